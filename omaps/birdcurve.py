@@ -1,0 +1,87 @@
+"""Micro-triangle order of VK_EXT_opacity_micromap / DXR 1.2 opacity micromaps ("bird curve").
+
+A triangle (p0, p1, p2) -- barycentric weights (1-u-v, u, v) -- splits at its edge midpoints
+m01, m12, m02 into four children, numbered and oriented as the specification's figure shows:
+
+    child 0: (p0,  m01, m02)   corner at p0, same winding
+    child 1: (m02, m12, m01)   the middle, flipped
+    child 2: (m01, p1,  m12)   corner at p1, same winding
+    child 3: (m12, m02, p2)    corner at p2, flipped
+
+Applied recursively, micro-triangle k at level L lies inside micro-triangle k >> 2 at level L-1.
+Everything here is in barycentric (u, v) space; ``uv_micro_triangles`` maps to texture space.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+MAX_LEVEL = 12
+
+# Children as weights of the parent's vertices (rows: child vertex 0..2; columns: p0, p1, p2).
+_CHILDREN = np.array([
+    [[1, 0, 0], [.5, .5, 0], [.5, 0, .5]],
+    [[.5, 0, .5], [0, .5, .5], [.5, .5, 0]],
+    [[.5, .5, 0], [0, 1, 0], [0, .5, .5]],
+    [[0, .5, .5], [.5, 0, .5], [0, 0, 1]],
+])
+
+
+def micro_triangles(level: int) -> np.ndarray:
+    """Vertices of the 4**level micro-triangles in curve order, as barycentric (u, v):
+    array (4**level, 3, 2). Vertex order is each micro-triangle's own (p0, p1, p2)."""
+    if not isinstance(level, (int, np.integer)) or not 0 <= level <= MAX_LEVEL:
+        raise ValueError(f"subdivision level must be an integer in 0..{MAX_LEVEL}, got {level!r}")
+    tris = np.array([[[0.0, 0.0], [1.0, 0.0], [0.0, 1.0]]])  # (p0, p1, p2) in (u, v)
+    for _ in range(level):
+        # (n, 4, 3, 2): child c vertex i = sum_j _CHILDREN[c, i, j] * parent vertex j
+        tris = np.einsum("cij,njd->ncid", _CHILDREN, tris).reshape(-1, 3, 2)
+    return tris
+
+
+def uv_micro_triangles(tri_uv: np.ndarray, level: int) -> np.ndarray:
+    """Micro-triangles of a triangle with texture coordinates ``tri_uv`` (3, 2) = (p0, p1, p2)."""
+    b = micro_triangles(level)
+    tri_uv = np.asarray(tri_uv, dtype=np.float64)
+    w0 = 1.0 - b[..., 0] - b[..., 1]
+    return (w0[..., None] * tri_uv[0] + b[..., 0, None] * tri_uv[1] + b[..., 1, None] * tri_uv[2])
+
+
+@njit(cache=True)
+def bary_to_index(u, v, level):
+    """Index of the micro-triangle containing barycentric (u, v) (weights of p1, p2).
+
+    Walks the subdivision: at each level the point's barycentrics in the current triangle pick a
+    child (a weight above 1/2 means a corner, otherwise the middle), then are re-expressed in
+    that child's own vertex order. Points on shared edges go to one of the touching children;
+    out-of-range input is clamped onto the triangle.
+    """
+    u = min(max(u, 0.0), 1.0)
+    v = min(max(v, 0.0), 1.0)
+    w = 1.0 - u - v
+    if w < 0.0:
+        s = u + v
+        u /= s
+        v /= s
+        w = 0.0
+    idx = 0
+    for _ in range(level):
+        # weights (w, u, v) of (p0, p1, p2)
+        if w >= 0.5:
+            c = 0
+            w, u, v = 2.0 * w - 1.0, 2.0 * u, 2.0 * v
+        elif u >= 0.5:
+            c = 2
+            # child 2 = (m01, p1, m12): p1 weight grows, m01 carries p0's weight
+            w, u, v = 2.0 * w, 2.0 * u - 1.0, 2.0 * v
+        elif v >= 0.5:
+            c = 3
+            # child 3 = (m12, m02, p2): new p0 = m12 (takes u), new p1 = m02 (takes w)
+            w, u, v = 2.0 * u, 2.0 * w, 2.0 * v - 1.0
+        else:
+            c = 1
+            # child 1 = (m02, m12, m01): new p0 = m02, p1 = m12, p2 = m01
+            w, u, v = 1.0 - 2.0 * u, 1.0 - 2.0 * w, 1.0 - 2.0 * v
+        idx = idx * 4 + c
+    return idx

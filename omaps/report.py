@@ -1,0 +1,118 @@
+"""Evaluation output: JSON, CSV, the savings-against-bits chart and per-texture map pictures."""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+import os
+
+import numpy as np
+from PIL import Image
+
+from . import atomic, render
+from .evaluate import TextureResult, mean_results
+
+
+def to_json(results: list[TextureResult], scheme_names: list[str]) -> dict:
+    return {
+        "textures": [
+            {"name": r.name, "width": r.width, "height": r.height,
+             "schemes": {s: {"savings": r.savings[s], "bits": r.bits[s]} for s in scheme_names}}
+            for r in results
+        ],
+        "mean": mean_results(results, scheme_names),
+    }
+
+
+def write_json(path, results, scheme_names) -> None:
+    atomic.write_text(path, json.dumps(to_json(results, scheme_names), indent=1) + "\n")
+
+
+def write_csv(path, results, scheme_names) -> None:
+    """One row per texture and scheme, then one ``(mean)`` row per scheme."""
+    buf = io.StringIO()
+    w = csv.writer(buf, lineterminator="\n")
+    w.writerow(["texture", "width", "height", "scheme", "bits", "savings"])
+    for r in results:
+        for s in scheme_names:
+            w.writerow([r.name, r.width, r.height, s, r.bits[s], f"{r.savings[s]:.6f}"])
+    for s, m in mean_results(results, scheme_names).items():
+        w.writerow(["(mean)", "", "", s, m["bits"], f"{m['savings']:.6f}"])
+    atomic.write_text(path, buf.getvalue())
+
+
+def family_of(name: str) -> str:
+    for prefix in ("sq", "tri"):
+        if name.startswith(prefix) and name[len(prefix):].isdigit():
+            return prefix
+    return name
+
+
+FAMILY_LABELS = {"sq": "square map per pair (sqN, 2 bits/cell)",
+                 "tri": "micromap per triangle (triL, 2 bits/micro-tri)"}
+
+
+def plot_savings(path, results, scheme_names, title="Shader invocation savings") -> None:
+    """Mean savings against bits per pair, a line per family, like the deck's charts."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    means = mean_results(results, scheme_names)
+    fig, ax = plt.subplots(figsize=(7.5, 4.8), dpi=120)
+    families: dict[str, list[tuple[float, float, str]]] = {}
+    for name, m in means.items():
+        if name == "texel":
+            continue
+        families.setdefault(family_of(name), []).append((m["bits"], m["savings"], name))
+    for fam, pts in families.items():
+        pts.sort()
+        xs, ys, labels = zip(*pts)
+        ax.plot(xs, ys, marker="o", label=FAMILY_LABELS.get(fam, fam))
+        for x, y, lab in pts:
+            ax.annotate(lab, (x, y), textcoords="offset points", xytext=(4, -11), fontsize=7)
+    if "texel" in means:
+        ax.axhline(means["texel"]["savings"], color="grey", ls="--", lw=1,
+                   label=f"texel limit ({means['texel']['savings']:.1%})")
+    ax.set_xscale("log", base=2)
+    ax.set_xlabel("bits per triangle pair")
+    ax.set_ylabel("mean fraction of hits without any-hit call")
+    ax.set_ylim(0, 1)
+    ax.grid(True, which="both", alpha=0.3)
+    ax.set_title(f"{title} ({len(results)} textures)")
+    ax.legend(loc="lower right", fontsize=8)
+    fig.tight_layout()
+    with atomic.atomic_path(path, suffix=".png") as tmp:
+        fig.savefig(tmp, format="png")
+    plt.close(fig)
+
+
+def show_texture(path, result: TextureResult, panel: int = 192) -> None:
+    """One PNG: the alpha texture, then each scheme's map in the deck's colours."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    names = list(result.maps)
+    cols = len(names) + 1
+    fig, axes = plt.subplots(1, cols, figsize=(1.9 * cols, 2.3), dpi=110)
+    axes = np.atleast_1d(axes)
+    axes[0].imshow(result.alpha, cmap="gray", interpolation="nearest")
+    axes[0].set_title(f"alpha {result.width}x{result.height}", fontsize=8)
+    for ax, name in zip(axes[1:], names):
+        ax.imshow(render.scheme_image(name, result.maps[name], panel), interpolation="nearest")
+        ax.set_title(f"{name}: {result.savings[name]:.1%}", fontsize=8)
+    for ax in axes:
+        ax.set_xticks([])
+        ax.set_yticks([])
+    fig.suptitle(f"{result.name}   T cyan, O magenta, C green", fontsize=9)
+    fig.tight_layout()
+    with atomic.atomic_path(path, suffix=".png") as tmp:
+        fig.savefig(tmp, format="png")
+    plt.close(fig)
+
+
+def show_file_name(result: TextureResult, index: int) -> str:
+    stem = os.path.splitext(os.path.basename(result.name))[0]
+    return f"{index:03d}_{stem}.png"

@@ -1,0 +1,131 @@
+"""What a hit can read: texture addressing and the "footprint grid" of filtered lookups.
+
+A region of a map is known (T or O) only if every texel value a hit inside it can read agrees.
+We turn each (filter, addressing) pair into one grid of flag cells in texel space so that a
+single rasteriser serves every case:
+
+* ``nearest``: cell (x, y) is texel (x, y), covering [x, x+1] x [y, y+1] in texel units.
+* ``linear``: a hit at texel coordinate p reads the taps floor(p - 0.5) and floor(p - 0.5) + 1
+  in each axis, i.e. the hit lies in a *dual* cell [c - 0.5, c + 0.5] whose flag is the OR of
+  its four taps. The grid is shifted by +0.5 (``offset``). This is conservative: it also counts
+  a tap whose bilinear weight is zero on the cell's boundary, and a region is known only when
+  all its taps agree (so their weighted mean agrees too).
+
+Out-of-range cells are handled by the grid's per-axis ``period`` (wrap, mirror: the grid repeats)
+or by clamping (period 0: indices clamp to the grid's edge).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numba import njit
+
+from . import states
+from .errors import InputError
+
+WRAP_MODES = ("wrap", "clamp", "mirror")
+FILTERS = ("nearest", "linear")
+
+
+@njit(cache=True, inline="always")
+def address(i, n, mode):
+    """Texel index ``i`` (any integer, negative too) to [0, n) under mode 0 wrap, 1 clamp, 2 mirror."""
+    if mode == 0:
+        r = i % n
+        return r + n if r < 0 else r
+    if mode == 1:
+        return 0 if i < 0 else (n - 1 if i >= n else i)
+    p = 2 * n
+    r = i % p
+    if r < 0:
+        r += p
+    return r if r < n else p - 1 - r
+
+
+def wrap_code(wrap: str) -> int:
+    try:
+        return WRAP_MODES.index(wrap)
+    except ValueError:
+        raise InputError(f"unknown wrap mode {wrap!r} (choose from {', '.join(WRAP_MODES)})") from None
+
+
+@dataclass(frozen=True)
+class FootprintGrid:
+    """Flag cells a hit can read. Texel coordinate p lies in cell floor(p + offset); that cell is
+    ``flags[addr_y(cy), addr_x(cx)]`` with the period (or clamp when 0) of each axis."""
+
+    flags: np.ndarray  # uint8 (Hc, Wc), values FLAG_T / FLAG_O / FLAG_C
+    offset: float
+    period_x: int
+    period_y: int
+    width: int  # texture size in texels
+    height: int
+
+    def cells_within_texture(self) -> tuple[np.ndarray, np.ndarray]:
+        """Flags and area weights of the cells that cover the texture [0,W]x[0,H] (for the
+        texel-resolution limit)."""
+        cx, wx = _axis_cover(self.width, self.offset)
+        cy, wy = _axis_cover(self.height, self.offset)
+        ix = _addr_cells(cx, self.flags.shape[1], self.period_x)
+        iy = _addr_cells(cy, self.flags.shape[0], self.period_y)
+        return self.flags[np.ix_(iy, ix)], np.outer(wy, wx)
+
+
+def _axis_cover(n: int, offset: float) -> tuple[np.ndarray, np.ndarray]:
+    """Cell indices meeting [offset, n + offset] on one axis and the length each covers."""
+    if offset == 0:
+        return np.arange(n), np.ones(n)
+    w = np.ones(n + 1)
+    w[0] = w[-1] = 0.5
+    return np.arange(n + 1), w
+
+
+def _addr_cells(c: np.ndarray, size: int, period: int) -> np.ndarray:
+    return c % period if period else np.clip(c, 0, size - 1)
+
+
+def _extend(arr: np.ndarray, axis: int, mode: str) -> tuple[np.ndarray, int]:
+    """The array the cell index runs over along ``axis`` and its period (0 = clamp)."""
+    n = arr.shape[axis]
+    if mode == "wrap":
+        return arr, n
+    if mode == "mirror":
+        return np.concatenate([arr, np.flip(arr, axis=axis)], axis=axis), 2 * n
+    return arr, 0
+
+
+def footprint_grid(texel_states: np.ndarray, filter: str = "nearest", wrap: str = "clamp",
+                   wrap_v: str | None = None) -> FootprintGrid:
+    """Build the grid for texel states (H, W) under a filter and addressing (``wrap`` for u,
+    ``wrap_v`` for v, default the same)."""
+    if filter not in FILTERS:
+        raise InputError(f"unknown filter {filter!r} (choose from {', '.join(FILTERS)})")
+    wrap_code(wrap)
+    wrap_v = wrap if wrap_v is None else wrap_v
+    wrap_code(wrap_v)
+    s = np.asarray(texel_states)
+    if s.ndim != 2 or s.size == 0:
+        raise InputError(f"texel states must be a non-empty 2-D array, got shape {s.shape}")
+    h, w = s.shape
+    f = states.STATE_TO_FLAG[s]
+    f, px = _extend(f, 1, wrap)
+    f, py = _extend(f, 0, wrap_v)
+    if filter == "nearest":
+        return FootprintGrid(np.ascontiguousarray(f), 0.0, px, py, w, h)
+    # linear: dual cell c reads taps c-1 and c (addressed); OR them along each axis.
+    f = _dual(f, 1, px)
+    f = _dual(f, 0, py)
+    return FootprintGrid(np.ascontiguousarray(f), 0.5, px, py, w, h)
+
+
+def _dual(f: np.ndarray, axis: int, period: int) -> np.ndarray:
+    if period:  # periodic: dual cell c = taps (c-1) mod P and c
+        return f | np.roll(f, 1, axis=axis)
+    # clamp: cells 0..n, where cell 0 = tap 0 and cell n = tap n-1
+    first = np.take(f, [0], axis=axis)
+    last = np.take(f, [-1], axis=axis)
+    lo = np.concatenate([first, f], axis=axis)
+    hi = np.concatenate([f, last], axis=axis)
+    return lo | hi

@@ -1,0 +1,183 @@
+"""Alpha textures: loading the coverage channel of an image file through Pillow.
+
+An ``AlphaTexture`` keeps the raw integer values and the format's maximum, so 8- and 16-bit
+sources compare against thresholds exactly (``alpha8`` is in 8-bit units either way).
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass
+
+import numpy as np
+from PIL import Image, UnidentifiedImageError
+
+from .errors import InputError
+
+# Extensions we look for when a folder is given (Pillow decides what it can actually read).
+IMAGE_EXTENSIONS = (".png", ".tga", ".jpg", ".jpeg", ".bmp", ".dds", ".tif", ".tiff", ".webp", ".gif")
+
+CHANNEL_NAMES = {"R": 0, "G": 1, "B": 2, "A": 3, "L": 0}
+
+
+@dataclass(frozen=True)
+class AlphaTexture:
+    """Coverage values of one texture: ``values[y, x]``, row 0 is the first image row (v = 0)."""
+
+    name: str
+    values: np.ndarray  # uint8 / uint16 / uint32, shape (H, W)
+    maxval: int
+
+    def __post_init__(self):
+        v = self.values
+        if v.ndim != 2:
+            raise InputError(f"alpha must be a 2-D array, got shape {v.shape}", self.name)
+        if v.shape[0] == 0 or v.shape[1] == 0:
+            raise InputError(f"empty image ({v.shape[1]}x{v.shape[0]})", self.name)
+        if self.maxval <= 0:
+            raise InputError(f"bad maximum value {self.maxval}", self.name)
+
+    @property
+    def width(self) -> int:
+        return int(self.values.shape[1])
+
+    @property
+    def height(self) -> int:
+        return int(self.values.shape[0])
+
+    @property
+    def alpha8(self) -> np.ndarray:
+        """Alpha in 8-bit units (0..255) as float64; exact for 8-bit sources and for 16-bit
+        values that are multiples of 257 (multiply before dividing keeps integers integral)."""
+        return self.values.astype(np.float64) * 255.0 / self.maxval
+
+    @classmethod
+    def from_array(cls, name: str, alpha) -> "AlphaTexture":
+        """Wrap an array: integers are taken as 8-bit (or 16-bit if any value exceeds 255);
+        floats must lie in [0, 1]."""
+        a = np.asarray(alpha)
+        if a.dtype.kind == "f":
+            if not np.all(np.isfinite(a)) or a.min(initial=0) < 0 or a.max(initial=0) > 1:
+                raise InputError("float alpha must be finite and in [0, 1]", name)
+            return cls(name, np.round(a * 65535).astype(np.uint16), 65535)
+        if a.dtype.kind not in "ui":
+            raise InputError(f"unsupported alpha dtype {a.dtype}", name)
+        if a.size and a.min() < 0:
+            raise InputError("negative alpha values", name)
+        maxval = 255 if (a.size == 0 or a.max() <= 255) else 65535
+        if a.size and a.max() > 65535:
+            raise InputError("integer alpha above 65535", name)
+        return cls(name, a.astype(np.uint8 if maxval == 255 else np.uint16), maxval)
+
+
+def _channel_index(channel, bands) -> int:
+    if isinstance(channel, int) or (isinstance(channel, str) and channel.isdigit()):
+        idx = int(channel)
+    else:
+        key = str(channel).upper()
+        if key not in bands:
+            raise KeyError(key)
+        idx = bands.index(key)
+    if not 0 <= idx < len(bands):
+        raise KeyError(channel)
+    return idx
+
+
+def _mode_maxval(im: Image.Image) -> int:
+    if im.mode.startswith("I;16") or im.mode == "I":
+        return 65535
+    return 255
+
+
+def load_alpha(path, channel=None) -> AlphaTexture:
+    """Load the coverage of an image file.
+
+    ``channel=None``: the alpha of RGBA / LA / PA, of P with a tRNS transparency, or the single
+    channel of a greyscale mask (L, I;16). An image with colour but no alpha is an error.
+    ``channel``: a band name (R, G, B, A, L) or index, to read coverage from another channel.
+    """
+    path = os.fspath(path)
+    name = os.path.basename(path)
+    if not os.path.exists(path):
+        raise InputError("no such file", path)
+    if os.path.isdir(path):
+        raise InputError("is a folder, not an image", path)
+    try:
+        with Image.open(path) as im:
+            im.load()
+            return _alpha_from_image(im, name, path, channel)
+    except InputError:
+        raise
+    except UnidentifiedImageError:
+        raise InputError("not an image Pillow can read", path) from None
+    except (OSError, SyntaxError, ValueError) as exc:  # truncated / corrupt / unsupported variant
+        raise InputError(f"cannot decode image ({exc})", path) from None
+
+
+def _alpha_from_image(im: Image.Image, name: str, path: str, channel) -> AlphaTexture:
+    if im.width == 0 or im.height == 0:
+        raise InputError(f"empty image ({im.width}x{im.height})", path)
+    mode = im.mode
+    if mode == "P" or mode == "PA":
+        im = im.convert("RGBA")  # applies tRNS / palette alpha
+        mode = "RGBA"
+        if channel is None and np.all(np.asarray(im.getchannel("A")) == 255):
+            raise InputError("palette image without transparency (tRNS); use --channel", path)
+    elif mode == "1":
+        im = im.convert("L")
+        mode = "L"
+    elif mode in ("RGBa", "La"):
+        im = im.convert(mode[:-1] + "A")
+        mode = im.mode
+    elif mode == "F":
+        raise InputError("32-bit float images are not supported; save the mask as 8 or 16 bit", path)
+
+    maxval = _mode_maxval(im)
+    bands = im.getbands()
+    if channel is None:
+        if "A" in bands:
+            idx = bands.index("A")
+        elif len(bands) == 1:
+            idx = 0  # a single-channel mask
+        else:
+            raise InputError(f"image has no alpha channel (mode {im.mode}); pick one with --channel", path)
+    else:
+        try:
+            idx = _channel_index(channel, bands)
+        except KeyError:
+            raise InputError(f"no channel {channel!r} in a {im.mode} image (bands {''.join(bands)})", path) from None
+    if len(bands) == 1:
+        arr = np.asarray(im)
+    else:
+        arr = np.asarray(im.getchannel(idx))
+    if arr.dtype.kind == "i":  # mode I holds 16-bit data in int32
+        if arr.size and (arr.min() < 0 or arr.max() > 65535):
+            raise InputError("32-bit integer image with values outside 0..65535", path)
+        arr = arr.astype(np.uint16)
+    elif arr.dtype.kind == "b":
+        arr = arr.astype(np.uint8) * 255
+    if arr.dtype.byteorder == ">":
+        arr = arr.astype(arr.dtype.newbyteorder("="))
+    return AlphaTexture(name, np.ascontiguousarray(arr), maxval)
+
+
+def find_images(paths) -> tuple[list[str], list[str]]:
+    """Expand files and folders (recursively, sorted) into image files.
+
+    Returns (images, skipped): files named explicitly are always returned (so a bad one is
+    reported); files in folders without an image extension are listed in ``skipped``.
+    """
+    images, skipped = [], []
+    for p in paths:
+        p = os.fspath(p)
+        if os.path.isdir(p):
+            for root, dirs, files in os.walk(p):
+                dirs.sort()
+                for f in sorted(files):
+                    full = os.path.join(root, f)
+                    (images if f.lower().endswith(IMAGE_EXTENSIONS) else skipped).append(full)
+        elif os.path.exists(p):
+            images.append(p)
+        else:
+            raise InputError("no such file or folder", p)
+    return images, skipped
