@@ -1,0 +1,32 @@
+import os
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+SHARED = Path(os.environ.get("OMAPS_SHARED", ROOT.parent / "shared"))
+TEXTURES = SHARED / "data" / "textures"
+
+
+def real_textures(min_size=0):
+    """Paths of the real alpha textures in ../shared (empty when absent)."""
+    if not TEXTURES.is_dir():
+        return []
+    from PIL import Image
+
+    out = []
+    for p in sorted(TEXTURES.glob("*.png")):
+        with Image.open(p) as im:
+            if min(im.size) >= min_size:
+                out.append(p)
+    return out
+
+
+needs_shared = pytest.mark.skipif(not TEXTURES.is_dir(),
+                                  reason=f"real textures not found at {TEXTURES} (../shared is absent)")
+
+
+@pytest.fixture
+def rng():
+    return np.random.default_rng(1234)
