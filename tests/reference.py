@@ -53,13 +53,23 @@ def read_texels(poly_texel, filter):
     return xs[m], ys[m]
 
 
-def region_state(states_img, poly_texel, filter="nearest", wrap="clamp"):
+class Addressed:
+    """The state image padded once by ``margin`` texels with the addressing mode."""
+
+    def __init__(self, states_img, wrap, margin):
+        self.m = int(margin)
+        self.padded = np.pad(states_img, self.m, mode=PAD_MODES[wrap])  # handles pads wider than the image
+
+    def __getitem__(self, yx):
+        ys, xs = yx
+        return self.padded[ys + self.m, xs + self.m]
+
+
+def region_state(texels, poly_texel, filter="nearest"):
     xs, ys = read_texels(poly_texel, filter)
     if len(xs) == 0:
         raise ValueError("region reads nothing")
-    m = int(max(np.abs(xs).max(), np.abs(ys).max())) + 1
-    padded = np.pad(states_img, m, mode=PAD_MODES[wrap])  # handles pads wider than the image
-    vals = padded[ys + m, xs + m]
+    vals = texels[ys, xs]
     if np.all(vals == T):
         return T
     if np.all(vals == O):
@@ -69,13 +79,14 @@ def region_state(states_img, poly_texel, filter="nearest", wrap="clamp"):
 
 def square_map(states_img, n, filter="nearest", wrap="clamp"):
     h, w = states_img.shape
+    texels = Addressed(states_img, wrap, 4)
     out = np.empty((n, n), dtype=np.uint8)
     for j in range(n):
         for i in range(n):
             x0, x1 = i * w / n, (i + 1) * w / n
             y0, y1 = j * h / n, (j + 1) * h / n
             poly = [[x0, y0], [x1, y0], [x1, y1], [x0, y1]]
-            out[j, i] = region_state(states_img, poly, filter, wrap)
+            out[j, i] = region_state(texels, poly, filter)
     return out
 
 
@@ -96,8 +107,10 @@ def triangle_states(states_img, tri_uv, level, filter="nearest", wrap="clamp"):
     """Dict from micro-triangle (its sorted vertex tuple) to state."""
     h, w = states_img.shape
     scale = np.array([w, h], dtype=np.float64)
+    tri_texel = np.asarray(tri_uv) * scale
+    texels = Addressed(states_img, wrap, np.abs(tri_texel).max() + 4)
     out = {}
     for t in subdivide(tri_uv, level):
         key = tuple(sorted(map(tuple, np.round(t, 12))))
-        out[key] = region_state(states_img, t * scale, filter, wrap)
+        out[key] = region_state(texels, t * scale, filter)
     return out

@@ -1,0 +1,138 @@
+import csv
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+from PIL import Image
+
+from conftest import TEXTURES, needs_shared
+from omaps.cli import main
+from omaps.schemes import DEFAULT_SCHEMES
+
+
+@pytest.fixture
+def textures(tmp_path, rng):
+    d = tmp_path / "tex"
+    d.mkdir()
+    for i, (w, h) in enumerate([(40, 24), (64, 64), (17, 90)]):
+        a = np.zeros((h, w), np.uint8)
+        yy, xx = np.mgrid[0:h, 0:w]
+        a[(xx - w / 2) ** 2 + (yy - h / 2) ** 2 < (min(w, h) / 2.5) ** 2] = 255
+        a[(xx - w / 2) ** 2 + (yy - h / 2) ** 2 < (min(w, h) / 5) ** 2] = 100
+        Image.fromarray(a).save(d / f"t{i}.png")
+    return d
+
+
+def test_default_corpus_runs(capsys):
+    assert main(["eval", "--quiet"]) == 0
+    out = capsys.readouterr().out
+    assert "embedded procedural corpus" in out and "MEAN savings (6)" in out
+
+
+def test_outputs(tmp_path, textures, capsys):
+    j, c, p, s = tmp_path / "r.json", tmp_path / "r.csv", tmp_path / "p.png", tmp_path / "show"
+    assert main(["eval", str(textures), "--json", str(j), "--csv", str(c), "--plot", str(p),
+                 "--show", str(s), "--jobs", "1"]) == 0
+    data = json.loads(j.read_text())
+    assert set(data) == {"textures", "mean"}
+    assert [t["name"] for t in data["textures"]] == ["t0.png", "t1.png", "t2.png"]
+    t0 = data["textures"][0]
+    assert set(t0) == {"name", "width", "height", "schemes"} and (t0["width"], t0["height"]) == (40, 24)
+    assert list(t0["schemes"]) == list(DEFAULT_SCHEMES)
+    assert t0["schemes"]["sq16"] == {"savings": pytest.approx(t0["schemes"]["sq16"]["savings"]), "bits": 512}
+    assert t0["schemes"]["tri3"]["bits"] == 256 and t0["schemes"]["texel"]["bits"] == 2 * 40 * 24
+    for name in DEFAULT_SCHEMES:
+        m = np.mean([t["schemes"][name]["savings"] for t in data["textures"]])
+        assert data["mean"][name]["savings"] == pytest.approx(m)
+        assert 0 <= m <= 1
+    rows = list(csv.DictReader(c.open()))
+    assert len(rows) == 3 * len(DEFAULT_SCHEMES) + len(DEFAULT_SCHEMES)
+    assert Image.open(p).size[0] > 300
+    shown = sorted(x.name for x in s.iterdir())
+    assert shown == ["000_t0.png", "001_t1.png", "002_t2.png"]
+
+
+def test_jobs_give_same_results(tmp_path, textures):
+    a, b = tmp_path / "a.json", tmp_path / "b.json"
+    assert main(["eval", str(textures), "--jobs", "1", "--quiet", "--json", str(a)]) == 0
+    assert main(["eval", str(textures), "--jobs", "2", "--quiet", "--json", str(b)]) == 0
+    assert json.loads(a.read_text()) == json.loads(b.read_text())
+
+
+def test_min_size_and_schemes(tmp_path, textures, capsys):
+    j = tmp_path / "r.json"
+    assert main(["eval", str(textures), "--min-size", "30", "--schemes", "sq8, tri3,sq8", "--json", str(j)]) == 0
+    data = json.loads(j.read_text())
+    assert [t["name"] for t in data["textures"]] == ["t1.png"]  # 40x24 and 17x90 are skipped
+    assert list(data["mean"]) == ["sq8", "tri3"]
+    assert "skipped 2 textures smaller than 30 px" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("args, message", [
+    (["--schemes", "sq12"], "power of two"),
+    (["--schemes", "sq256"], "power of two"),
+    (["--schemes", "tri9"], "subdivision level"),
+    (["--schemes", "vq9"], "unknown scheme"),
+    (["--mode", "cutoff", "--cutoff", "2"], "cutoff must be in"),
+    (["--jobs", "0"], "--jobs"),
+])
+def test_bad_options(tmp_path, textures, capsys, args, message):
+    j = tmp_path / "r.json"
+    assert main(["eval", str(textures), "--json", str(j)] + args) == 2
+    assert message in capsys.readouterr().err
+    assert not j.exists()
+
+
+def test_bad_file_in_folder_stops_everything(tmp_path, textures, capsys):
+    (textures / "zz_broken.png").write_bytes(b"not a png")
+    j, s = tmp_path / "r.json", tmp_path / "show"
+    assert main(["eval", str(textures), "--json", str(j), "--show", str(s), "--jobs", "2"]) == 2
+    err = capsys.readouterr().err
+    assert "zz_broken.png" in err and "not an image" in err
+    assert not j.exists() and not s.exists()
+    assert list(tmp_path.glob(".omaps-*")) == []
+
+
+def test_missing_and_no_alpha(tmp_path, capsys):
+    assert main(["eval", str(tmp_path / "missing.png")]) == 2
+    assert "missing.png: no such file" in capsys.readouterr().err
+    Image.fromarray(np.zeros((8, 8, 3), np.uint8)).save(tmp_path / "rgb.png")
+    assert main(["eval", str(tmp_path / "rgb.png")]) == 2
+    assert "rgb.png: image has no alpha channel" in capsys.readouterr().err
+    assert main(["eval", str(tmp_path / "rgb.png"), "--channel", "R", "--quiet"]) == 0
+
+
+def test_bake(tmp_path, textures, capsys):
+    out = tmp_path / "m.npy"
+    assert main(["bake", str(textures / "t1.png"), "--scheme", "sq16", "-o", str(out)]) == 0
+    assert np.load(out).shape == (16, 16)
+    uvs = np.array([[[0.1, 0.1], [0.9, 0.2], [0.5, 0.9]], [[0, 0], [2, 0], [0, 2]]])
+    np.save(tmp_path / "uv.npy", uvs)
+    assert main(["bake", str(textures / "t1.png"), "--scheme", "tri3", "--uvs", str(tmp_path / "uv.npy"),
+                 "--wrap", "wrap", "-o", str(out)]) == 0
+    assert np.load(out).shape == (2, 64)
+    bad = uvs.copy()
+    bad[1, 2] = bad[1, 1]
+    np.save(tmp_path / "bad.npy", bad)
+    out2 = tmp_path / "m2.npy"
+    assert main(["bake", str(textures / "t1.png"), "--scheme", "tri3", "--uvs", str(tmp_path / "bad.npy"),
+                 "-o", str(out2)]) == 2
+    err = capsys.readouterr().err
+    assert "bad.npy: UV triangle 1 is degenerate" in err and not out2.exists()
+
+
+def test_console_script(tmp_path):
+    r = subprocess.run([sys.executable, "-m", "omaps.cli", "eval", "--quiet", "--schemes", "sq4,tri1"],
+                       capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    assert "MEAN" in r.stdout
+
+
+@needs_shared
+def test_real_corpus_eval(tmp_path):
+    j = tmp_path / "real.json"
+    assert main(["eval", str(TEXTURES), "--min-size", "64", "--quiet", "--json", str(j)]) == 0
+    data = json.loads(j.read_text())
+    assert len(data["textures"]) == 46
