@@ -1,0 +1,129 @@
+"""VQ2: a 16x16 map in one 256-bit block -- physical layout, symbolic block, decoders.
+
+The map is an 8x8 grid of 2x2 vectors (vector (vx, vy) holds cells x = 2vx..2vx+1,
+y = 2vy..2vy+1 of ``map[y, x]``), in four quadrants of 4x4 vectors: q = 2*(vy >> 2) + (vx >> 2),
+0 top-left, 1 top-right, 2 bottom-left, 3 bottom-right.
+
+Physical block (32 bytes, bits numbered as in ``bits.py``):
+
+    bits   0..191  index of vector v = 8*vy + vx, 3 bits each, at bit 3v
+    bits 192..246  codebook: 11 entries x 5 bits (``vec2`` codes), entry s at bit 192 + 5s;
+                   entries 0..2 global, entries 3 + 2q + k local to quadrant q
+    bits 247..255  transforms of quadrants 1, 2, 3 (3 bits each, at 247 + 3(q-1))
+
+Index 0, 1, 2: uniform T, O, C (the state codes themselves); 3, 4, 5: global entries 0..2;
+6, 7: the quadrant's local entries. Every 256-bit pattern is a valid block.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numba import njit
+
+from .. import states
+from .bits import as_block, get_bits, put_bits
+from .vec2 import CODE_STATES, FWD2, INV2
+
+BLOCK_BYTES = 32
+SIZE = 16
+INDEX_BITS, INDEX_POS = 3, 0
+CODE_BITS, CODEBOOK_POS = 5, 192
+N_GLOBAL, N_LOCAL, N_ENTRIES = 3, 2, 11
+TRANSFORM_BITS, TRANSFORM_POS = 3, 247
+
+
+def quadrant_of_vector(vx: int, vy: int) -> int:
+    return 2 * (vy >> 2) + (vx >> 2)
+
+
+def entry_of_index(index: int, quadrant: int) -> int:
+    """Codebook entry an index >= 3 selects in a quadrant."""
+    return index - 3 if index < 6 else N_GLOBAL + N_LOCAL * quadrant + (index - 6)
+
+
+@dataclass
+class VQ2Block:
+    """Symbolic block: ``indices`` (64,) in 0..7, ``codebook`` (11,) 5-bit codes,
+    ``transforms`` (4,) with transforms[0] = 0 (the top-left quadrant is untransformed)."""
+
+    indices: np.ndarray
+    codebook: np.ndarray
+    transforms: np.ndarray
+
+    def __post_init__(self):
+        self.indices = np.asarray(self.indices, dtype=np.uint8).reshape(64)
+        self.codebook = np.asarray(self.codebook, dtype=np.uint8).reshape(N_ENTRIES)
+        t = np.asarray(self.transforms, dtype=np.uint8).reshape(-1)
+        self.transforms = np.concatenate([[0], t]).astype(np.uint8) if t.size == 3 else t
+        if self.transforms.shape != (4,) or self.transforms[0] != 0:
+            raise ValueError("transforms: 3 values (quadrants 1..3) or 4 with the first 0")
+        if self.indices.max() > 7 or self.codebook.max() > 31 or self.transforms.max() > 7:
+            raise ValueError("field out of range")
+
+    def pack(self) -> bytes:
+        b = np.zeros(BLOCK_BYTES, dtype=np.uint8)
+        for v in range(64):
+            put_bits(b, INDEX_POS + INDEX_BITS * v, INDEX_BITS, int(self.indices[v]))
+        for s in range(N_ENTRIES):
+            put_bits(b, CODEBOOK_POS + CODE_BITS * s, CODE_BITS, int(self.codebook[s]))
+        for q in range(1, 4):
+            put_bits(b, TRANSFORM_POS + TRANSFORM_BITS * (q - 1), TRANSFORM_BITS, int(self.transforms[q]))
+        return b.tobytes()
+
+    @classmethod
+    def unpack(cls, data) -> "VQ2Block":
+        b = as_block(data, BLOCK_BYTES, "a VQ2 block")
+        idx = [get_bits(b, INDEX_POS + INDEX_BITS * v, INDEX_BITS) for v in range(64)]
+        cb = [get_bits(b, CODEBOOK_POS + CODE_BITS * s, CODE_BITS) for s in range(N_ENTRIES)]
+        tr = [get_bits(b, TRANSFORM_POS + TRANSFORM_BITS * (q - 1), TRANSFORM_BITS) for q in range(1, 4)]
+        return cls(np.array(idx), np.array(cb), np.array(tr))
+
+    def decode(self) -> np.ndarray:
+        """The 16x16 map (``map[y, x]``)."""
+        out = np.empty((SIZE, SIZE), dtype=np.uint8)
+        for vy in range(8):
+            for vx in range(8):
+                q = quadrant_of_vector(vx, vy)
+                i = int(self.indices[8 * vy + vx])
+                if i < 3:
+                    vec = np.full(4, i, dtype=np.uint8)
+                else:
+                    stored = CODE_STATES[self.codebook[entry_of_index(i, q)]]
+                    vec = np.empty(4, dtype=np.uint8)
+                    vec[FWD2[self.transforms[q]]] = stored  # shown = t(stored)
+                out[2 * vy:2 * vy + 2, 2 * vx:2 * vx + 2] = vec.reshape(2, 2)
+        return out
+
+
+def decode(data) -> np.ndarray:
+    """Physical block (32 bytes) to its 16x16 map."""
+    return VQ2Block.unpack(data).decode()
+
+
+@njit(cache=True)
+def lookup(block, x, y):
+    """State of cell (x, y) (column, row) of a physical block, reading only the bits it needs:
+    the vector's index, then (for indices >= 3) one codebook entry and the quadrant transform."""
+    v = (y >> 1) * 8 + (x >> 1)
+    idx = get_bits(block, INDEX_POS + INDEX_BITS * v, INDEX_BITS)
+    if idx < 3:
+        return idx
+    q = ((y >> 3) << 1) | (x >> 3)
+    entry = idx - 3 if idx < 6 else N_GLOBAL + N_LOCAL * q + (idx - 6)
+    code = get_bits(block, CODEBOOK_POS + CODE_BITS * entry, CODE_BITS)
+    t = 0 if q == 0 else get_bits(block, TRANSFORM_POS + TRANSFORM_BITS * (q - 1), TRANSFORM_BITS)
+    e = INV2[t, ((y & 1) << 1) | (x & 1)]  # the transform acts on the low coordinate bits
+    if (code >> (1 + e)) & 1:
+        return states.C
+    return states.O if code & 1 else states.T
+
+
+@njit(cache=True)
+def lookup_batch(blocks, block_ids, xs, ys):
+    """``lookup`` for many cells: blocks (B, 32) uint8; block_ids, xs, ys of one length."""
+    out = np.empty(xs.shape[0], dtype=np.uint8)
+    for i in range(xs.shape[0]):
+        out[i] = lookup(blocks[block_ids[i]], xs[i], ys[i])
+    return out
