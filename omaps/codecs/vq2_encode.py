@@ -7,9 +7,10 @@ element), or as uniform C. Encoders work in each quadrant's canonical space: a d
 D of a quadrant with transform t is stored as an entry covering t^-1(D).
 
 ``best`` builds the codebook greedily by marginal gain (known cells kept) over all 11 slots --
-global or quadrant-local, whichever gains more -- then improves it by swapping entries, and
-searches the quadrant transforms by coordinate descent (``fast``/``medium``) or exhaustively
-(``thorough``). It stops as soon as a block is lossless.
+global or quadrant-local, whichever gains more -- for each transform combination it tries:
+``fast`` by coordinate descent from the identity, ``medium`` (default) every combination that
+gives distinct canonical vectors, ``thorough`` the same and then swaps codebook entries while
+that keeps more cells. It stops as soon as a block is lossless.
 """
 
 from __future__ import annotations
