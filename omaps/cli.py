@@ -72,6 +72,24 @@ def _parser() -> argparse.ArgumentParser:
     b.add_argument("-o", "--output", required=True, metavar="OUT.npy", help="states (0 T, 1 O, 2 C), uint8")
     _add_state_options(b, "levels")
     b.set_defaults(func=cmd_bake)
+
+    en = sub.add_parser("encode", help="compress a texture's square map into a codec block",
+                        description="Bake the codec's square map of a texture (corpus convention) and "
+                                    "write the raw block.")
+    en.add_argument("texture")
+    en.add_argument("--codec", required=True, help="vq2")
+    en.add_argument("--encoder", default="best", help="paper or best (default)")
+    en.add_argument("--effort", default="medium", help="best encoder's search: fast, medium (default), thorough")
+    en.add_argument("-o", "--output", required=True, metavar="FILE", help="raw block bytes")
+    _add_state_options(en, "levels")
+    en.set_defaults(func=cmd_encode)
+
+    de = sub.add_parser("decode", help="decode a codec block and print or draw its map")
+    de.add_argument("block", metavar="FILE")
+    de.add_argument("--codec", required=True, help="vq2")
+    de.add_argument("--show", metavar="OUT.png", help="draw the map in the deck's colours")
+    de.add_argument("--json", action="store_true", help="print the map as JSON")
+    de.set_defaults(func=cmd_decode)
     return p
 
 
@@ -164,6 +182,63 @@ def cmd_bake(a) -> int:
         np.save(tmp, out)
     known = float(np.mean(out != 2))
     print(f"{a.output}: {scheme.name} map {out.shape}, {known:.1%} of regions known")
+    return 0
+
+
+def cmd_encode(a) -> int:
+    from .codecs.registry import get_codec
+    from .states import is_conservative
+
+    codec = get_codec(a.codec)
+    if a.encoder not in codec.encoders:
+        raise InputError(f"unknown encoder {a.encoder!r} for {codec.name} (choose from {', '.join(codec.encoders)})")
+    if a.effort not in codec.efforts:
+        raise InputError(f"unknown effort {a.effort!r} (choose from {', '.join(codec.efforts)})")
+    config = _config(a)
+    tex = load_alpha(a.texture, config.channel)
+    grid = footprint_grid(config.rule.classify(tex), config.filter, config.wrap)
+    original = maps.bake_square(grid, codec.map_size)
+    block = codec.encode(original, a.encoder, a.effort)
+    decoded = codec.decode(block)
+    if len(block) != codec.block_bytes or not is_conservative(original, decoded):
+        raise RuntimeError("internal error: the encoder produced a bad block")  # never expected
+    from .atomic import write_bytes
+    write_bytes(a.output, block)
+    print(f"{a.output}: {codec.name} block, {len(block)} bytes; savings {maps.known_fraction(decoded):.3f} "
+          f"(uncompressed sq{codec.map_size}: {maps.known_fraction(original):.3f})")
+    return 0
+
+
+def cmd_decode(a) -> int:
+    import json
+
+    from .codecs.registry import get_codec
+    from .states import NAMES
+
+    codec = get_codec(a.codec)
+    try:
+        with open(a.block, "rb") as f:
+            data = f.read()
+    except FileNotFoundError:
+        raise InputError("no such file", a.block) from None
+    if len(data) != codec.block_bytes:
+        raise InputError(f"a {codec.name} block is {codec.block_bytes} bytes, this file has {len(data)}", a.block)
+    m = codec.decode(data)
+    if a.json:
+        print(json.dumps({"codec": codec.name, "size": int(m.shape[0]), "savings": maps.known_fraction(m),
+                          "states": m.tolist()}))
+    else:
+        print(f"{a.block}: {codec.name} {m.shape[1]}x{m.shape[0]} map, savings {maps.known_fraction(m):.3f} "
+              f"(rows are v, T transparent, O opaque, C check)")
+        for row in m:
+            print("".join(NAMES[s] for s in row))
+    if a.show:
+        from PIL import Image
+
+        from .atomic import atomic_path
+        from .render import square_image
+        with atomic_path(a.show, suffix=".png") as tmp:
+            Image.fromarray(square_image(m, 16 * m.shape[0])).save(tmp, format="PNG")
     return 0
 
 

@@ -66,6 +66,23 @@ def register(name: str, factory: Callable[[], Scheme]) -> None:
     _FIXED[name] = factory
 
 
+def _codec_scheme(name: str, codec_name: str, encoder: str, effort: str, family: str) -> Scheme:
+    """A compressed square map: bake the codec's N x N map, encode, decode what was stored."""
+    from .codecs.registry import get_codec
+
+    codec = get_codec(codec_name)
+
+    def bake(g: FootprintGrid) -> np.ndarray:
+        return codec.decode(codec.encode(maps.bake_square(g, codec.map_size), encoder, effort))
+
+    return Scheme(name, family, bake, lambda w, h: 8 * codec.block_bytes)
+
+
+for _name, _enc, _eff in [("vq2", "best", "medium"), ("vq2-paper", "paper", "medium"),
+                          ("vq2-fast", "best", "fast"), ("vq2-thorough", "best", "thorough")]:
+    register(_name, lambda n=_name, e=_enc, f=_eff: _codec_scheme(n, "vq2", e, f, n))
+
+
 def get_scheme(name: str) -> Scheme:
     key = name.strip().lower()
     if key in _FIXED:
