@@ -50,7 +50,9 @@ def family_of(name: str) -> str:
 
 
 FAMILY_LABELS = {"sq": "square map per pair (sqN, 2 bits/cell)",
-                 "tri": "micromap per triangle (triL, 2 bits/micro-tri)"}
+                 "tri": "micromap per triangle (triL, 2 bits/micro-tri)",
+                 "vq2": "VQ2: 16x16 in 256 bits (our encoder)",
+                 "vq2-paper": "VQ2, the deck's naive encoder"}
 
 
 def plot_savings(path, results, scheme_names, title="Shader invocation savings") -> None:
@@ -66,12 +68,18 @@ def plot_savings(path, results, scheme_names, title="Shader invocation savings")
         if name == "texel":
             continue
         families.setdefault(family_of(name), []).append((m["bits"], m["savings"], name))
+    stacked: dict[float, int] = {}  # labels of points at the same storage stack downwards
     for fam, pts in families.items():
         pts.sort()
         xs, ys, labels = zip(*pts)
         ax.plot(xs, ys, marker="o", label=FAMILY_LABELS.get(fam, fam))
         for x, y, lab in pts:
-            ax.annotate(lab, (x, y), textcoords="offset points", xytext=(4, -11), fontsize=7)
+            k = stacked.get(x, 0) if len(pts) == 1 else 0
+            if len(pts) == 1:
+                stacked[x] = k + 1
+                ax.annotate(lab, (x, y), textcoords="offset points", xytext=(-48, 8 + 10 * k), fontsize=7)
+            else:
+                ax.annotate(lab, (x, y), textcoords="offset points", xytext=(4, -11), fontsize=7)
     if "texel" in means:
         ax.axhline(means["texel"]["savings"], color="grey", ls="--", lw=1,
                    label=f"texel limit ({means['texel']['savings']:.1%})")

@@ -9,12 +9,17 @@ from numba import njit
 
 @njit(cache=True, inline="always")
 def get_bits(block, pos, n):
-    """Unsigned value of the ``n``-bit field at bit ``pos`` of a uint8 array."""
-    v = 0
-    for i in range(n):
-        k = pos + i
-        v |= ((block[k >> 3] >> (k & 7)) & 1) << i
-    return v
+    """Unsigned value of the ``n``-bit field (n <= 56) at bit ``pos`` of a uint8 array, read a
+    byte at a time."""
+    byte = pos >> 3
+    shift = pos & 7
+    v = np.int64(block[byte]) >> shift
+    got = 8 - shift
+    while got < n:
+        byte += 1
+        v |= np.int64(block[byte]) << got
+        got += 8
+    return v & ((np.int64(1) << n) - 1)
 
 
 def put_bits(block: np.ndarray, pos: int, n: int, value: int) -> None:

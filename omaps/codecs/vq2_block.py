@@ -105,15 +105,22 @@ def decode(data) -> np.ndarray:
 @njit(cache=True)
 def lookup(block, x, y):
     """State of cell (x, y) (column, row) of a physical block, reading only the bits it needs:
-    the vector's index, then (for indices >= 3) one codebook entry and the quadrant transform."""
-    v = (y >> 1) * 8 + (x >> 1)
-    idx = get_bits(block, INDEX_POS + INDEX_BITS * v, INDEX_BITS)
+    the vector's index, then (for indices >= 3) one codebook entry and the quadrant transform.
+    Each field sits in a 16-bit window of two bytes (the transforms in bytes 30-31)."""
+    p = 3 * (((y >> 1) << 3) | (x >> 1))
+    b = p >> 3
+    idx = ((np.int64(block[b]) | (np.int64(block[b + 1]) << 8)) >> (p & 7)) & 7
     if idx < 3:
         return idx
     q = ((y >> 3) << 1) | (x >> 3)
     entry = idx - 3 if idx < 6 else N_GLOBAL + N_LOCAL * q + (idx - 6)
-    code = get_bits(block, CODEBOOK_POS + CODE_BITS * entry, CODE_BITS)
-    t = 0 if q == 0 else get_bits(block, TRANSFORM_POS + TRANSFORM_BITS * (q - 1), TRANSFORM_BITS)
+    p = CODEBOOK_POS + CODE_BITS * entry
+    b = p >> 3
+    code = ((np.int64(block[b]) | (np.int64(block[b + 1]) << 8)) >> (p & 7)) & 31
+    t = 0
+    if q:
+        tw = np.int64(block[30]) | (np.int64(block[31]) << 8)  # bits 240..255
+        t = (tw >> (TRANSFORM_POS - 240 + TRANSFORM_BITS * (q - 1))) & 7
     e = INV2[t, ((y & 1) << 1) | (x & 1)]  # the transform acts on the low coordinate bits
     if (code >> (1 + e)) & 1:
         return states.C
