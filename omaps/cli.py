@@ -10,10 +10,11 @@ import time
 import numpy as np
 
 from . import __version__, maps, report
+from .codecs.registry import codec_names
 from .errors import InputError
 from .evaluate import EvalConfig, evaluate_many, mean_results
 from .procedural import default_corpus
-from .sampling import FILTERS, WRAP_MODES, footprint_grid
+from .sampling import FILTERS, WRAP_MODES
 from .schemes import DEFAULT_SCHEMES, parse_schemes
 from .texel_states import MODES, StateRule
 from .texture import find_images, load_alpha
@@ -77,7 +78,7 @@ def _parser() -> argparse.ArgumentParser:
                         description="Bake the codec's square map of a texture (corpus convention) and "
                                     "write the raw block.")
     en.add_argument("texture")
-    en.add_argument("--codec", required=True, help="vq2")
+    en.add_argument("--codec", required=True, help=", ".join(codec_names()))
     en.add_argument("--encoder", default="best", help="paper or best (default)")
     en.add_argument("--effort", default="medium", help="best encoder's search: fast, medium (default), thorough")
     en.add_argument("-o", "--output", required=True, metavar="FILE", help="raw block bytes")
@@ -86,7 +87,7 @@ def _parser() -> argparse.ArgumentParser:
 
     de = sub.add_parser("decode", help="decode a codec block and print or draw its map")
     de.add_argument("block", metavar="FILE")
-    de.add_argument("--codec", required=True, help="vq2")
+    de.add_argument("--codec", required=True, help=", ".join(codec_names()))
     de.add_argument("--show", metavar="OUT.png", help="draw the map in the deck's colours")
     de.add_argument("--json", action="store_true", help="print the map as JSON")
     de.set_defaults(func=cmd_decode)
@@ -160,8 +161,7 @@ def cmd_bake(a) -> int:
 
     config = _config(a)
     scheme = get_scheme(a.scheme)
-    tex = load_alpha(a.texture, config.channel)
-    grid = footprint_grid(config.rule.classify(tex), config.filter, config.wrap)
+    grid = config.grid(load_alpha(a.texture, config.channel))
     if a.uvs:
         if scheme.family != "tri":
             raise InputError("--uvs needs a triL scheme", a.uvs)
@@ -195,8 +195,7 @@ def cmd_encode(a) -> int:
     if a.effort not in codec.efforts:
         raise InputError(f"unknown effort {a.effort!r} (choose from {', '.join(codec.efforts)})")
     config = _config(a)
-    tex = load_alpha(a.texture, config.channel)
-    grid = footprint_grid(config.rule.classify(tex), config.filter, config.wrap)
+    grid = config.grid(load_alpha(a.texture, config.channel))
     original = maps.bake_square(grid, codec.map_size)
     block = codec.encode(original, a.encoder, a.effort)
     decoded = codec.decode(block)

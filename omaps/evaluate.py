@@ -22,6 +22,10 @@ class EvalConfig:
     wrap: str = "clamp"
     channel: str | None = None
 
+    def grid(self, texture: AlphaTexture):
+        """The footprint grid of a texture under these states, filter and addressing."""
+        return footprint_grid(self.rule.classify(texture), self.filter, self.wrap)
+
 
 @dataclass
 class TextureResult:
@@ -37,7 +41,7 @@ class TextureResult:
 
 def evaluate_texture(texture: AlphaTexture, schemes: list[Scheme], config: EvalConfig = EvalConfig(),
                      keep_maps: bool = False) -> TextureResult:
-    grid = footprint_grid(config.rule.classify(texture), config.filter, config.wrap)
+    grid = config.grid(texture)
     savings, bits, kept = {}, {}, {}
     for s in schemes:
         m = s.bake(grid)

@@ -27,11 +27,6 @@ FLAG_TO_STATE = np.array([C, T, O, C], dtype=np.uint8)
 COLOURS = np.array([[0, 255, 255], [255, 0, 255], [0, 200, 0]], dtype=np.uint8)
 
 
-def is_known(states: np.ndarray) -> np.ndarray:
-    """True where a hit needs no any-hit shader (T or O)."""
-    return np.asarray(states) != C
-
-
 def is_conservative(original: np.ndarray, lossy: np.ndarray) -> bool:
     """True when every change from ``original`` to ``lossy`` is O->C or T->C."""
     original = np.asarray(original)

@@ -43,11 +43,3 @@ def position_tables(n: int) -> tuple[np.ndarray, np.ndarray]:
         inv[t, fwd[t]] = np.arange(n * n)
     return fwd, inv
 
-
-def transform_vector(t: int, v: np.ndarray) -> np.ndarray:
-    """D = t(V) for an n x n array V."""
-    n = v.shape[0]
-    fwd, _ = position_tables(n)
-    out = np.empty_like(v)
-    out.reshape(-1)[fwd[t]] = v.reshape(-1)
-    return out

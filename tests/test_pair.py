@@ -1,0 +1,35 @@
+"""The corpus pair's barycentric -> (u, v) -> square cell mapping of docs/FORMAT.md."""
+
+import numpy as np
+from hypothesis import given
+from hypothesis import strategies as st
+
+from omaps import pair
+
+bary = st.tuples(st.floats(0, 1), st.floats(0, 1)).filter(lambda b: b[0] + b[1] <= 1)
+
+
+@given(st.integers(0, 1), bary, st.sampled_from([1, 2, 4, 16, 32, 128]))
+def test_hit_to_cell_is_the_point_of_the_triangle(tri, b, n):
+    b1, b2 = b
+    p = pair.PAIR[tri]
+    u, v = (1 - b1 - b2) * p[0] + b1 * p[1] + b2 * p[2]  # the hit's position on the triangle
+    assert np.allclose(pair.hit_to_uv(tri, b1, b2), (u, v))
+    i, j = pair.hit_to_cell(tri, b1, b2, n)
+    assert 0 <= i < n and 0 <= j < n
+    assert i / n - 1e-12 <= u <= (i + 1) / n + 1e-12 and j / n - 1e-12 <= v <= (j + 1) / n + 1e-12
+
+
+@given(st.floats(0, 1), st.floats(0, 1))
+def test_uv_to_hit_inverts(u, v):
+    t, b1, b2 = pair.uv_to_hit(u, v)
+    assert b1 >= 0 and b2 >= 0 and b1 + b2 <= 1 + 1e-12
+    assert np.allclose(pair.hit_to_uv(t, b1, b2), (u, v))
+    assert (t == 0) == (v <= u)  # A lies below the diagonal
+
+
+def test_square_cells_order():
+    cells = pair.square_cells(4)
+    assert cells.shape == (16, 4, 2)
+    np.testing.assert_allclose(cells[1], [[0.25, 0], [0.5, 0], [0.5, 0.25], [0.25, 0.25]])  # (i=1, j=0)
+    np.testing.assert_allclose(cells[4, 0], [0, 0.25])  # row j = 1 starts at index 4
