@@ -3,6 +3,12 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from hypothesis import settings
+
+# numba compiles (or loads its cache) on a kernel's first call, which can take longer than
+# Hypothesis' per-example deadline: timing is not what these tests check
+settings.register_profile("omaps", deadline=None)
+settings.load_profile("omaps")
 
 ROOT = Path(__file__).resolve().parents[1]
 SHARED = Path(os.environ.get("OMAPS_SHARED", ROOT.parent / "shared"))
