@@ -68,14 +68,14 @@ def plot_savings(path, results, scheme_names, title="Shader invocation savings")
         if name == "texel":
             continue
         families.setdefault(family_of(name), []).append((m["bits"], m["savings"], name))
-    stacked: dict[float, int] = {}  # labels of points at the same storage stack downwards
+    stacked: dict[float, int] = {}
     for fam, pts in families.items():
         pts.sort()
         xs, ys, labels = zip(*pts)
         ax.plot(xs, ys, marker="o", label=FAMILY_LABELS.get(fam, fam))
         for x, y, lab in pts:
-            k = stacked.get(x, 0) if len(pts) == 1 else 0
-            if len(pts) == 1:
+            if len(pts) == 1:  # a lone point: label above-left, stacked with others at this x
+                k = stacked.get(x, 0)
                 stacked[x] = k + 1
                 ax.annotate(lab, (x, y), textcoords="offset points", xytext=(-48, 8 + 10 * k), fontsize=7)
             else:

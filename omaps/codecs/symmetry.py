@@ -15,10 +15,6 @@ from __future__ import annotations
 
 import numpy as np
 
-NAMES = ["identity", "rotate 90", "reflect top/bottom", "reflect X=-Y", "reflect left/right",
-         "reflect X=Y", "rotate 180", "rotate 270"]
-
-
 def apply_position(t: int, ex: int, ey: int, n: int) -> tuple[int, int]:
     """Where element (ex, ey) of an n x n vector goes under transform t."""
     if t & 4:
@@ -42,4 +38,3 @@ def position_tables(n: int) -> tuple[np.ndarray, np.ndarray]:
     for t in range(8):
         inv[t, fwd[t]] = np.arange(n * n)
     return fwd, inv
-

@@ -34,11 +34,13 @@ N_GLOBAL, N_LOCAL, N_ENTRIES = 3, 2, 11
 TRANSFORM_BITS, TRANSFORM_POS = 3, 247
 
 
-def quadrant_of_vector(vx: int, vy: int) -> int:
+@njit(cache=True, inline="always")
+def quadrant_of_vector(vx, vy):
     return 2 * (vy >> 2) + (vx >> 2)
 
 
-def entry_of_index(index: int, quadrant: int) -> int:
+@njit(cache=True, inline="always")
+def entry_of_index(index, quadrant):
     """Codebook entry an index >= 3 selects in a quadrant."""
     return index - 3 if index < 6 else N_GLOBAL + N_LOCAL * quadrant + (index - 6)
 
@@ -112,9 +114,8 @@ def lookup(block, x, y):
     idx = ((np.int64(block[b]) | (np.int64(block[b + 1]) << 8)) >> (p & 7)) & 7
     if idx < 3:
         return idx
-    q = ((y >> 3) << 1) | (x >> 3)
-    entry = idx - 3 if idx < 6 else N_GLOBAL + N_LOCAL * q + (idx - 6)
-    p = CODEBOOK_POS + CODE_BITS * entry
+    q = quadrant_of_vector(x >> 1, y >> 1)
+    p = CODEBOOK_POS + CODE_BITS * entry_of_index(idx, q)
     b = p >> 3
     code = ((np.int64(block[b]) | (np.int64(block[b + 1]) << 8)) >> (p & 7)) & 31
     t = 0

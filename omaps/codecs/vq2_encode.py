@@ -20,7 +20,7 @@ from numba import njit
 
 from .. import states
 from .vec2 import INVERSE_T, KNOWN, RETAINED, TRANS_CODE
-from .vq2_block import N_ENTRIES, N_GLOBAL, SIZE, VQ2Block
+from .vq2_block import N_ENTRIES, N_GLOBAL, SIZE, VQ2Block, quadrant_of_vector
 
 ENCODERS = ("paper", "best")
 EFFORTS = {"fast": 0, "medium": 1, "thorough": 2}
@@ -69,7 +69,7 @@ def quadrant_items(codes):
         mask = (c >> 1) & 15
         if mask == 0 or mask == 15:
             continue
-        q = 2 * ((v >> 3) >> 2) + ((v & 7) >> 2)
+        q = quadrant_of_vector(v & 7, v >> 3)
         found = False
         for k in range(n_item[q]):
             if item_code[q, k] == c:
@@ -132,7 +132,7 @@ def _greedy(cc, item_cnt, n_item):
     nlo = np.zeros(4, dtype=np.int64)
     ngl = 0
     cur = np.zeros((4, 16), dtype=np.int64)
-    gain = np.zeros((5, 32), dtype=np.int64)  # rows 0..3 per quadrant, row 4 all quadrants
+    gain = np.zeros((4, 32), dtype=np.int64)  # marginal gain of each code in each quadrant
     for _ in range(N_ENTRIES):
         gain[:] = 0
         for q in range(4):
@@ -184,37 +184,31 @@ def _refine(cc, item_cnt, n_item, gl, ngl, lo, nlo, target, max_passes):
     value = _value(cc, item_cnt, n_item, gl, ngl, lo, nlo)
     for _ in range(max_passes):
         improved = False
-        for slot in range(-1, 4):
-            count = 3 if slot == -1 else 2
-            for i in range(count):
+        for slot in range(-1, 4):  # -1: the global entries, q: quadrant q's local entries
+            entries = gl if slot == -1 else lo[slot]
+            for i in range(entries.shape[0]):
                 for ci in range(CANDIDATES.shape[0]):
                     if value == target:
                         return value, gl, ngl, lo, nlo
-                    c = CANDIDATES[ci]
+                    used = ngl if slot == -1 else nlo[slot]
+                    if i > used:  # fill slots in order
+                        break
+                    old = entries[i]
+                    entries[i] = CANDIDATES[ci]
                     if slot == -1:
-                        old, old_n = gl[i], ngl
-                        if i > ngl:
-                            break
-                        gl[i] = c
-                        ngl = max(ngl, i + 1)
-                        v = _value(cc, item_cnt, n_item, gl, ngl, lo, nlo)
-                        if v > value:
-                            value = v
-                            improved = True
-                        else:
-                            gl[i], ngl = old, old_n
+                        ngl = max(used, i + 1)
                     else:
-                        old, old_n = lo[slot, i], nlo[slot]
-                        if i > nlo[slot]:
-                            break
-                        lo[slot, i] = c
-                        nlo[slot] = max(nlo[slot], i + 1)
-                        v = _value(cc, item_cnt, n_item, gl, ngl, lo, nlo)
-                        if v > value:
-                            value = v
-                            improved = True
+                        nlo[slot] = max(used, i + 1)
+                    v = _value(cc, item_cnt, n_item, gl, ngl, lo, nlo)
+                    if v > value:
+                        value = v
+                        improved = True
+                    else:
+                        entries[i] = old
+                        if slot == -1:
+                            ngl = used
                         else:
-                            lo[slot, i], nlo[slot] = old, old_n
+                            nlo[slot] = used
         if not improved:
             break
     return value, gl, ngl, lo, nlo
@@ -384,7 +378,7 @@ def _assemble(codes, tr, gl, ngl, lo, nlo):
         if mask == 15:
             indices[v] = 2
             continue
-        q = 2 * ((v >> 3) >> 2) + ((v & 7) >> 2)
+        q = quadrant_of_vector(v & 7, v >> 3)
         d = TRANS_CODE[INVERSE_T[tr[q]], c]
         best, idx = 0, 2
         for i in range(ngl):
