@@ -19,6 +19,9 @@ class Codec:
     efforts: tuple[str, ...]
     encode: Callable[..., bytes]  # (map, encoder, effort) -> physical block(s)
     decode: Callable[[bytes], np.ndarray]  # physical block(s) -> map
+    # numba @njit (data: uint8[block_bytes], x, y) -> state of cell (x, y), reading only the bits it
+    # needs; callable from other numba code (the tracer's any-hit filter)
+    lookup: Callable
 
 
 def _vq2() -> Codec:
@@ -28,7 +31,7 @@ def _vq2() -> Codec:
         return vq2_encode.encode(m, encoder, effort).pack()
 
     return Codec("vq2", vq2_block.SIZE, vq2_block.BLOCK_BYTES, vq2_encode.ENCODERS, tuple(vq2_encode.EFFORTS),
-                 enc, vq2_block.decode)
+                 enc, vq2_block.decode, vq2_block.lookup)
 
 
 _FACTORIES: dict[str, Callable[[], Codec]] = {"vq2": _vq2}
