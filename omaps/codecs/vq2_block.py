@@ -104,28 +104,32 @@ def decode(data) -> np.ndarray:
     return VQ2Block.unpack(data).decode()
 
 
+# _CODE_POS[i, q]: bit position of the codebook entry index i selects in quadrant q (i >= 3; rows
+# 0..2 point at entry 0 so that the lookup needs no branch)
+_CODE_POS = np.array([[CODEBOOK_POS + CODE_BITS * (entry_of_index(i, q) if i >= 3 else 0) for q in range(4)]
+                      for i in range(8)], dtype=np.int64)
+
+
 @njit(cache=True)
 def lookup(block, x, y):
     """State of cell (x, y) (column, row) of a physical block, reading only the bits it needs:
-    the vector's index, then (for indices >= 3) one codebook entry and the quadrant transform.
-    Each field sits in a 16-bit window of two bytes (the transforms in bytes 30-31)."""
+    the vector's index, one codebook entry and the quadrant transform. Each field sits in a
+    16-bit window of two bytes (the transforms in bytes 30-31). Written without branches on the
+    index (a mispredicted branch costs more than the loads it would skip)."""
     p = 3 * (((y >> 1) << 3) | (x >> 1))
     b = p >> 3
     idx = ((np.int64(block[b]) | (np.int64(block[b + 1]) << 8)) >> (p & 7)) & 7
-    if idx < 3:
-        return idx
     q = quadrant_of_vector(x >> 1, y >> 1)
-    p = CODEBOOK_POS + CODE_BITS * entry_of_index(idx, q)
+    p = _CODE_POS[idx, q]
     b = p >> 3
     code = ((np.int64(block[b]) | (np.int64(block[b + 1]) << 8)) >> (p & 7)) & 31
-    t = 0
-    if q:
-        tw = np.int64(block[30]) | (np.int64(block[31]) << 8)  # bits 240..255
-        t = (tw >> (TRANSFORM_POS - 240 + TRANSFORM_BITS * (q - 1))) & 7
+    tw = np.int64(block[30]) | (np.int64(block[31]) << 8)  # bits 240..255
+    t = (tw >> (TRANSFORM_POS - 240 - TRANSFORM_BITS + TRANSFORM_BITS * q)) & 7 & -np.int64(q != 0)
     e = INV2[t, ((y & 1) << 1) | (x & 1)]  # the transform acts on the low coordinate bits
-    if (code >> (1 + e)) & 1:
-        return states.C
-    return states.O if code & 1 else states.T
+    c = (code >> (1 + e)) & 1
+    pal = code & 1
+    state = c * states.C + (1 - c) * (states.O * pal + states.T * (1 - pal))
+    return idx if idx < 3 else state
 
 
 @njit(cache=True)

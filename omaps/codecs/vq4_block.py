@@ -38,12 +38,14 @@ ENTRY_POS = 256 + np.concatenate([[0], np.cumsum(KIND_BITS[ENTRY_KIND])[:-1]]).a
 TRANSFORM_BITS, TRANSFORM_POS = 3, 503
 assert ENTRY_POS[-1] + KIND_BITS[3] == TRANSFORM_POS and TRANSFORM_POS + 9 == 8 * BLOCK_BYTES
 
-# absolute bit of the C flag and of the palette bit of stored element e under index i (i >= 3)
-_CBIT = np.zeros((16, 16), dtype=np.int64)
-_PBIT = np.zeros((16, 16), dtype=np.int64)
+# _BITS[i, t, c]: for index i >= 3 under transform t, the absolute bits of the C flag (low 16) and
+# the palette bit (high 16) that cell c = 4*(y & 3) + (x & 3) of the vector reads; rows 0..2 are
+# never used but keep the lookup free of branches
+_BITS = np.zeros((16, 8, 16), dtype=np.int64)
 for _i in range(3, 16):
-    _CBIT[_i] = ENTRY_POS[_i - 3] + CFLAG_BIT[ENTRY_KIND[_i - 3]]
-    _PBIT[_i] = ENTRY_POS[_i - 3] + PALETTE_BIT[ENTRY_KIND[_i - 3]]
+    _k = ENTRY_KIND[_i - 3]
+    _e = INV4  # stored element e = t^-1(c)
+    _BITS[_i] = (ENTRY_POS[_i - 3] + CFLAG_BIT[_k][_e]) | ((ENTRY_POS[_i - 3] + PALETTE_BIT[_k][_e]) << 16)
 
 X64_SIZE, X64_BYTES = 64, 4 * BLOCK_BYTES
 
@@ -130,21 +132,19 @@ def _bit(data, base, k):
 @njit(cache=True)
 def lookup_at(data, base, x, y):
     """State of cell (x, y) of the block at byte ``base`` of ``data``, reading only what it needs:
-    the vector's 4-bit index; for an explicit entry, the quadrant's transform, then one C flag
-    and (if clear) one palette bit."""
+    the vector's 4-bit index, the quadrant's transform, and for an explicit entry one C flag and
+    one palette bit. Written without branches on the index (a mispredicted branch costs more
+    than the few loads it would skip)."""
     v = ((y >> 2) << 3) | (x >> 2)
     idx = (np.int64(data[base + (v >> 1)]) >> ((v & 1) << 2)) & 15
-    if idx < 3:
-        return idx
     q = ((y >> 4) << 1) | (x >> 4)
-    t = 0
-    if q:
-        tw = np.int64(data[base + 62]) | (np.int64(data[base + 63]) << 8)  # bits 496..511
-        t = (tw >> (TRANSFORM_POS - 496 + TRANSFORM_BITS * (q - 1))) & 7
-    e = INV4[t, ((y & 3) << 2) | (x & 3)]
-    if _bit(data, base, _CBIT[idx, e]):
-        return states.C
-    return states.O if _bit(data, base, _PBIT[idx, e]) else states.T
+    tw = np.int64(data[base + 62]) | (np.int64(data[base + 63]) << 8)  # bits 496..511
+    t = (tw >> (TRANSFORM_POS - 496 - TRANSFORM_BITS + TRANSFORM_BITS * q)) & 7 & -np.int64(q != 0)
+    p = _BITS[idx, t, ((y & 3) << 2) | (x & 3)]
+    c = _bit(data, base, p & 0xFFFF)
+    pal = _bit(data, base, p >> 16)
+    state = c * states.C + (1 - c) * (states.O * pal + states.T * (1 - pal))
+    return idx if idx < 3 else state
 
 
 @njit(cache=True)
