@@ -143,8 +143,64 @@ def _pool(bt, bo):
             if (kt | ko) != 0:
                 keys[nk] = (kind << 32) | (kt << 16) | ko
                 nk += 1
-    u = np.unique(keys[:nk])
+    u = _unique_by_kind(keys[:nk])
     return u >> 32, (u >> 16) & FULL, u & FULL
+
+
+# Pools are deduplicated with a small hash table: numba's sort made np.unique the slowest step.
+
+@njit(cache=True)
+def _new_table(n):
+    size = 16
+    while size < 2 * n:
+        size <<= 1
+    return np.full(size, -1, dtype=np.int64)
+
+
+@njit(cache=True, inline="always")
+def _slot(table, keys, key):
+    """Slot of ``key`` in an open-addressing table of positions into ``keys`` (free: -1)."""
+    mask = table.shape[0] - 1
+    h = ((key * 0x9E3779B1) ^ (key >> 17)) & mask
+    while table[h] >= 0 and keys[table[h]] != key:
+        h = (h + 1) & mask
+    return h
+
+
+@njit(cache=True)
+def _unique_by_kind(keys):
+    """Distinct keys (kind << 32 | T << 16 | O), grouped by kind in increasing order."""
+    table = _new_table(keys.shape[0])
+    uniq = np.empty_like(keys)
+    m = 0
+    count = np.zeros(N_KINDS + 1, dtype=np.int64)
+    for key in keys:
+        h = _slot(table, uniq, key)
+        if table[h] < 0:
+            table[h] = m
+            uniq[m] = key
+            m += 1
+            count[(key >> 32) + 1] += 1
+    for k in range(N_KINDS):
+        count[k + 1] += count[k]
+    out = np.empty(m, dtype=np.int64)
+    for i in range(m):
+        k = uniq[i] >> 32
+        out[count[k]] = uniq[i]
+        count[k] += 1
+    return out
+
+
+@njit(cache=True)
+def _positions(pool_keys, queries):
+    """Index in ``pool_keys`` of each query key (all present)."""
+    table = _new_table(pool_keys.shape[0])
+    for i in range(pool_keys.shape[0]):
+        table[_slot(table, pool_keys, pool_keys[i])] = i
+    out = np.empty(queries.shape[0], dtype=np.int64)
+    for j in range(queries.shape[0]):
+        out[j] = table[_slot(table, pool_keys, queries[j])]
+    return out
 
 
 @njit(cache=True)
@@ -157,17 +213,52 @@ def _gain_matrix(ck, ct, co, it, io):
 
 
 @njit(cache=True)
-def _marginal(grow, cur, w):
+def _sparse(g):
+    """The nonzero gains by candidate (rows) and by item (columns): a candidate covers few items,
+    so the greedy and the swaps walk these lists instead of the dense matrix."""
+    nc, n = g.shape
+    nnz = 0
+    for c in range(nc):
+        for i in range(n):
+            if g[c, i]:
+                nnz += 1
+    rp = np.zeros(nc + 1, dtype=np.int64)
+    ri = np.empty(nnz, dtype=np.int64)
+    cp = np.zeros(n + 1, dtype=np.int64)
+    cc = np.empty(nnz, dtype=np.int64)
+    k = 0
+    for c in range(nc):
+        for i in range(n):
+            if g[c, i]:
+                ri[k] = i
+                k += 1
+                cp[i + 1] += 1
+        rp[c + 1] = k
+    for i in range(n):
+        cp[i + 1] += cp[i]
+    fill = cp[:-1].copy()
+    for c in range(nc):
+        for k in range(rp[c], rp[c + 1]):
+            i = ri[k]
+            cc[fill[i]] = c
+            fill[i] += 1
+    return rp, ri, cp, cc
+
+
+@njit(cache=True, inline="always")
+def _marginal(g, sp, c, cur, w):
+    rp, ri = sp[0], sp[1]
     s = 0
-    for i in range(cur.shape[0]):
-        d = grow[i] - cur[i]
+    for k in range(rp[c], rp[c + 1]):
+        i = ri[k]
+        d = g[c, i] - cur[i]
         if d > 0:
             s += d * w[i]
     return s
 
 
 @njit(cache=True)
-def _greedy(g, ck, w, allowed):
+def _greedy(g, sp, ck, w, allowed):
     """Slots filled one at a time by the allowed candidate of largest marginal gain whose kind
     has room. chosen[s] is the candidate in entry s (-1 empty)."""
     nc, n = g.shape
@@ -175,7 +266,7 @@ def _greedy(g, ck, w, allowed):
     marg = np.zeros(nc, dtype=np.int64)
     for c in range(nc):
         if allowed[c]:
-            marg[c] = _marginal(g[c], cur, w)
+            marg[c] = _marginal(g, sp, c, cur, w)
     used = np.zeros(N_KINDS, dtype=np.int64)
     chosen = np.full(N_ENTRIES, -1, dtype=np.int64)
     for _ in range(N_ENTRIES):
@@ -192,9 +283,10 @@ def _greedy(g, ck, w, allowed):
             new = g[pick, i]
             old = cur[i]
             if new > old:
-                for c in range(nc):
+                for k in range(sp[2][i], sp[2][i + 1]):
+                    c = sp[3][k]
                     gc = g[c, i]
-                    if gc > old:
+                    if gc > old and allowed[c]:
                         marg[c] -= w[i] * (min(gc, new) - old)
                 cur[i] = new
     return chosen
@@ -216,7 +308,7 @@ def _value_without(g, chosen, skip, w, cur):
 
 
 @njit(cache=True)
-def _swap(g, ck, w, chosen, target, max_passes):
+def _swap(g, sp, ck, w, chosen, target, max_passes):
     """Replace one entry at a time by the candidate of its kind that keeps most cells."""
     n = g.shape[1]
     cur = np.zeros(n, dtype=np.int64)
@@ -230,7 +322,7 @@ def _swap(g, ck, w, chosen, target, max_passes):
             best, bc = value - base, chosen[s]
             for c in range(g.shape[0]):
                 if ck[c] == ENTRY_KIND[s]:
-                    m = _marginal(g[c], cur, w)
+                    m = _marginal(g, sp, c, cur, w)
                     if m > best:
                         best, bc = m, c
             if bc != chosen[s]:
@@ -279,7 +371,7 @@ def _extend_pool(ck, ct, co, nt, no):
     """The pool plus the projections of new base patterns, without duplicates."""
     ek, et, eo = _pool(nt, no)
     keys = np.concatenate(((ck << 32) | (ct << 16) | co, (ek << 32) | (et << 16) | eo))
-    u = np.unique(keys)
+    u = _unique_by_kind(keys)
     return u >> 32, (u >> 16) & FULL, u & FULL
 
 
@@ -290,37 +382,35 @@ def _codebook(it, io, w, level, target):
     pair merges; 2: then swaps; 3: then merges of the items each entry serves, and swaps."""
     ck, ct, co = _candidates(it, io, level >= 1)
     g = _gain_matrix(ck, ct, co, it, io)
-    chosen = _greedy(g, ck, w, np.ones(ck.shape[0], dtype=np.bool_))
+    sp = _sparse(g)
+    chosen = _greedy(g, sp, ck, w, np.ones(ck.shape[0], dtype=np.bool_))
     cur = np.zeros(it.shape[0], dtype=np.int64)
     value = _value_without(g, chosen, -1, w, cur)
     if level >= 1 and value < target:
         # merges can crowd out the scarce general entries: also try the vectors alone
         ik, i_t, i_o = _pool(it, io)
-        keys = (ck << 32) | (ct << 16) | co
         allowed = np.zeros(ck.shape[0], dtype=np.bool_)
-        allowed[np.searchsorted(keys, (ik << 32) | (i_t << 16) | i_o)] = True
-        alone = _greedy(g, ck, w, allowed)
+        allowed[_positions((ck << 32) | (ct << 16) | co, (ik << 32) | (i_t << 16) | i_o)] = True
+        alone = _greedy(g, sp, ck, w, allowed)
         v = _value_without(g, alone, -1, w, cur)
         if v > value:
             value, chosen = v, alone
     if level >= 2 and value < target:
-        value = _swap(g, ck, w, chosen, target, 8)
+        value = _swap(g, sp, ck, w, chosen, target, 8)
     if level >= 3 and value < target:
         for _ in range(3):
             nt, no = _served_merges(g, ct, co, chosen, it, io, w)
-            old = (ck, ct, co)
+            old_keys = (ck << 32) | (ct << 16) | co
             ck, ct, co = _extend_pool(ck, ct, co, nt, no)
-            if ck.shape[0] == old[0].shape[0]:
+            if ck.shape[0] == old_keys.shape[0]:
                 break
             # keep the chosen entries: find them in the new pool
+            where = _positions((ck << 32) | (ct << 16) | co, old_keys)
             for s in range(N_ENTRIES):
-                c = chosen[s]
-                if c >= 0:
-                    key = (old[0][c] << 32) | (old[1][c] << 16) | old[2][c]
-                    keys = (ck << 32) | (ct << 16) | co
-                    chosen[s] = np.searchsorted(keys, key)
+                if chosen[s] >= 0:
+                    chosen[s] = where[chosen[s]]
             g = _gain_matrix(ck, ct, co, it, io)
-            v = _swap(g, ck, w, chosen, target, 8)
+            v = _swap(g, _sparse(g), ck, w, chosen, target, 8)
             if v <= value:
                 value = v
                 break
