@@ -438,22 +438,22 @@ class Camera:
 
 
 def default_camera(bounds: np.ndarray) -> Camera:
-    """A low, grazing view across the scene through its foliage: from outside one corner of the
-    bounds at a fifth of their height, looking at the far side at a quarter of the height."""
+    """A low, grazing view through the foliage. A wide scene (a forest) is crossed along its
+    diagonal from just inside one corner, eye at an eighth of the scene's height, looking slightly
+    up; a compact one (a tree) is framed whole from the side, low, through its crown."""
     lo, hi = bounds
     size = hi - lo
     height = size[1]
-    eye = np.array([lo[0] - 0.05 * size[0], lo[1] + 0.2 * height, lo[2] - 0.05 * size[2]])
-    target = np.array([lo[0] + 0.6 * size[0], lo[1] + 0.25 * height, lo[2] + 0.6 * size[2]])
-    horizontal = float(np.hypot(size[0], size[2]))
-    if horizontal < 3 * height:  # a compact object (one tree): frame it from the side, low
-        c = (lo + hi) / 2
-        radius = float(np.linalg.norm(size)) / 2
-        d = radius / math.sin(math.radians(50) / 2)
-        direction = np.array([-0.6, 0.08, -0.8])
-        direction /= np.linalg.norm(direction)
-        return Camera(c + d * direction, c, 50.0)
-    return Camera(eye, target, 60.0)
+    if float(np.hypot(size[0], size[2])) >= 3 * height:
+        eye = lo + size * np.array([0.03, 0.12, 0.03])
+        target = lo + size * np.array([0.97, 0.2, 0.97])
+        return Camera(eye, target, 60.0)
+    c = (lo + hi) / 2
+    radius = float(np.linalg.norm(size)) / 2
+    d = radius / math.sin(math.radians(50) / 2)
+    direction = np.array([-0.6, 0.08, -0.8])
+    direction /= np.linalg.norm(direction)
+    return Camera(c + d * direction, c, 50.0)
 
 
 @dataclass
