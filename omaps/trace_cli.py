@@ -29,8 +29,9 @@ def add_parser(sub) -> None:
                                    "each scheme's maps are read in the any-hit filter, and every scheme's "
                                    "visible result is checked against 'none' (every candidate alpha-tested).")
     t.add_argument("scene", metavar="SCENE", help=".gltf or .glb file")
-    t.add_argument("--schemes", default=DEFAULT_SCHEMES,
-                   help="comma-separated: none, sqN, triL, or a codec (vq2, vq4, vq4x64) (default: %(default)s)")
+    t.add_argument("--schemes", default=None,
+                   help="comma-separated: none, sqN, triL, or a codec (vq2, vq4, vq4x64) (default: "
+                        f"{DEFAULT_SCHEMES}, those of its codecs that this installation has)")
     t.add_argument("--camera", metavar="X,Y,Z:TX,TY,TZ:FOV",
                    help="eye, target and vertical field of view in degrees (default: a low grazing view "
                         "across the scene bounds)")
@@ -48,6 +49,13 @@ def add_parser(sub) -> None:
     t.add_argument("--render", metavar="FILE.png", help="the alpha-tested albedo image")
     t.add_argument("--quiet", action="store_true", help="no progress bars")
     t.set_defaults(func=cmd_trace)
+
+
+def default_schemes() -> str:
+    from .codecs.registry import codec_names
+
+    known = set(codec_names())
+    return ",".join(n for n in DEFAULT_SCHEMES.split(",") if not n.startswith("vq") or n in known)
 
 
 def parse_size(text: str) -> tuple[int, int]:
@@ -100,7 +108,7 @@ def cmd_trace(a) -> int:
     from . import scene_maps, trace
     from .scene import SceneWarning, load_scene
 
-    names = scene_maps.parse_trace_schemes(a.schemes)
+    names = scene_maps.parse_trace_schemes(a.schemes or default_schemes())
     w, h = parse_size(a.size)
     if a.jobs is not None and a.jobs < 1:
         raise InputError(f"--jobs must be >= 1, got {a.jobs}")
