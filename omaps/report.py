@@ -43,16 +43,21 @@ def write_csv(path, results, scheme_names) -> None:
 
 
 def family_of(name: str) -> str:
+    """Plot line of a scheme: sqN, triL; vq4 and vq4x64 (one codec at two sizes) share one."""
     for prefix in ("sq", "tri"):
         if name.startswith(prefix) and name[len(prefix):].isdigit():
             return prefix
+    if name.startswith("vq4x64"):
+        return "vq4" + name[len("vq4x64"):]
     return name
 
 
 FAMILY_LABELS = {"sq": "square map per pair (sqN, 2 bits/cell)",
                  "tri": "micromap per triangle (triL, 2 bits/micro-tri)",
                  "vq2": "VQ2: 16x16 in 256 bits (our encoder)",
-                 "vq2-paper": "VQ2, the deck's naive encoder"}
+                 "vq2-paper": "VQ2, the deck's naive encoder",
+                 "vq4": "VQ4: 32x32 in 512 bits, 64x64 in 4 blocks (our encoder)",
+                 "vq4-paper": "VQ4, the deck's top-down encoder"}
 
 
 def plot_savings(path, results, scheme_names, title="Shader invocation savings") -> None:

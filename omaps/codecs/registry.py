@@ -34,7 +34,24 @@ def _vq2() -> Codec:
                  enc, vq2_block.decode, vq2_block.lookup)
 
 
-_FACTORIES: dict[str, Callable[[], Codec]] = {"vq2": _vq2}
+def _vq4() -> Codec:
+    from . import vq4_block, vq4_encode
+
+    def enc(m, encoder="best", effort="medium"):
+        return vq4_encode.encode(m, encoder, effort).pack()
+
+    return Codec("vq4", vq4_block.SIZE, vq4_block.BLOCK_BYTES, vq4_encode.ENCODERS, tuple(vq4_encode.EFFORTS),
+                 enc, vq4_block.decode, vq4_block.lookup)
+
+
+def _vq4x64() -> Codec:
+    from . import vq4_block, vq4_encode
+
+    return Codec("vq4x64", vq4_block.X64_SIZE, vq4_block.X64_BYTES, vq4_encode.ENCODERS,
+                 tuple(vq4_encode.EFFORTS), vq4_encode.encode_x64, vq4_block.decode_x64, vq4_block.lookup_x64)
+
+
+_FACTORIES: dict[str, Callable[[], Codec]] = {"vq2": _vq2, "vq4": _vq4, "vq4x64": _vq4x64}
 
 
 def codec_names() -> list[str]:

@@ -1,0 +1,177 @@
+"""VQ4: a 32x32 map in one 512-bit block (and ``vq4x64``: a 64x64 map in four) -- physical
+layout, symbolic block, decoders.
+
+The map is an 8x8 grid of 4x4 vectors (vector (vx, vy) holds cells x = 4vx..4vx+3,
+y = 4vy..4vy+3 of ``map[y, x]``), in four quadrants of 4x4 vectors numbered as in VQ2
+(q = 2*(vy >> 2) + (vx >> 2)).
+
+Physical block (64 bytes, bits numbered as in ``bits.py``):
+
+    bits   0..255  index of vector v = 8*vy + vx, 4 bits each, at bit 4v
+    bits 256..502  codebook: 13 entries (``vec4`` kinds), entry j at ENTRY_POS[j]:
+                   j 0..2 two-value (17 bits), 3 vertical and 4 horizontal partition (18 bits),
+                   5..12 general (20 bits)
+    bits 503..511  transforms of quadrants 1, 2, 3 (3 bits each, at 503 + 3(q-1))
+
+Index 0, 1, 2: uniform T, O, C; index i >= 3: entry i - 3. Every 512-bit pattern is a valid block.
+``vq4x64`` stores the 64x64 map's 32x32 quadrants (top-left, top-right, bottom-left,
+bottom-right) as four consecutive blocks.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numba import njit
+
+from .. import states
+from .bits import as_block, get_bits, put_bits
+from .vec4 import CFLAG_BIT, FWD4, INV4, KIND_BITS, PALETTE_BIT, entry_pattern, pattern_states
+
+BLOCK_BYTES = 64
+SIZE = 32
+INDEX_BITS, INDEX_POS = 4, 0
+N_ENTRIES = 13
+ENTRY_KIND = np.array([0, 0, 0, 1, 2] + [3] * 8, dtype=np.int64)
+ENTRY_POS = 256 + np.concatenate([[0], np.cumsum(KIND_BITS[ENTRY_KIND])[:-1]]).astype(np.int64)
+TRANSFORM_BITS, TRANSFORM_POS = 3, 503
+assert ENTRY_POS[-1] + KIND_BITS[3] == TRANSFORM_POS and TRANSFORM_POS + 9 == 8 * BLOCK_BYTES
+
+# absolute bit of the C flag and of the palette bit of stored element e under index i (i >= 3)
+_CBIT = np.zeros((16, 16), dtype=np.int64)
+_PBIT = np.zeros((16, 16), dtype=np.int64)
+for _i in range(3, 16):
+    _CBIT[_i] = ENTRY_POS[_i - 3] + CFLAG_BIT[ENTRY_KIND[_i - 3]]
+    _PBIT[_i] = ENTRY_POS[_i - 3] + PALETTE_BIT[ENTRY_KIND[_i - 3]]
+
+X64_SIZE, X64_BYTES = 64, 4 * BLOCK_BYTES
+
+
+@dataclass
+class VQ4Block:
+    """Symbolic block: ``indices`` (64,) in 0..15, ``entries`` (13,) codes of the kinds in
+    ENTRY_KIND, ``transforms`` (4,) with transforms[0] = 0."""
+
+    indices: np.ndarray
+    entries: np.ndarray
+    transforms: np.ndarray
+
+    def __post_init__(self):
+        self.indices = np.asarray(self.indices, dtype=np.uint8).reshape(64)
+        self.entries = np.asarray(self.entries, dtype=np.int64).reshape(N_ENTRIES)
+        t = np.asarray(self.transforms, dtype=np.uint8).reshape(-1)
+        self.transforms = np.concatenate([[0], t]).astype(np.uint8) if t.size == 3 else t
+        if self.transforms.shape != (4,) or self.transforms[0] != 0:
+            raise ValueError("transforms: 3 values (quadrants 1..3) or 4 with the first 0")
+        if self.indices.max() > 15 or self.transforms.max() > 7:
+            raise ValueError("field out of range")
+        if np.any(self.entries < 0) or np.any(self.entries >= (1 << KIND_BITS[ENTRY_KIND])):
+            raise ValueError("codebook entry out of range for its kind")
+
+    def pack(self) -> bytes:
+        b = np.zeros(BLOCK_BYTES, dtype=np.uint8)
+        for v in range(64):
+            put_bits(b, INDEX_POS + INDEX_BITS * v, INDEX_BITS, int(self.indices[v]))
+        for j in range(N_ENTRIES):
+            put_bits(b, int(ENTRY_POS[j]), int(KIND_BITS[ENTRY_KIND[j]]), int(self.entries[j]))
+        for q in range(1, 4):
+            put_bits(b, TRANSFORM_POS + TRANSFORM_BITS * (q - 1), TRANSFORM_BITS, int(self.transforms[q]))
+        return b.tobytes()
+
+    @classmethod
+    def unpack(cls, data) -> "VQ4Block":
+        b = as_block(data, BLOCK_BYTES, "a VQ4 block")
+        idx = [get_bits(b, INDEX_POS + INDEX_BITS * v, INDEX_BITS) for v in range(64)]
+        ent = [get_bits(b, int(ENTRY_POS[j]), int(KIND_BITS[ENTRY_KIND[j]])) for j in range(N_ENTRIES)]
+        tr = [get_bits(b, TRANSFORM_POS + TRANSFORM_BITS * (q - 1), TRANSFORM_BITS) for q in range(1, 4)]
+        return cls(np.array(idx), np.array(ent), np.array(tr))
+
+    def vector_states(self, index: int) -> np.ndarray:
+        """Stored (untransformed) 4x4 states of an index value."""
+        if index < 3:
+            return np.full((4, 4), index, dtype=np.uint8)
+        j = index - 3
+        return pattern_states(*entry_pattern(ENTRY_KIND[j], int(self.entries[j])))
+
+    def decode(self) -> np.ndarray:
+        """The 32x32 map (``map[y, x]``)."""
+        out = np.empty((SIZE, SIZE), dtype=np.uint8)
+        for vy in range(8):
+            for vx in range(8):
+                q = 2 * (vy >> 2) + (vx >> 2)
+                stored = self.vector_states(int(self.indices[8 * vy + vx])).reshape(16)
+                shown = np.empty(16, dtype=np.uint8)
+                shown[FWD4[self.transforms[q]]] = stored  # shown = t(stored)
+                out[4 * vy:4 * vy + 4, 4 * vx:4 * vx + 4] = shown.reshape(4, 4)
+        return out
+
+
+def decode(data) -> np.ndarray:
+    """Physical block (64 bytes) to its 32x32 map."""
+    return VQ4Block.unpack(data).decode()
+
+
+def decode_x64(data) -> np.ndarray:
+    """Four physical blocks (256 bytes) to their 64x64 map."""
+    b = as_block(data, X64_BYTES, "a VQ4x64 map (four VQ4 blocks)")
+    out = np.empty((X64_SIZE, X64_SIZE), dtype=np.uint8)
+    for k in range(4):
+        y, x = SIZE * (k >> 1), SIZE * (k & 1)
+        out[y:y + SIZE, x:x + SIZE] = decode(b[BLOCK_BYTES * k:BLOCK_BYTES * (k + 1)])
+    return out
+
+
+@njit(cache=True, inline="always")
+def _bit(data, base, k):
+    return (np.int64(data[base + (k >> 3)]) >> (k & 7)) & 1
+
+
+@njit(cache=True)
+def lookup_at(data, base, x, y):
+    """State of cell (x, y) of the block at byte ``base`` of ``data``, reading only what it needs:
+    the vector's 4-bit index; for an explicit entry, the quadrant's transform, then one C flag
+    and (if clear) one palette bit."""
+    v = ((y >> 2) << 3) | (x >> 2)
+    idx = (np.int64(data[base + (v >> 1)]) >> ((v & 1) << 2)) & 15
+    if idx < 3:
+        return idx
+    q = ((y >> 4) << 1) | (x >> 4)
+    t = 0
+    if q:
+        tw = np.int64(data[base + 62]) | (np.int64(data[base + 63]) << 8)  # bits 496..511
+        t = (tw >> (TRANSFORM_POS - 496 + TRANSFORM_BITS * (q - 1))) & 7
+    e = INV4[t, ((y & 3) << 2) | (x & 3)]
+    if _bit(data, base, _CBIT[idx, e]):
+        return states.C
+    return states.O if _bit(data, base, _PBIT[idx, e]) else states.T
+
+
+@njit(cache=True)
+def lookup(block, x, y):
+    """``lookup_at`` of a single 64-byte block, x and y in 0..31."""
+    return lookup_at(block, 0, x, y)
+
+
+@njit(cache=True)
+def lookup_x64(data, x, y):
+    """State of cell (x, y), 0..63, of a 256-byte VQ4x64 map."""
+    return lookup_at(data, BLOCK_BYTES * (((y >> 5) << 1) | (x >> 5)), x & 31, y & 31)
+
+
+@njit(cache=True)
+def lookup_batch(blocks, block_ids, xs, ys):
+    """``lookup`` for many cells: blocks (B, 64) uint8; block_ids, xs, ys of one length."""
+    out = np.empty(xs.shape[0], dtype=np.uint8)
+    for i in range(xs.shape[0]):
+        out[i] = lookup_at(blocks[block_ids[i]], 0, xs[i], ys[i])
+    return out
+
+
+@njit(cache=True)
+def lookup_batch_x64(maps, map_ids, xs, ys):
+    """``lookup_x64`` for many cells: maps (B, 256) uint8."""
+    out = np.empty(xs.shape[0], dtype=np.uint8)
+    for i in range(xs.shape[0]):
+        out[i] = lookup_x64(maps[map_ids[i]], xs[i], ys[i])
+    return out
