@@ -88,9 +88,9 @@ def grid_table(scene: Scene) -> GridTable:
 # geometry kernels
 
 @njit(cache=True)
-def _clip(poly, k, a, b, c):
-    """Convex polygon poly[:k] clipped to a*x + b*y + c >= 0; returns (new poly, count)."""
-    out = np.empty((k + 2, 2))
+def _clip(poly, k, a, b, c, out):
+    """Convex polygon poly[:k] clipped to a*x + b*y + c >= 0, written to ``out``; returns the
+    vertex count."""
     m = 0
     for i in range(k):
         p0 = poly[i]
@@ -105,7 +105,7 @@ def _clip(poly, k, a, b, c):
             out[m, 0] = p0[0] + f * (p1[0] - p0[0])
             out[m, 1] = p0[1] + f * (p1[1] - p0[1])
             m += 1
-    return out, m
+    return m
 
 
 @njit(cache=True)
@@ -118,55 +118,18 @@ def _area2(poly, k):
 
 
 @njit(cache=True)
-def _grown_hull(pts, k, eps):
-    """Convex hull of the points pts[:k] each moved by (+-eps, +-eps): the polygon grown by a
-    square of half-side eps (Andrew's monotone chain)."""
-    n = 4 * k
-    q = np.empty((n, 2))
-    for i in range(k):
-        for c in range(4):
-            q[4 * i + c, 0] = pts[i, 0] + (eps if c & 1 else -eps)
-            q[4 * i + c, 1] = pts[i, 1] + (eps if c & 2 else -eps)
-    for i in range(1, n):  # insertion sort by (x, y)
-        x = q[i, 0]
-        y = q[i, 1]
-        j = i - 1
-        while j >= 0 and (q[j, 0] > x or (q[j, 0] == x and q[j, 1] > y)):
-            q[j + 1] = q[j]
-            j -= 1
-        q[j + 1, 0] = x
-        q[j + 1, 1] = y
-    h = np.empty((2 * n, 2))
-    m = 0
-    for i in range(n):
-        while m >= 2 and ((h[m - 1, 0] - h[m - 2, 0]) * (q[i, 1] - h[m - 2, 1])
-                          - (h[m - 1, 1] - h[m - 2, 1]) * (q[i, 0] - h[m - 2, 0])) <= 0:
-            m -= 1
-        h[m] = q[i]
-        m += 1
-    lower = m + 1
-    for i in range(n - 2, -1, -1):
-        while m >= lower and ((h[m - 1, 0] - h[m - 2, 0]) * (q[i, 1] - h[m - 2, 1])
-                              - (h[m - 1, 1] - h[m - 2, 1]) * (q[i, 0] - h[m - 2, 0])) <= 0:
-            m -= 1
-        h[m] = q[i]
-        m += 1
-    return h[:m - 1].copy()
-
-
-@njit(cache=True)
 def _grid_view(gt_flags, start, rows, cols):
     return gt_flags[start:start + rows * cols].reshape(rows, cols)
 
 
 @njit(cache=True)
-def region_flag(flags, px, py, off, w, h, uvpoly, k, eps):
-    """OR of the footprint flags a UV polygon (k vertices) grown by eps texels can read."""
-    pts = np.empty((k, 2))
+def region_flag(flags, px, py, off, w, h, uvpoly, k, eps, pts):
+    """OR of the footprint flags a UV polygon (k <= 8 vertices) grown by eps texels can read
+    (``pts``: scratch of 8 points)."""
     for i in range(k):
         pts[i, 0] = uvpoly[i, 0] * w + off
         pts[i, 1] = uvpoly[i, 1] * h + off
-    return raster.polygon_flags(flags, px, py, _grown_hull(pts, k, eps))
+    return raster.polygon_flags(flags, px, py, pts[:k], eps)
 
 
 @njit(cache=True)
@@ -177,7 +140,9 @@ def bake_pairs_kernel(uv, has_b, mat, n, eps, gflags, gstart, grows, gcols, gpx,
     npairs = uv.shape[0]
     out = np.zeros((npairs, n, n), np.uint8)
     rect = np.empty((4, 2))
+    poly = np.empty((8, 2))
     poly_uv = np.empty((8, 2))
+    scratch = np.empty((8, 2))
     for p in range(npairs):
         m = mat[p]
         flags = _grid_view(gflags, gstart[m], grows[m], gcols[m])
@@ -202,11 +167,11 @@ def bake_pairs_kernel(uv, has_b, mat, n, eps, gflags, gstart, grows, gcols, gpx,
                     if tri == 0:
                         if i < j:
                             continue  # wholly above the diagonal
-                        poly, k = _clip(rect, 4, 1.0, -1.0, 0.0)  # s - t >= 0
+                        k = _clip(rect, 4, 1.0, -1.0, 0.0, poly)  # s - t >= 0
                     else:
                         if i > j:
                             continue
-                        poly, k = _clip(rect, 4, -1.0, 1.0, 0.0)  # t - s >= 0
+                        k = _clip(rect, 4, -1.0, 1.0, 0.0, poly)  # t - s >= 0
                     if k < 3 or abs(_area2(poly, k)) <= 0.0:
                         continue
                     for v in range(k):
@@ -220,7 +185,7 @@ def bake_pairs_kernel(uv, has_b, mat, n, eps, gflags, gstart, grows, gcols, gpx,
                             b = 3
                         for d in range(2):
                             poly_uv[v, d] = w0 * uv[p, b, d] + w1 * uv[p, b + 1, d] + w2 * uv[p, b + 2, d]
-                    acc |= region_flag(flags, gpx[m], gpy[m], goff[m], gw[m], gh[m], poly_uv, k, eps)
+                    acc |= region_flag(flags, gpx[m], gpy[m], goff[m], gw[m], gh[m], poly_uv, k, eps, scratch)
                 out[p, j, i] = acc
     return out
 
@@ -233,6 +198,7 @@ def bake_micro_kernel(uv, mat, bary, eps, gflags, gstart, grows, gcols, gpx, gpy
     nm = bary.shape[0]
     out = np.zeros((nt, nm), np.uint8)
     poly_uv = np.empty((3, 2))
+    scratch = np.empty((8, 2))
     for t in range(nt):
         m = mat[t]
         flags = _grid_view(gflags, gstart[m], grows[m], gcols[m])
@@ -243,7 +209,7 @@ def bake_micro_kernel(uv, mat, bary, eps, gflags, gstart, grows, gcols, gpx, gpy
                 w0 = 1.0 - b1 - b2
                 for d in range(2):
                     poly_uv[v, d] = w0 * uv[t, 0, d] + b1 * uv[t, 1, d] + b2 * uv[t, 2, d]
-            out[t, k] = region_flag(flags, gpx[m], gpy[m], goff[m], gw[m], gh[m], poly_uv, 3, eps)
+            out[t, k] = region_flag(flags, gpx[m], gpy[m], goff[m], gw[m], gh[m], poly_uv, 3, eps, scratch)
     return out
 
 
