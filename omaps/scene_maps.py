@@ -513,10 +513,11 @@ def build_scheme_maps(at: AlphaTriangles, gt: GridTable, names: list[str], jobs:
             codec = codecs[name]
             encoder = "best" if "best" in codec.encoders else codec.encoders[0]
             eff = effort if effort in codec.efforts else codec.efforts[0]
-            parts = _chunks(len(uniq), 8 * jobs if jobs > 1 else 1)
-            blocks = _run_chunks(_encode_chunk, [(name, uniq[a:b], encoder, eff) for a, b in parts],
-                                 jobs, f"encode {name}", progress)
-            blocks = [b for chunk in blocks for b in chunk]
+            first = [codec.encode(uniq[0], encoder, eff)] if len(uniq) else []  # compiles before forking
+            parts = _chunks(len(uniq) - len(first), 8 * jobs if jobs > 1 else 1)
+            rest = _run_chunks(_encode_chunk, [(name, uniq[1 + a:1 + b], encoder, eff) for a, b in parts],
+                               jobs, f"encode {name}", progress)
+            blocks = first + [b for chunk in rest for b in chunk]
             data = np.frombuffer(b"".join(blocks), dtype=np.uint8).reshape(len(uniq), codec.block_bytes)
             decoded = np.stack([codec.decode(b) for b in blocks]) if blocks else uniq
             if not is_conservative(uniq, decoded):
