@@ -70,7 +70,8 @@ def adjacency(triangles: np.ndarray, material: np.ndarray, welded: np.ndarray, s
     order = np.lexsort((tri, hi, lo, mat))
     tri, lo, hi, mat = tri[order], lo[order], hi[order], mat[order]
     same = (lo[1:] == lo[:-1]) & (hi[1:] == hi[:-1]) & (mat[1:] == mat[:-1])
-    src, dst = _edge_links(tri, same)
+    starts = np.concatenate([[0], np.flatnonzero(~same) + 1, [len(tri)]]).astype(np.int64)
+    src, dst = _edge_links(tri, starts)
     both_src = np.concatenate([src, dst])
     both_dst = np.concatenate([dst, src])
     order = np.lexsort((both_dst, both_src))
@@ -85,33 +86,22 @@ def adjacency(triangles: np.ndarray, material: np.ndarray, welded: np.ndarray, s
 
 
 @njit(cache=True)
-def _edge_links(tri, same):
-    """Links between every two triangles in a run of equal edge keys."""
-    m = len(tri)
+def _edge_links(tri, starts):
+    """Links between every two triangles in each run tri[starts[r]:starts[r + 1]] of equal edge keys."""
     cnt = 0
-    i = 0
-    while i < m:
-        j = i
-        while j + 1 < m and same[j]:
-            j += 1
-        k = j - i + 1
+    for r in range(len(starts) - 1):
+        k = starts[r + 1] - starts[r]
         cnt += k * (k - 1) // 2
-        i = j + 1
     src = np.empty(cnt, np.int64)
     dst = np.empty(cnt, np.int64)
     c = 0
-    i = 0
-    while i < m:
-        j = i
-        while j + 1 < m and same[j]:
-            j += 1
-        for x in range(i, j + 1):
-            for y in range(x + 1, j + 1):
+    for r in range(len(starts) - 1):
+        for x in range(starts[r], starts[r + 1]):
+            for y in range(x + 1, starts[r + 1]):
                 if tri[x] != tri[y]:
                     src[c] = tri[x]
                     dst[c] = tri[y]
                     c += 1
-        i = j + 1
     return src[:c], dst[:c]
 
 

@@ -9,6 +9,7 @@ from hypothesis import strategies as st
 
 import reference as ref
 from omaps import maps, scene_maps, states, trace
+from omaps.codecs.registry import codec_names
 from omaps.pairing import CORNERS
 from omaps.sampling import footprint_grid
 from omaps.scene import Material, Mesh, Scene, Texture
@@ -173,7 +174,7 @@ def test_tracer_lookups_agree_with_the_alpha_test(seed, b_order, filt, wu, wv, c
     scene = pair_scene(alpha, ua, ub, filt, wu, wv, cutoff, b_order)
     at = scene_maps.alpha_triangles(scene)
     gt = scene_maps.grid_table(scene)
-    built = scene_maps.build_scheme_maps(at, gt, ["none", "sq8", "sq2", "tri2", "vq2"])
+    built = scene_maps.build_scheme_maps(at, gt, ["none", "sq8", "sq2", "tri2"] + codec_names())
     base = trace.base_tables(scene, at, np.zeros(1, np.int32))
     for name, sm in built.items():
         tables = trace.scheme_tables(base, sm)

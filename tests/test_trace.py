@@ -11,6 +11,7 @@ from conftest import SCENES, needs_scenes
 from gltf_files import write_quad_gltf
 from omaps import embree, trace
 from omaps.cli import main
+from omaps.codecs.registry import codec_names
 from omaps.scene import load_scene
 
 
@@ -62,7 +63,7 @@ def test_quad_hits_match_an_independent_alpha_test(tmp_path):
 @pytest.fixture(scope="module")
 def palm_runs():
     scene = load_scene(SCENES / "palm.glb")
-    names = ["none", "sq16", "tri3", "vq2"]
+    names = ["none", "sq16", "tri3"] + codec_names()  # vq2, vq4, vq4x64 where present
     prep = trace.prepare(scene, names)
     w, h = 64, 48
     # under the crown, looking up into it: many candidates per ray, shadow rays through leaves
