@@ -470,6 +470,15 @@ def build_scheme_maps(at: AlphaTriangles, gt: GridTable, names: list[str], jobs:
     from .states import is_conservative
 
     out: dict[str, SchemeMaps] = {}
+    if at.count == 0:  # nothing alpha-tested: no maps, the filter is never called
+        for name in names:
+            kind = "none" if name == "none" else ("square" if name.startswith("sq") else
+                                                  "tri" if name.startswith("tri") else "codec")
+            codec = get_codec(name) if kind == "codec" else None
+            param = codec.map_size if codec else (int(name.lstrip("sqtri")) if kind != "none" else 0)
+            out[name] = SchemeMaps(name, kind, param, np.zeros(0, np.int32), np.zeros(1, np.uint8), 1, 0, 0, 0.0,
+                                   codec)
+        return out
     n_pairs = len(at.pair_first)
     square_sizes = {}
     codecs = {}

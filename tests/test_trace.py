@@ -129,3 +129,12 @@ def test_cli_trace_bad_options(tmp_path, capsys, args, problem):
     f = write_quad_gltf(tmp_path / "q.gltf", np.full((2, 2), 255, np.uint8))
     assert main(["trace", f] + args) == 2
     assert problem in capsys.readouterr().err
+
+
+def test_scene_without_alpha_tested_triangles(tmp_path, capsys):
+    f = write_quad_gltf(tmp_path / "q.gltf", np.full((2, 2), 255, np.uint8), material={"alphaMode": "OPAQUE"})
+    j = tmp_path / "r.json"
+    assert main(["trace", f, "--size", "8", "--shadows", "--schemes", "none,sq8,tri2,vq2", "--json", str(j)]) == 0
+    r = json.loads(j.read_text())
+    assert r["scene"]["alpha_triangles"] == 0
+    assert all(v["alpha_tests_per_primary_ray"] == 0 and v["differing_pixels"] == 0 for v in r["schemes"].values())
