@@ -670,6 +670,7 @@ def summary(run: SchemeRun, ref: SchemeRun, sm, w: int, h: int) -> dict:
         "filter_calls_per_primary_ray": float(p.calls.sum()) / n,
         "differing_pixels": differing_pixels(p, ref.primary),
         "primary_rays_per_second": n / p.seconds if p.seconds > 0 else None,
+        "candidate_set_overflows": p.set_full,  # candidates met with a full set (counted as new)
     }
     rays, secs = n, p.seconds
     if run.shadow is not None:
