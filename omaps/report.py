@@ -83,8 +83,10 @@ def plot_savings(path, results, scheme_names, title="Shader invocation savings")
                 k = stacked.get(x, 0)
                 stacked[x] = k + 1
                 ax.annotate(lab, (x, y), textcoords="offset points", xytext=(-48, 8 + 10 * k), fontsize=7)
-            else:
-                ax.annotate(lab, (x, y), textcoords="offset points", xytext=(4, -11), fontsize=7)
+            else:  # below the line; a family's other encoders above (they sit close)
+                above = fam not in ("sq", "tri") and not fam.endswith("-paper")
+                ax.annotate(lab, (x, y), textcoords="offset points", xytext=(-14, 7) if above else (4, -11),
+                            fontsize=7)
     if "texel" in means:
         ax.axhline(means["texel"]["savings"], color="grey", ls="--", lw=1,
                    label=f"texel limit ({means['texel']['savings']:.1%})")

@@ -18,12 +18,10 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from .. import states
+from .options import ENCODERS, EFFORTS, check_maps, check_options  # noqa: F401 (re-exported)
 from .vec2 import INVERSE_T, KNOWN, RETAINED, TRANS_CODE
 from .vq2_block import N_ENTRIES, N_GLOBAL, SIZE, VQ2Block, quadrant_of_vector
 
-ENCODERS = ("paper", "best")
-EFFORTS = {"fast": 0, "medium": 1, "thorough": 2}
 
 # non-uniform codes: C mask 1..14 with either palette
 CANDIDATES = np.array([(m << 1) | p for m in range(1, 15) for p in (0, 1)], dtype=np.int64)
@@ -427,30 +425,15 @@ def encode_many_arrays(maps, encoder, effort):
     return idx, cb, tr
 
 
-def _check(encoder: str, effort: str) -> tuple[int, int]:
-    if encoder not in ENCODERS:
-        raise ValueError(f"unknown VQ2 encoder {encoder!r} (choose from {', '.join(ENCODERS)})")
-    if effort not in EFFORTS:
-        raise ValueError(f"unknown effort {effort!r} (choose from {', '.join(EFFORTS)})")
-    return ENCODERS.index(encoder), EFFORTS[effort]
-
-
-def _check_map(m) -> np.ndarray:
-    m = np.ascontiguousarray(m, dtype=np.uint8)
-    if m.shape[-2:] != (SIZE, SIZE) or m.max(initial=0) > states.C:
-        raise ValueError(f"VQ2 encodes 16x16 maps of states 0..2, got shape {m.shape}")
-    return m
-
-
 def encode(map16, encoder: str = "best", effort: str = "medium") -> VQ2Block:
     """Encode a 16x16 map into a symbolic VQ2 block (conservative: only O->C, T->C)."""
-    e, f = _check(encoder, effort)
-    idx, cb, tr = encode_arrays(_check_map(map16), e, f)
+    e, f = check_options("VQ2", encoder, effort)
+    idx, cb, tr = encode_arrays(check_maps(map16, SIZE, "VQ2"), e, f)
     return VQ2Block(idx, cb, tr)
 
 
 def encode_many(maps16, encoder: str = "best", effort: str = "medium") -> list[VQ2Block]:
-    e, f = _check(encoder, effort)
-    m = _check_map(maps16).reshape(-1, SIZE, SIZE)
+    e, f = check_options("VQ2", encoder, effort)
+    m = check_maps(maps16, SIZE, "VQ2").reshape(-1, SIZE, SIZE)
     idx, cb, tr = encode_many_arrays(m, e, f)
     return [VQ2Block(idx[i], cb[i], tr[i]) for i in range(len(m))]

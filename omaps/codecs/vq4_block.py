@@ -162,16 +162,19 @@ def lookup_x64(data, x, y):
 @njit(cache=True)
 def lookup_batch(blocks, block_ids, xs, ys):
     """``lookup`` for many cells: blocks (B, 64) uint8; block_ids, xs, ys of one length."""
+    flat = blocks.reshape(-1)  # a row offset, not a row view per lookup
     out = np.empty(xs.shape[0], dtype=np.uint8)
     for i in range(xs.shape[0]):
-        out[i] = lookup_at(blocks[block_ids[i]], 0, xs[i], ys[i])
+        out[i] = lookup_at(flat, BLOCK_BYTES * block_ids[i], xs[i], ys[i])
     return out
 
 
 @njit(cache=True)
 def lookup_batch_x64(maps, map_ids, xs, ys):
     """``lookup_x64`` for many cells: maps (B, 256) uint8."""
+    flat = maps.reshape(-1)
     out = np.empty(xs.shape[0], dtype=np.uint8)
     for i in range(xs.shape[0]):
-        out[i] = lookup_x64(maps[map_ids[i]], xs[i], ys[i])
+        x, y = xs[i], ys[i]
+        out[i] = lookup_at(flat, X64_BYTES * map_ids[i] + BLOCK_BYTES * (((y >> 5) << 1) | (x >> 5)), x & 31, y & 31)
     return out

@@ -29,11 +29,10 @@ import numpy as np
 from numba import njit
 
 from .. import states
+from .options import ENCODERS, EFFORTS, check_maps, check_options  # noqa: F401 (re-exported)
 from .vec4 import FULL, entry_code, popcount16, project, untransform_mask
 from .vq4_block import ENTRY_KIND, N_ENTRIES, SIZE, VQ4Block
 
-ENCODERS = ("paper", "best")
-EFFORTS = {"fast": 0, "medium": 1, "thorough": 2}
 N_KINDS = 4
 TOP_K = 16
 CAPACITY = np.bincount(ENTRY_KIND, minlength=N_KINDS).astype(np.int64)  # entries per kind: 3, 1, 1, 8
@@ -629,38 +628,23 @@ def encode_many_arrays(maps, encoder, effort):
     return idx, ent, tr
 
 
-def _check(encoder: str, effort: str) -> tuple[int, int]:
-    if encoder not in ENCODERS:
-        raise ValueError(f"unknown VQ4 encoder {encoder!r} (choose from {', '.join(ENCODERS)})")
-    if effort not in EFFORTS:
-        raise ValueError(f"unknown effort {effort!r} (choose from {', '.join(EFFORTS)})")
-    return ENCODERS.index(encoder), EFFORTS[effort]
-
-
-def _check_map(m, size: int) -> np.ndarray:
-    m = np.ascontiguousarray(m, dtype=np.uint8)
-    if m.shape[-2:] != (size, size) or m.max(initial=0) > states.C:
-        raise ValueError(f"expected {size}x{size} maps of states 0..2, got shape {m.shape}")
-    return m
-
-
 def encode(map32, encoder: str = "best", effort: str = "medium") -> VQ4Block:
     """Encode a 32x32 map into a symbolic VQ4 block (conservative: only O->C, T->C)."""
-    e, f = _check(encoder, effort)
-    idx, ent, tr = encode_arrays(_check_map(map32, SIZE), e, f)
+    e, f = check_options("VQ4", encoder, effort)
+    idx, ent, tr = encode_arrays(check_maps(map32, SIZE, "VQ4"), e, f)
     return VQ4Block(idx, ent, tr)
 
 
 def encode_many(maps32, encoder: str = "best", effort: str = "medium") -> list[VQ4Block]:
-    e, f = _check(encoder, effort)
-    m = _check_map(maps32, SIZE).reshape(-1, SIZE, SIZE)
+    e, f = check_options("VQ4", encoder, effort)
+    m = check_maps(maps32, SIZE, "VQ4").reshape(-1, SIZE, SIZE)
     idx, ent, tr = encode_many_arrays(m, e, f)
     return [VQ4Block(idx[i], ent[i], tr[i]) for i in range(len(m))]
 
 
 def split_x64(map64) -> np.ndarray:
     """The four 32x32 quadrants of a 64x64 map, in vq4x64 block order."""
-    m = _check_map(map64, 2 * SIZE)
+    m = check_maps(map64, 2 * SIZE, "VQ4x64")
     return m.reshape(2, SIZE, 2, SIZE).transpose(0, 2, 1, 3).reshape(4, SIZE, SIZE)
 
 

@@ -1,0 +1,56 @@
+"""VQ4 speed: blocks/s per encoder, and random-access lookups (vq4, vq4x64) against raw 2-bit
+maps of the same size, side by side.
+
+Maps: the sq32 map of every 64x64-texel tile of the shared textures (or of the procedural
+corpus when ../shared is absent). The slow encoders run on an evenly spread subset, and every
+encoder's savings are also given on that subset so they compare.
+
+    python bench/bench_vq4.py
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+from common import lookup_rates, pack_raw, raw_lookup_batch, tile_maps
+
+from omaps import maps, states
+from omaps.codecs import vq4_block, vq4_encode
+
+SUBSET = 400
+
+
+def main():
+    m = tile_maps(32)
+    sub = m[np.linspace(0, len(m) - 1, min(SUBSET, len(m))).astype(int)]
+    print(f"{len(m)} non-uniform 32x32 maps from 64x64 tiles (subset of {len(sub)} for the slow encoders); one core")
+    sq_all = np.mean([maps.known_fraction(a) for a in m])
+    sq_sub = np.mean([maps.known_fraction(a) for a in sub])
+    for enc, eff, all_maps in [("best", "fast", True), ("best", "medium", True), ("paper", "medium", False),
+                               ("best", "thorough", False)]:
+        data = m if all_maps else sub
+        vq4_encode.encode_many(m[:2], enc, eff)  # compile / load cache
+        t0 = time.perf_counter()
+        blocks = vq4_encode.encode_many(data, enc, eff)
+        dt = time.perf_counter() - t0
+        dec = [b.decode() for b in blocks]
+        assert all(states.is_conservative(a, d) for a, d in zip(data, dec))
+        sav = np.array([maps.known_fraction(d) for d in dec])
+        on_sub = sav[np.linspace(0, len(m) - 1, len(sub)).astype(int)] if all_maps else sav
+        line = f"  {enc:5} {eff:8} {len(data) / dt:9.0f} blocks/s   subset savings {on_sub.mean() / sq_sub:.4f} of sq32"
+        if all_maps:
+            line += f", all maps {sav.mean() / sq_all:.4f} of sq32"
+        print(line)
+    blocks = np.stack([np.frombuffer(b.pack(), np.uint8) for b in vq4_encode.encode_many(m, "best", "fast")])
+    rates = lookup_rates(32, [("raw 2-bit", raw_lookup_batch, pack_raw(m)), ("vq4", vq4_block.lookup_batch, blocks)])
+    print(f"  vq4 / raw lookup rate: {rates['vq4'] / rates['raw 2-bit']:.2f}")
+    n4 = len(blocks) // 4
+    x64 = blocks[:4 * n4].reshape(n4, 256)
+    raw64 = np.zeros((n4, 64 * 64 // 4), np.uint8)  # same-size raw 64x64 maps, contents irrelevant to speed
+    rates = lookup_rates(64, [("raw 2-bit", raw_lookup_batch, raw64), ("vq4x64", vq4_block.lookup_batch_x64, x64)])
+    print(f"  vq4x64 / raw lookup rate: {rates['vq4x64'] / rates['raw 2-bit']:.2f}")
+
+
+if __name__ == "__main__":
+    main()
