@@ -26,9 +26,13 @@ def _cell(c, size, period):
 
 
 @njit(cache=True)
-def polygon_flags(flags, period_x, period_y, poly):
+def polygon_flags(flags, period_x, period_y, poly, grow=0.0):
     """OR of the flags of every cell overlapped by convex polygon ``poly`` (K, 2) given in cell
-    coordinates (texel coordinates plus the grid offset). 0 when the polygon has no area."""
+    coordinates (texel coordinates plus the grid offset). 0 when the polygon has no area.
+
+    ``grow`` > 0: the polygon grown by a square of half-side ``grow`` (its Minkowski sum), which
+    has area even when the polygon has none: per band, the polygon's x-extent over the band
+    widened by ``grow`` above and below, then widened by ``grow`` left and right."""
     k = poly.shape[0]
     ymin = poly[0, 1]
     ymax = poly[0, 1]
@@ -37,10 +41,10 @@ def polygon_flags(flags, period_x, period_y, poly):
         ymax = max(ymax, poly[i, 1])
     hc, wc = flags.shape
     acc = 0
-    for r in range(int(math.floor(ymin)), int(math.ceil(ymax))):
-        y0 = max(float(r), ymin)
-        y1 = min(float(r + 1), ymax)
-        if y1 <= y0:
+    for r in range(int(math.floor(ymin - grow)), int(math.ceil(ymax + grow))):
+        y0 = max(float(r) - grow, ymin)
+        y1 = min(float(r + 1) + grow, ymax)
+        if y1 < y0 or (y1 == y0 and grow == 0.0):
             continue
         xmin = np.inf
         xmax = -np.inf
@@ -64,6 +68,8 @@ def polygon_flags(flags, period_x, period_y, poly):
             xh = bx if hi == by else ax + ((hi - ay) * (bx - ax)) / (by - ay)
             xmin = min(xmin, min(xl, xh))
             xmax = max(xmax, max(xl, xh))
+        xmin -= grow
+        xmax += grow
         if not xmax > xmin:
             continue
         row = _cell(r, hc, period_y)

@@ -13,6 +13,7 @@ settings.load_profile("omaps")
 ROOT = Path(__file__).resolve().parents[1]
 SHARED = Path(os.environ.get("OMAPS_SHARED", ROOT.parent / "shared"))
 TEXTURES = SHARED / "data" / "textures"
+SCENES = SHARED / "data" / "scenes"
 
 
 def real_textures(min_size=0):
@@ -31,6 +32,10 @@ def real_textures(min_size=0):
 
 needs_shared = pytest.mark.skipif(not TEXTURES.is_dir(),
                                   reason=f"real textures not found at {TEXTURES} (../shared is absent)")
+
+
+needs_scenes = pytest.mark.skipif(not (SCENES / "palm.glb").is_file(),
+                                  reason=f"scenes not found at {SCENES} (../shared is absent)")
 
 
 @pytest.fixture

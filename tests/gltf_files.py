@@ -1,0 +1,92 @@
+"""Small glTF files written from scratch for tests: a unit quad (two triangles) in the z = 0
+plane, textured so that the image appears upright seen from +z: vertex (x, y) has UV (x, 1 - y)
+(glTF's v runs down the image). Nothing here uses omaps."""
+
+import base64
+import io
+import json
+
+import numpy as np
+from PIL import Image
+
+QUAD_POS = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], np.float32)
+QUAD_UV = np.array([[0, 1], [1, 1], [1, 0], [0, 0]], np.float32)
+QUAD_IDX = np.array([0, 1, 2, 0, 2, 3], np.uint16)
+
+
+def png_bytes(alpha: np.ndarray) -> bytes:
+    rgba = np.zeros(alpha.shape + (4,), np.uint8)
+    rgba[..., 1] = 180
+    rgba[..., 3] = alpha
+    buf = io.BytesIO()
+    Image.fromarray(rgba, "RGBA").save(buf, format="PNG")
+    return buf.getvalue()
+
+
+def write_quad_gltf(path, alpha, *, nodes=None, material=None, sampler=None, uv_transform=None,
+                    image_uri=None, extra_images=(), bin_uri=None, positions=QUAD_POS, uvs=QUAD_UV,
+                    indices=QUAD_IDX):
+    """Write a .gltf with one mesh (the quad) and its material. ``alpha``: the base colour
+    texture's alpha (uint8 image) embedded as a data URI unless ``image_uri`` names a file
+    (written beside it unless it is meant to be missing: pass alpha=None). ``nodes``: list of
+    node dicts (default one node). ``bin_uri``: store the buffer in that file instead of a data
+    URI (not written when it is to be missing: pass bin_uri with 'missing' in it)."""
+    path = str(path)
+    folder = path.rsplit("/", 1)[0]
+    pos = np.ascontiguousarray(positions, np.float32).tobytes()
+    uv = np.ascontiguousarray(uvs, np.float32).tobytes()
+    idx = np.ascontiguousarray(indices, np.uint16).tobytes()
+    pad = (-len(idx)) % 4
+    blob = pos + uv + idx + b"\0" * pad
+    if bin_uri:
+        if "missing" not in bin_uri:
+            with open(f"{folder}/{bin_uri}", "wb") as f:
+                f.write(blob)
+        buffer = {"byteLength": len(blob), "uri": bin_uri}
+    else:
+        buffer = {"byteLength": len(blob),
+                  "uri": "data:application/octet-stream;base64," + base64.b64encode(blob).decode()}
+    n = len(positions)
+    pmin = np.asarray(positions, np.float32).min(axis=0).tolist()
+    pmax = np.asarray(positions, np.float32).max(axis=0).tolist()
+    images = []
+    if image_uri:
+        if alpha is not None:
+            with open(f"{folder}/{image_uri}", "wb") as f:
+                f.write(png_bytes(alpha))
+        images.append({"uri": image_uri})
+    else:
+        images.append({"uri": "data:image/png;base64," + base64.b64encode(png_bytes(alpha)).decode()})
+    for uri in extra_images:
+        images.append({"uri": uri})
+    tex_info = {"index": 0}
+    if uv_transform:
+        tex_info["extensions"] = {"KHR_texture_transform": uv_transform}
+    mat = {"name": "leaf", "alphaMode": "MASK", "alphaCutoff": 0.5, "doubleSided": True,
+           "pbrMetallicRoughness": {"baseColorTexture": tex_info}}
+    mat.update(material or {})
+    doc = {
+        "asset": {"version": "2.0"},
+        "scene": 0,
+        "scenes": [{"nodes": list(range(len(nodes or [{}])))}],
+        "nodes": [dict(mesh=0, **nd) for nd in (nodes or [{}])],
+        "meshes": [{"primitives": [{"attributes": {"POSITION": 0, "TEXCOORD_0": 1}, "indices": 2,
+                                    "material": 0}]}],
+        "materials": [mat],
+        "textures": [{"source": 0, "sampler": 0}],
+        "samplers": [sampler or {"magFilter": 9729, "wrapS": 10497, "wrapT": 10497}],
+        "images": images,
+        "buffers": [buffer],
+        "bufferViews": [{"buffer": 0, "byteOffset": 0, "byteLength": len(pos)},
+                        {"buffer": 0, "byteOffset": len(pos), "byteLength": len(uv)},
+                        {"buffer": 0, "byteOffset": len(pos) + len(uv), "byteLength": len(idx)}],
+        "accessors": [{"bufferView": 0, "componentType": 5126, "count": n, "type": "VEC3", "min": pmin, "max": pmax},
+                      {"bufferView": 1, "componentType": 5126, "count": n, "type": "VEC2"},
+                      {"bufferView": 2, "componentType": 5123, "count": len(indices), "type": "SCALAR"}],
+    }
+    if uv_transform:
+        doc["extensionsUsed"] = ["KHR_texture_transform"]
+    with open(path, "w") as f:
+        json.dump(doc, f)
+    return path
+
