@@ -91,6 +91,9 @@ def _parser() -> argparse.ArgumentParser:
     de.add_argument("--show", metavar="OUT.png", help="draw the map in the deck's colours")
     de.add_argument("--json", action="store_true", help="print the map as JSON")
     de.set_defaults(func=cmd_decode)
+
+    from .omm.command import add_parser as add_omm_parser
+    add_omm_parser(sub)
     return p
 
 
