@@ -22,8 +22,10 @@ from ..sampling import FILTERS, address, footprint_grid, wrap_code
 from ..texel_states import StateRule
 from ..texture import AlphaTexture
 
-# Opaque fractions are measured at the centroids of the level-3 sub-triangles: 64 samples.
-FRACTION_SAMPLE_LEVEL = 3
+# Opaque fractions are measured at the centroids of the level-K sub-triangles of a micro-triangle,
+# K the smallest giving 16 samples per texel of its area, at most 3 (64 samples).
+SAMPLES_PER_TEXEL = 16
+MAX_SAMPLE_LEVEL = 3
 STATE_RULES = ("test", "blend", "unknown")
 
 
@@ -115,79 +117,98 @@ def sample_passes(value, threshold, inclusive, filt, mode_u, mode_v, x, y):
 @njit(cache=True)
 def micro_vertices(index, level):
     """Barycentric (b1, b2) of micro-triangle ``index``'s vertices (p0, p1, p2), walking the
-    bird curve's digits from the top (the children of ``omaps.birdcurve``)."""
-    p = np.array([[0.0, 0.0], [1.0, 0.0], [0.0, 1.0]])
+    bird curve's digits from the top (the children of ``omaps.birdcurve``): a (3, 2) array."""
+    a1, a2, b1, b2, c1, c2 = _micro_vertices(index, level)
+    return np.array([[a1, a2], [b1, b2], [c1, c2]])
+
+
+@njit(cache=True, inline="always")
+def _micro_vertices(index, level):
+    a1, a2, b1, b2, c1, c2 = 0.0, 0.0, 1.0, 0.0, 0.0, 1.0  # p0, p1, p2
     for d in range(level - 1, -1, -1):
         c = (index >> (2 * d)) & 3
-        m01 = 0.5 * (p[0] + p[1])
-        m12 = 0.5 * (p[1] + p[2])
-        m02 = 0.5 * (p[0] + p[2])
+        m01 = (0.5 * (a1 + b1), 0.5 * (a2 + b2))
+        m12 = (0.5 * (b1 + c1), 0.5 * (b2 + c2))
+        m02 = (0.5 * (a1 + c1), 0.5 * (a2 + c2))
         if c == 0:
-            p[1] = m01
-            p[2] = m02
+            b1, b2 = m01
+            c1, c2 = m02
         elif c == 1:
-            p[0] = m02
-            p[1] = m12
-            p[2] = m01
+            a1, a2 = m02
+            b1, b2 = m12
+            c1, c2 = m01
         elif c == 2:
-            p[0] = m01
-            p[2] = m12
+            a1, a2 = m01
+            c1, c2 = m12
         else:
-            p[0] = m12
-            p[1] = m02
-    return p
+            a1, a2 = m12
+            b1, b2 = m02
+    return a1, a2, b1, b2, c1, c2
 
 
 @njit(cache=True)
-def micro_fraction(value, threshold, inclusive, filt, mode_u, mode_v, tri_texel, index, level, sample_bary):
+def micro_fraction(value, threshold, inclusive, filt, mode_u, mode_v, tri_texel, index, level, samples, k):
     """Fraction of the sample points of micro-triangle ``index`` where the alpha test passes,
-    and the micro-triangle's centroid (texel coordinates)."""
-    p = micro_vertices(index, level)
+    and the micro-triangle's centroid (texel coordinates). The points are the centroids of its
+    level-``k`` sub-triangles, ``samples[(4**k - 1) // 3:][:4**k]``."""
+    a1, a2, b1, b2, c1, c2 = _micro_vertices(index, level)
     # the micro-triangle's vertices in texel coordinates
-    q = np.empty((3, 2))
-    for k in range(3):
-        b1 = p[k, 0]
-        b2 = p[k, 1]
-        for d in range(2):
-            q[k, d] = (1.0 - b1 - b2) * tri_texel[0, d] + b1 * tri_texel[1, d] + b2 * tri_texel[2, d]
+    t = tri_texel
+    qax = (1.0 - a1 - a2) * t[0, 0] + a1 * t[1, 0] + a2 * t[2, 0]
+    qay = (1.0 - a1 - a2) * t[0, 1] + a1 * t[1, 1] + a2 * t[2, 1]
+    qbx = (1.0 - b1 - b2) * t[0, 0] + b1 * t[1, 0] + b2 * t[2, 0]
+    qby = (1.0 - b1 - b2) * t[0, 1] + b1 * t[1, 1] + b2 * t[2, 1]
+    qcx = (1.0 - c1 - c2) * t[0, 0] + c1 * t[1, 0] + c2 * t[2, 0]
+    qcy = (1.0 - c1 - c2) * t[0, 1] + c1 * t[1, 1] + c2 * t[2, 1]
+    first = ((1 << (2 * k)) - 1) // 3
+    n = 1 << (2 * k)
     hits = 0
-    for s in range(sample_bary.shape[0]):
-        b1 = sample_bary[s, 0]
-        b2 = sample_bary[s, 1]
-        b0 = 1.0 - b1 - b2
-        x = b0 * q[0, 0] + b1 * q[1, 0] + b2 * q[2, 0]
-        y = b0 * q[0, 1] + b1 * q[1, 1] + b2 * q[2, 1]
-        if sample_passes(value, threshold, inclusive, filt, mode_u, mode_v, x, y):
+    for s in range(first, first + n):
+        w1 = samples[s, 0]
+        w2 = samples[s, 1]
+        w0 = 1.0 - w1 - w2
+        if sample_passes(value, threshold, inclusive, filt, mode_u, mode_v,
+                         w0 * qax + w1 * qbx + w2 * qcx, w0 * qay + w1 * qby + w2 * qcy):
             hits += 1
-    cx = (q[0, 0] + q[1, 0] + q[2, 0]) / 3.0
-    cy = (q[0, 1] + q[1, 1] + q[2, 1]) / 3.0
-    return hits / sample_bary.shape[0], cx, cy
+    return hits / n, (qax + qbx + qcx) / 3.0, (qay + qby + qcy) / 3.0
 
 
-def sample_points(level: int = FRACTION_SAMPLE_LEVEL) -> np.ndarray:
-    """Barycentric (b1, b2) of the centroids of the level-``level`` sub-triangles."""
-    return np.ascontiguousarray(birdcurve.micro_triangles(level).mean(axis=1))
+def sample_points() -> np.ndarray:
+    """Barycentric (b1, b2) of the centroids of the level-K sub-triangles, K = 0 .. 3 one after
+    the other (level K starts at row (4**K - 1) / 3)."""
+    return np.ascontiguousarray(np.concatenate([birdcurve.micro_triangles(k).mean(axis=1)
+                                                for k in range(MAX_SAMPLE_LEVEL + 1)]))
 
 
 def texel_triangles(test: AlphaTest, tris_uv) -> np.ndarray:
     return np.ascontiguousarray(np.asarray(tris_uv, dtype=np.float64) * np.array([test.width, test.height], dtype=np.float64))
 
 
+def sample_levels(tris_texel: np.ndarray, levels: np.ndarray) -> np.ndarray:
+    """Per triangle, the sample level K of its micro-triangles (see SAMPLES_PER_TEXEL)."""
+    t = tris_texel
+    area = 0.5 * np.abs((t[:, 1, 0] - t[:, 0, 0]) * (t[:, 2, 1] - t[:, 0, 1])
+                        - (t[:, 1, 1] - t[:, 0, 1]) * (t[:, 2, 0] - t[:, 0, 0]))
+    want = np.maximum(SAMPLES_PER_TEXEL * area / np.power(4.0, levels), 1.0)
+    return np.clip(np.ceil(np.log(want) / np.log(4.0) - 1e-9), 0, MAX_SAMPLE_LEVEL).astype(np.int64)
+
+
 @njit(cache=True, parallel=True)
-def _fractions(value, threshold, inclusive, filt, mu, mv, tris, levels, starts, sample_bary, out):
+def _fractions(value, threshold, inclusive, filt, mu, mv, tris, levels, starts, samples, sample_k, out):
     for t in prange(tris.shape[0]):
         for k in range(starts[t + 1] - starts[t]):
-            f, _, _ = micro_fraction(value, threshold, inclusive, filt, mu, mv, tris[t], k, levels[t], sample_bary)
+            f, _, _ = micro_fraction(value, threshold, inclusive, filt, mu, mv, tris[t], k, levels[t], samples,
+                                     sample_k[t])
             out[starts[t] + k] = f
 
 
 def opaque_fractions(test: AlphaTest, tris_uv, levels, starts) -> np.ndarray:
-    """Opaque fraction (of the 64 sample points) of every micro-triangle, float64, flat like
+    """Opaque fraction (of the sample points) of every micro-triangle, float64, flat like
     ``bake.bake_levels``' states."""
     tris = texel_triangles(test, tris_uv)
     lv = np.ascontiguousarray(np.broadcast_to(np.asarray(levels), (len(tris),)), dtype=np.int64)
     out = np.empty(int(starts[-1]), dtype=np.float64)
     filt, mu, mv = test.codes()
     _fractions(test.value, float(test.threshold), bool(test.inclusive), filt, mu, mv, tris, lv,
-               np.asarray(starts, dtype=np.int64), sample_points(), out)
+               np.asarray(starts, dtype=np.int64), sample_points(), sample_levels(tris, lv), out)
     return out

@@ -38,11 +38,24 @@ def check_level(level, name="level") -> int:
 
 
 def flag_table(grid: FootprintGrid) -> np.ndarray:
-    """Summed-area table (Hc+1, Wc+1, 2) int32 of the T bit (plane 0) and O bit (plane 1)."""
-    f = grid.flags
-    bits = np.stack([(f & states.FLAG_T) != 0, (f & states.FLAG_O) != 0], axis=-1).astype(np.int32)
-    sat = np.zeros((f.shape[0] + 1, f.shape[1] + 1, 2), dtype=np.int32)
-    sat[1:, 1:] = bits.cumsum(axis=0).cumsum(axis=1)
+    """Summed-area table (Hc+1, Wc+1, 2) int32 of the T bit (plane 0) and O bit (plane 1):
+    ``sat[y, x, k]`` counts the cells above row y and left of column x with bit k."""
+    return _flag_table(grid.flags)
+
+
+@njit(cache=True)
+def _flag_table(flags):
+    h, w = flags.shape
+    sat = np.zeros((h + 1, w + 1, 2), dtype=np.int32)
+    for y in range(h):
+        rt = 0
+        ro = 0
+        for x in range(w):
+            f = flags[y, x]
+            rt += f & 1
+            ro += (f >> 1) & 1
+            sat[y + 1, x + 1, 0] = sat[y, x + 1, 0] + rt
+            sat[y + 1, x + 1, 1] = sat[y, x + 1, 1] + ro
     return sat
 
 
@@ -72,14 +85,19 @@ def _rect(sat, y0, y1, x0, x1, k):
 @njit(cache=True, inline="always")
 def _box(sat, r0, r1, c0, c1, period_y, period_x):
     """(cells with the T bit, cells with the O bit, distinct cells) of the box [c0,c1)x[r0,r1)."""
-    hc = sat.shape[0] - 1
-    wc = sat.shape[1] - 1
-    ya0, yb0, ya1, yb1 = _axis_ranges(r0, r1, hc, period_y)
-    xa0, xb0, xa1, xb1 = _axis_ranges(c0, c1, wc, period_x)
-    nt = (_rect(sat, ya0, yb0, xa0, xb0, 0) + _rect(sat, ya0, yb0, xa1, xb1, 0)
-          + _rect(sat, ya1, yb1, xa0, xb0, 0) + _rect(sat, ya1, yb1, xa1, xb1, 0))
-    no = (_rect(sat, ya0, yb0, xa0, xb0, 1) + _rect(sat, ya0, yb0, xa1, xb1, 1)
-          + _rect(sat, ya1, yb1, xa0, xb0, 1) + _rect(sat, ya1, yb1, xa1, xb1, 1))
+    ya0, yb0, ya1, yb1 = _axis_ranges(r0, r1, sat.shape[0] - 1, period_y)
+    xa0, xb0, xa1, xb1 = _axis_ranges(c0, c1, sat.shape[1] - 1, period_x)
+    nt = _rect(sat, ya0, yb0, xa0, xb0, 0)
+    no = _rect(sat, ya0, yb0, xa0, xb0, 1)
+    if xb1 > xa1:  # the x range wraps around the period
+        nt += _rect(sat, ya0, yb0, xa1, xb1, 0)
+        no += _rect(sat, ya0, yb0, xa1, xb1, 1)
+    if yb1 > ya1:
+        nt += _rect(sat, ya1, yb1, xa0, xb0, 0)
+        no += _rect(sat, ya1, yb1, xa0, xb0, 1)
+        if xb1 > xa1:
+            nt += _rect(sat, ya1, yb1, xa1, xb1, 0)
+            no += _rect(sat, ya1, yb1, xa1, xb1, 1)
     n = (yb0 - ya0 + yb1 - ya1) * (xb0 - xa0 + xb1 - xa1)
     return nt, no, n
 

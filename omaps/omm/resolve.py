@@ -23,7 +23,7 @@ import numpy as np
 from numba import njit, prange
 
 from . import format as omm_format
-from .alpha_test import AlphaTest, micro_fraction, sample_points, texel_triangles
+from .alpha_test import AlphaTest, micro_fraction, sample_levels, sample_points, texel_triangles
 
 PROMOTIONS = ("nearest", "opaque", "transparent", "hashed")
 HASH_CELLS_PER_TEXEL = 64  # the hashed threshold is constant over 1/64-texel squares
@@ -64,7 +64,7 @@ def promote(fraction, mode, threshold):
 
 @njit(cache=True, parallel=True)
 def _resolve(states3, starts, levels, two_state, mode, seed, value, thr, inclusive, filt, mu, mv, tris,
-             sample_bary, out):
+             samples, sample_k, out):
     for t in prange(tris.shape[0]):
         base = starts[t]
         for k in range(starts[t + 1] - base):
@@ -75,7 +75,8 @@ def _resolve(states3, starts, levels, two_state, mode, seed, value, thr, inclusi
             if mode == 1 or mode == 2:
                 opaque = mode == 1
             else:
-                f, cx, cy = micro_fraction(value, thr, inclusive, filt, mu, mv, tris[t], k, levels[t], sample_bary)
+                f, cx, cy = micro_fraction(value, thr, inclusive, filt, mu, mv, tris[t], k, levels[t], samples,
+                                           sample_k[t])
                 opaque = promote(f, mode, hashed_threshold(cx, cy, seed) if mode == 3 else 0.5)
             if two_state:
                 out[base + k] = 1 if opaque else 0
@@ -92,5 +93,6 @@ def resolve(states3: np.ndarray, starts: np.ndarray, levels, test: AlphaTest, tr
     out = np.empty_like(states3)
     filt, mu, mv = test.codes()
     _resolve(states3, np.asarray(starts, dtype=np.int64), lv, fmt == omm_format.FORMAT_2_STATE, mode, int(seed),
-             test.value, float(test.threshold), bool(test.inclusive), filt, mu, mv, tris, sample_points(), out)
+             test.value, float(test.threshold), bool(test.inclusive), filt, mu, mv, tris, sample_points(),
+             sample_levels(tris, lv), out)
     return out
