@@ -108,12 +108,11 @@ def main():
                   f"{frac[0]:6.3f} {frac[1]:6.3f} {frac[2]:6.3f} {'yes' if same else 'NO'}")
         # the whole pipeline: bake, promotion (nearest: sampled opaque fractions), special indices, reuse, packing
         numba.set_num_threads(threads)
-        for level in (4, 6):
-            geo = [Geometry(tex.name, test, tris)]
-            build(geo, OmmSettings(level=level))
-            dt = best_time(lambda: build(geo, OmmSettings(level=level)), repeat=1)
-            print(f"      omm build, level {level}, {threads} threads (bake + promotion + reuse + packing): "
-                  f"{len(tris) * 4 ** level / dt / 1e6:.1f} M micro-triangles/s")
+        geo = [Geometry(tex.name, test, tris)]
+        build([Geometry(tex.name, test, tris[:10])], OmmSettings(level=4))
+        dt = best_time(lambda: build(geo, OmmSettings(level=4)), repeat=1)
+        print(f"      omm build, level 4, {threads} threads (bake + nearest promotion + reuse + packing): "
+              f"{len(tris) * 4 ** 4 / dt / 1e6:.1f} M micro-triangles/s")
     if not ok:
         print("STATES DIFFER from maps.bake_triangles", file=sys.stderr)
         sys.exit(1)

@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import math
 
+import numba
 import numpy as np
 from numba import njit, prange
 
@@ -161,21 +162,20 @@ def _vertex(tri, i, j, inv_n, w, h, offset):
     return u * w + offset, v * h + offset
 
 
+STACK = 3 * omm_format.MAX_LEVEL + 4  # nodes pending: 3 more per level down, plus the root
+
+
 @njit(cache=True)
-def _bake_one(sat, period_y, period_x, tri, level, w, h, offset, out):
+def _bake_one(sat, period_y, period_x, tri, level, w, h, offset, out, st_l, st_k, st_v):
     """States of one triangle's 4**level micro-triangles into ``out``; returns how many
-    micro-triangles had no area (the reference raises on those)."""
+    micro-triangles had no area (the reference raises on those). ``st_*``: the node stack
+    (level, index, barycentric grid coordinates of p0, p1, p2), STACK entries."""
     n = 1 << level
     inv_n = 1.0 / n
     scale = 1.0
     for k in range(3):
         scale = max(scale, abs(tri[k, 0] * w) + abs(offset), abs(tri[k, 1] * h) + abs(offset))
     margin = MARGIN * scale
-    # stack of nodes: level, index, then barycentric grid coordinates of (p0, p1, p2)
-    cap = 3 * level + 4
-    st_l = np.empty(cap, dtype=np.int64)
-    st_k = np.empty(cap, dtype=np.int64)
-    st_v = np.empty((cap, 6), dtype=np.int64)
     st_l[0] = 0
     st_k[0] = 0
     st_v[0, 0] = 0
@@ -194,25 +194,26 @@ def _bake_one(sat, period_y, period_x, tri, level, w, h, offset, out):
         x0, y0 = _vertex(tri, i0, j0, inv_n, w, h, offset)
         x1, y1 = _vertex(tri, i1, j1, inv_n, w, h, offset)
         x2, y2 = _vertex(tri, i2, j2, inv_n, w, h, offset)
-        c0 = int(math.floor(min(x0, min(x1, x2)) - margin))
-        c1 = int(math.ceil(max(x0, max(x1, x2)) + margin))
-        r0 = int(math.floor(min(y0, min(y1, y2)) - margin))
-        r1 = int(math.ceil(max(y0, max(y1, y2)) + margin))
-        nt, no, nc = _box(sat, r0, r1, c0, c1, period_y, period_x)
         state = -1
-        if no == 0:
-            state = 0  # T
-        elif nt == 0:
-            state = 1  # O
-        elif nt == nc and no == nc:
-            state = 2  # every cell is C
-        elif lv == level:
+        if lv == level:  # a leaf: rasterise exactly (its box was mixed at the parent already)
             f = _leaf_flag(sat, period_y, period_x, x0, y0, x1, y1, x2, y2)
             if f == 0:
                 empty += 1
                 state = 2
             else:
                 state = 2 if f == 3 else f - 1  # FLAG_T 1 -> T 0, FLAG_O 2 -> O 1
+        else:
+            c0 = int(math.floor(min(x0, min(x1, x2)) - margin))
+            c1 = int(math.ceil(max(x0, max(x1, x2)) + margin))
+            r0 = int(math.floor(min(y0, min(y1, y2)) - margin))
+            r1 = int(math.ceil(max(y0, max(y1, y2)) + margin))
+            nt, no, nc = _box(sat, r0, r1, c0, c1, period_y, period_x)
+            if no == 0:
+                state = 0  # T
+            elif nt == 0:
+                state = 1  # O
+            elif nt == nc and no == nc:
+                state = 2  # every cell is C
         if state >= 0:
             span = 1 << (2 * (level - lv))
             out[k * span:(k + 1) * span] = state
@@ -242,13 +243,21 @@ def _bake_one(sat, period_y, period_x, tri, level, w, h, offset, out):
     return empty
 
 
+CHUNK = 64  # triangles per parallel work item (one node stack each)
+
+
 @njit(cache=True, parallel=True)
 def _bake_all(sat, period_y, period_x, tris, levels, starts, w, h, offset, out):
     empty = np.zeros(tris.shape[0], dtype=np.int64)
-    for t in prange(tris.shape[0]):
-        n = 1 << (2 * levels[t])
-        empty[t] = _bake_one(sat, period_y, period_x, tris[t], levels[t], w, h, offset,
-                             out[starts[t]:starts[t] + n])
+    n_chunks = (tris.shape[0] + CHUNK - 1) // CHUNK
+    for c in prange(n_chunks):
+        st_l = np.empty(STACK, dtype=np.int64)
+        st_k = np.empty(STACK, dtype=np.int64)
+        st_v = np.empty((STACK, 6), dtype=np.int64)
+        for t in range(c * CHUNK, min((c + 1) * CHUNK, tris.shape[0])):
+            n = 1 << (2 * levels[t])
+            empty[t] = _bake_one(sat, period_y, period_x, tris[t], levels[t], w, h, offset,
+                                 out[starts[t]:starts[t] + n], st_l, st_k, st_v)
     return empty
 
 
@@ -273,8 +282,9 @@ def bake_levels(grid: FootprintGrid, tris_uv, levels, sat: np.ndarray | None = N
     out = np.empty(int(starts[-1]), dtype=np.uint8)
     if len(t):
         sat = flag_table(grid) if sat is None else sat
-        empty = _bake_all(sat, grid.period_y, grid.period_x, t, lv, starts, float(grid.width),
-                          float(grid.height), float(grid.offset), out)
+        with numba.parallel_chunksize(1):  # hand out chunks dynamically: threads may be slowed unevenly
+            empty = _bake_all(sat, grid.period_y, grid.period_x, t, lv, starts, float(grid.width),
+                              float(grid.height), float(grid.offset), out)
         if empty.any():
             bad = int(np.flatnonzero(empty)[0])
             raise ValueError(f"triangle {bad} has micro-triangles with no area")
