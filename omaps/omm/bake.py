@@ -8,9 +8,9 @@ make it fast without changing a single state:
   box around a node (its bounding box, widened by a margin far above float rounding) is all T,
   all O or all C, every micro-triangle below it has that state, and its index range is filled
   at once (the descendants of node k of level l are k*4^(L-l) ... (k+1)*4^(L-l) - 1);
-* a leaf whose box is mixed is rasterised exactly as ``raster.polygon_flags`` does -- the same
-  vertex arithmetic, the same row bands and x-extents -- but each row's cell span is read from
-  the table in O(1) instead of cell by cell.
+* a leaf (a micro-triangle under a mixed box) is rasterised exactly as ``raster.polygon_flags``
+  does -- the same vertex arithmetic, the same row bands and x-extents -- but each row's cell
+  span is read from the table in O(1) instead of cell by cell.
 
 Triangles run in parallel (numba ``prange``); ``numba.set_num_threads`` picks the thread count.
 """
