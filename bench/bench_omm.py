@@ -22,7 +22,7 @@ import numpy as np
 
 from omaps import maps
 from omaps.omm import alpha_test, bake
-from omaps.omm.build import Geometry, OmmSettings, build
+from omaps.omm.pipeline import Geometry, OmmSettings, build
 from omaps.texture import AlphaTexture, load_alpha
 
 ROOT = Path(__file__).resolve().parents[1]

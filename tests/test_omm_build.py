@@ -15,7 +15,7 @@ from omaps import birdcurve, maps, states
 from omaps.errors import InputError
 from omaps.omm import alpha_test, bake, files, resolve
 from omaps.omm import format as omm_format
-from omaps.omm.build import Geometry, OmmSettings, build
+from omaps.omm.pipeline import Geometry, OmmSettings, build
 from omaps.texture import AlphaTexture
 
 

@@ -9,10 +9,10 @@ deck's square maps into them, write and verify the files an engine loads.
 """
 
 from .alpha_test import AlphaTest
-from .bake import bake, bake_levels, dynamic_levels
-from .build import Geometry, OmmResult, OmmSettings, build
+from .bake import bake_levels, dynamic_levels
+from .pipeline import Geometry, OmmResult, OmmSettings, build
 from .files import read, write
 from .pairs import expand, merge
 
-__all__ = ["AlphaTest", "bake", "bake_levels", "dynamic_levels", "Geometry", "OmmResult", "OmmSettings", "build",
+__all__ = ["AlphaTest", "bake_levels", "dynamic_levels", "Geometry", "OmmResult", "OmmSettings", "build",
            "read", "write", "expand", "merge"]

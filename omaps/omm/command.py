@@ -14,7 +14,7 @@ from ..errors import InputError
 from ..sampling import FILTERS, WRAP_MODES
 from . import files, inputs, pairs, resolve
 from . import format as omm_format
-from .build import OmmResult, OmmSettings, build
+from .pipeline import OmmResult, OmmSettings, build
 
 GLTF_EXTENSIONS = (".gltf", ".glb")
 

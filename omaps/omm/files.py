@@ -17,7 +17,7 @@ import numpy as np
 
 from ..errors import InputError
 from . import format as omm_format
-from .build import OmmResult
+from .pipeline import OmmResult
 
 
 def write(folder, result: OmmResult, extra_summary: dict | None = None) -> None:

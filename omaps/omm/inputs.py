@@ -22,7 +22,7 @@ from ..errors import InputError
 from ..maps import check_uv_triangles
 from ..texture import load_alpha
 from .alpha_test import AlphaTest
-from .build import Geometry
+from .pipeline import Geometry
 
 BLEND_RULES = ("levels", "cutoff", "skip")
 _DUMMY_UV = np.array([[0.0, 0.0], [1.0, 0.0], [0.0, 1.0]])
