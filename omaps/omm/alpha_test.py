@@ -105,10 +105,18 @@ def sample_passes(value, threshold, inclusive, filt, mode_u, mode_v, x, y):
         y0 = int(math.floor(fy))
         tx = fx - x0
         ty = fy - y0
-        xa = address(x0, w, mode_u)
-        xb = address(x0 + 1, w, mode_u)
-        ya = address(y0, h, mode_v)
-        yb = address(y0 + 1, h, mode_v)
+        if 0 <= x0 and x0 + 1 < w:  # inside the texture every mode addresses as is
+            xa = x0
+            xb = x0 + 1
+        else:
+            xa = address(x0, w, mode_u)
+            xb = address(x0 + 1, w, mode_u)
+        if 0 <= y0 and y0 + 1 < h:
+            ya = y0
+            yb = y0 + 1
+        else:
+            ya = address(y0, h, mode_v)
+            yb = address(y0 + 1, h, mode_v)
         a = ((1 - ty) * ((1 - tx) * value[ya, xa] + tx * value[ya, xb])
              + ty * ((1 - tx) * value[yb, xa] + tx * value[yb, xb]))
     return a >= threshold if inclusive else a > threshold

@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import math
 
+import numba
 import numpy as np
 from numba import njit, prange
 
@@ -92,7 +93,8 @@ def resolve(states3: np.ndarray, starts: np.ndarray, levels, test: AlphaTest, tr
     lv = np.ascontiguousarray(np.broadcast_to(np.asarray(levels), (len(tris),)), dtype=np.int64)
     out = np.empty_like(states3)
     filt, mu, mv = test.codes()
-    _resolve(states3, np.asarray(starts, dtype=np.int64), lv, fmt == omm_format.FORMAT_2_STATE, mode, int(seed),
-             test.value, float(test.threshold), bool(test.inclusive), filt, mu, mv, tris, sample_points(),
-             sample_levels(tris, lv), out)
+    with numba.parallel_chunksize(16):  # triangles differ a lot in cost: hand them out dynamically
+        _resolve(states3, np.asarray(starts, dtype=np.int64), lv, fmt == omm_format.FORMAT_2_STATE, mode, int(seed),
+                 test.value, float(test.threshold), bool(test.inclusive), filt, mu, mv, tris, sample_points(),
+                 sample_levels(tris, lv), out)
     return out
