@@ -268,3 +268,34 @@ def test_buffers_decode_to_the_baked_states(seed, filter, wrap, level, fmt):
         got = np.broadcast_to(res.triangle_states(t), (4 ** level,))
         known = baked[t] != states.C
         np.testing.assert_array_equal(got[known], baked[t][known])
+
+
+def test_resolve_regions_matches_the_micromap_resolution(rng):
+    """The tracer's 2-state mode over any regions gives what 2-state OMM output holds."""
+    tex = _alpha(rng)
+    test = alpha_test.AlphaTest.from_cutoff(tex, 0.5, "linear", "wrap")
+    tris = _tris(rng, 6)
+    s, starts = bake.bake_levels(test.grid(), tris, 3)
+    f = alpha_test.opaque_fractions(test, tris, 3, starts)
+    cen = np.concatenate([birdcurve.uv_micro_triangles(t, 3).mean(axis=1) for t in tris]) * [16, 16]
+    for m in resolve.PROMOTIONS:
+        want = resolve.resolve(s, starts, 3, test, tris, omm_format.FORMAT_2_STATE, m, seed=3)
+        np.testing.assert_array_equal(resolve.resolve_regions(s, f, cen, m, seed=3), want)
+
+
+def test_square_fractions(rng):
+    """A cell's fraction is the mean of its two micro-triangles' (the corpus pair), and a known
+    cell's fraction agrees with its state."""
+    from omaps import pair
+    from omaps.omm import pairs
+
+    tex = _alpha(rng)
+    test = alpha_test.AlphaTest.from_cutoff(tex, 0.5, "linear", "clamp")
+    f, c = pairs.square_fractions(test, pair.PAIR, 8)
+    sq = maps.bake_square(test.grid(), 8)
+    assert np.all(f[sq == states.T] == 0) and np.all(f[sq == states.O] == 1)
+    j, i = np.mgrid[0:8, 0:8]
+    np.testing.assert_allclose(c[..., 0], (i + 0.5) * 2, atol=1e-9)  # the cell centre
+    np.testing.assert_allclose(c[..., 1], (j + 0.5) * 2, atol=1e-9)
+    two = resolve.resolve_regions(sq, f, c, "nearest")
+    np.testing.assert_array_equal(two[sq != states.C], sq[sq != states.C])

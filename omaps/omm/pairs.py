@@ -114,3 +114,28 @@ def unpair(pair_micromaps: np.ndarray, n_triangles: int) -> np.ndarray:
     """(P, 2, M) pair micromaps -> (T, M) per-triangle micromaps (drops a lone pair's B)."""
     return np.asarray(pair_micromaps).reshape(-1, pair_micromaps.shape[-1])[:n_triangles]
 
+
+
+def square_fractions(test, pair_uv: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """Opaque fraction (n, n) and texel-space centroid (n, n, 2) of each cell of a pair's square
+    map (``pair_uv`` (2, 3, 2): triangles A and B), from its two micro-triangles at level log2 n
+    (equal areas of the pair's square), for the 2-state resolution of a square map's C cells."""
+    from ..birdcurve import micro_triangles
+    from .alpha_test import opaque_fractions
+
+    level = level_of_size(n)
+    tris = np.asarray(pair_uv, dtype=np.float64)
+    starts = bake.micro_starts(np.full(2, level))
+    f = opaque_fractions(test, tris, level, starts).reshape(2, -1)
+    c = micro_triangles(level).mean(axis=1)  # barycentric centroids
+    w0 = 1.0 - c[:, 0] - c[:, 1]
+    scale = np.array([test.width, test.height], dtype=np.float64)
+    cen = (w0[None, :, None] * tris[:, None, 0] + c[None, :, 0, None] * tris[:, None, 1]
+           + c[None, :, 1, None] * tris[:, None, 2]) * scale  # (2, M, 2)
+    cells = micro_cells(level)
+    frac = np.zeros(n * n)
+    cxy = np.zeros((n * n, 2))
+    for t in (0, 1):
+        np.add.at(frac, cells[t], f[t] / 2)
+        np.add.at(cxy, cells[t], cen[t] / 2)
+    return frac.reshape(n, n), cxy.reshape(n, n, 2)

@@ -98,3 +98,29 @@ def resolve(states3: np.ndarray, starts: np.ndarray, levels, test: AlphaTest, tr
                  test.value, float(test.threshold), bool(test.inclusive), filt, mu, mv, tris, sample_points(),
                  sample_levels(tris, lv), out)
     return out
+
+
+@njit(cache=True)
+def _thresholds(centroids, seed):
+    out = np.empty(len(centroids))
+    for i in range(len(centroids)):
+        out[i] = hashed_threshold(centroids[i, 0], centroids[i, 1], seed)
+    return out
+
+
+def resolve_regions(states3, fractions, centroids_texel, promotion: str = "hashed", seed: int = 0) -> np.ndarray:
+    """2-state (0 T, 1 O) of any regions -- micro-triangles, the cells of a square map -- from
+    their T/O/C states, opaque fractions and texel-space centroids: the tracer's 2-state mode."""
+    s = np.asarray(states3, dtype=np.uint8)
+    f = np.asarray(fractions, dtype=np.float64)
+    mode = PROMOTIONS.index(promotion)
+    if mode == 1:
+        opaque = np.ones(s.shape, dtype=bool)
+    elif mode == 2:
+        opaque = np.zeros(s.shape, dtype=bool)
+    elif mode == 0:
+        opaque = f > 0.5
+    else:
+        c = np.ascontiguousarray(np.asarray(centroids_texel, dtype=np.float64).reshape(-1, 2))
+        opaque = f > _thresholds(c, int(seed)).reshape(s.shape)
+    return np.where(s == 2, opaque, s).astype(np.uint8)
