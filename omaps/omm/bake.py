@@ -63,6 +63,8 @@ def _flag_table(flags):
 @njit(cache=True, inline="always")
 def _axis_ranges(c0, c1, size, period):
     """Unaddressed cell range [c0, c1) as up to two ranges of stored cells [a0, b0), [a1, b1)."""
+    if c0 >= 0 and c1 <= size:  # inside the grid every mode reads the cells as they are
+        return c0, c1, 0, 0
     if period == 0:  # clamp: the distinct cells the range reads
         lo = min(max(c0, 0), size - 1)
         hi = min(max(c1 - 1, 0), size - 1)
