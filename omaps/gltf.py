@@ -254,6 +254,9 @@ def alpha_primitives(path) -> Scene:
             if pmode not in (_TRIANGLES, _STRIP, _FAN):
                 skipped.append({**where, "reason": f"primitive mode {pmode} is not triangles"})
                 continue
+            if prim.attributes.POSITION is None:
+                skipped.append({**where, "reason": "no POSITION attribute"})
+                continue
             pos = r.accessor(prim.attributes.POSITION)
             idx = (r.accessor(prim.indices).ravel() if prim.indices is not None else np.arange(len(pos)))
             tris = _triangles(pmode, idx)

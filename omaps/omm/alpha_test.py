@@ -36,7 +36,9 @@ class AlphaTest:
     ``rule`` says how texels become states: ``test`` (O where the test passes, T elsewhere) or
     ``blend`` (an alpha-blended material: T only where value is 0, O only where it is 1, C
     between; the test then only decides promotions) or ``unknown`` (every texel C: a texture
-    that could not be read)."""
+    that could not be read). With ``test``, a texel whose value lies within ``tolerance`` of the
+    threshold is C: a shader computing alpha * factor in its own float precision may decide it
+    either way."""
 
     name: str
     value: np.ndarray
@@ -46,6 +48,7 @@ class AlphaTest:
     wrap_u: str = "clamp"
     wrap_v: str = "clamp"
     rule: str = "test"
+    tolerance: float = 0.0
 
     def __post_init__(self):
         if self.filter not in FILTERS:
@@ -81,7 +84,10 @@ class AlphaTest:
             out[v >= 1.0] = states.O
             return out
         passes = v >= self.threshold if self.inclusive else v > self.threshold
-        return np.where(passes, states.O, states.T).astype(np.uint8)
+        out = np.where(passes, states.O, states.T).astype(np.uint8)
+        if self.tolerance > 0:
+            out[np.abs(v - self.threshold) <= self.tolerance] = states.C
+        return out
 
     def grid(self):
         return footprint_grid(self.texel_states(), self.filter, self.wrap_u, self.wrap_v)

@@ -23,7 +23,6 @@ import numba
 import numpy as np
 from numba import njit, prange
 
-from .. import states
 from ..errors import InputError
 from ..maps import check_uv_triangles
 from ..sampling import FootprintGrid

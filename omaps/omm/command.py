@@ -3,7 +3,6 @@ and ``omaps omm --verify DIR``. ``add_parser`` registers the subcommand on omaps
 
 from __future__ import annotations
 
-import argparse
 import os
 import sys
 import time

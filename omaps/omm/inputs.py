@@ -4,7 +4,7 @@ An input is described by a small JSON-able ``spec`` (kept in omm.json), so ``--v
 load the same geometry again and re-bake it.
 
 glTF materials: MASK is alpha-tested (opaque iff alpha * baseColorFactor.a >= alphaCutoff,
-default 0.5); BLEND follows ``blend``: ``levels`` (T only where alpha is 0, O only where it is 1,
+default 0.5; texels within CUTOFF_TOLERANCE of the cut-off are unknown); BLEND follows ``blend``: ``levels`` (T only where alpha is 0, O only where it is 1,
 unknown between: exact for blending), ``cutoff`` (alpha-tested like MASK, at the cut-off) or
 ``skip``. A base colour texture that cannot be read gives a warning naming the file, and its
 primitive's micro-triangles are all unknown (the any-hit shader decides every hit). Triangles
@@ -25,6 +25,9 @@ from .alpha_test import AlphaTest
 from .pipeline import Geometry
 
 BLEND_RULES = ("levels", "cutoff", "skip")
+# glTF texels whose alpha * baseColorFactor.a is this close to the cut-off are unknown: a shader's
+# float32 product may fall on either side (exact 8-bit alphas are 1/255 = 0.0039 apart)
+CUTOFF_TOLERANCE = 1e-6
 _DUMMY_UV = np.array([[0.0, 0.0], [1.0, 0.0], [0.0, 1.0]])
 
 
@@ -106,7 +109,7 @@ def _gltf_geometries(spec, warn):
         else:  # no texture: the factor alone decides, uniformly
             value, name = np.full((1, 1), p.alpha_factor), None
             tris = np.broadcast_to(_DUMMY_UV, tris.shape).copy()
-        test = AlphaTest(name or "(no texture)", value, cutoff, True, filt, wrap_u, wrap_v, rule)
+        test = AlphaTest(name or "(no texture)", value, cutoff, True, filt, wrap_u, wrap_v, rule, CUTOFF_TOLERANCE)
         bad = _zero_uv_area(tris, test.width, test.height)
         if bad.any():
             unknown = bad

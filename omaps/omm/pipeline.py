@@ -252,7 +252,10 @@ def build(geometries: list[Geometry], settings: OmmSettings = OmmSettings(), pro
             total_area += float(np.sum(area[a:b]))
             for lvl in np.unique(lv):
                 sel = np.flatnonzero(lv == lvl)
-                rows = omm[starts[sel][:, None] + np.arange(1 << (2 * int(lvl)))]
+                if len(sel) == len(lv):
+                    rows = omm.reshape(len(lv), -1)
+                else:
+                    rows = omm[starts[sel][:, None] + np.arange(1 << (2 * int(lvl)))]
                 idx[a + sel] = packer.add(rows, int(lvl))
                 level_hist[int(lvl)] = level_hist.get(int(lvl), 0) + len(sel)
             if progress:
