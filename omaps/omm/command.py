@@ -108,9 +108,10 @@ def cmd_omm(a) -> int:
         if a.inputs or a.output:
             raise InputError("--verify DIR takes no inputs and no -o")
         return _cmd_verify(a.verify)
+    spec = _spec(a)
     if not a.output:
         raise InputError("give the output folder with -o DIR")
-    spec = _spec(a)
+    files.check_target(a.output)  # before the work, not after
     settings = _settings(a)
     t0 = time.perf_counter()
     geoms, skipped = inputs.load_geometries(spec)

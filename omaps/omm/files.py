@@ -20,14 +20,20 @@ from . import format as omm_format
 from .pipeline import OmmResult
 
 
-def write(folder, result: OmmResult, extra_summary: dict | None = None) -> None:
+def check_target(folder) -> str:
+    """The absolute output folder, when it may be written: absent, empty, or an earlier output."""
     folder = os.path.abspath(os.fspath(folder))
-    parent = os.path.dirname(folder)
     if os.path.exists(folder):
         if not os.path.isdir(folder):
             raise InputError("exists and is not a folder", folder)
         if os.listdir(folder) and not os.path.isfile(os.path.join(folder, omm_format.SUMMARY_FILE)):
             raise InputError(f"folder is not empty and holds no {omm_format.SUMMARY_FILE}: not replacing it", folder)
+    return folder
+
+
+def write(folder, result: OmmResult, extra_summary: dict | None = None) -> None:
+    folder = check_target(folder)
+    parent = os.path.dirname(folder)
     os.makedirs(parent, exist_ok=True)
     tmp = tempfile.mkdtemp(prefix=".omaps-omm-", dir=parent)
     try:
