@@ -206,7 +206,15 @@ def _pair_states(grid, tris, n, codec, settings, sat):
     return pairs.unpair(pairs.expand(squares), len(tris)).ravel(), blocks
 
 
-def build(geometries: list[Geometry], settings: OmmSettings = OmmSettings(), progress=None) -> OmmResult:
+def _triangle_levels(test: AlphaTest, tris: np.ndarray, settings: OmmSettings, n_map: int | None) -> np.ndarray:
+    if n_map is not None:
+        return np.full(len(tris), pairs.level_of_size(n_map), dtype=np.int64)
+    if settings.dynamic_scale is not None:
+        return bake.dynamic_levels(tris, test.width, test.height, settings.dynamic_scale, settings.max_level)
+    return np.full(len(tris), settings.level, dtype=np.int64)
+
+
+def build(geometries: list[Geometry], settings: OmmSettings = OmmSettings()) -> OmmResult:
     """Bake every geometry's micromaps and pack them into the standard buffers."""
     n_map, codec = source_map_size(settings.source)
     fmt = settings.format_code
@@ -222,12 +230,7 @@ def build(geometries: list[Geometry], settings: OmmSettings = OmmSettings(), pro
         tris = check_uv_triangles(g.tris_uv) if len(g.tris_uv) else np.zeros((0, 3, 2))
         grid = g.test.grid()
         sat = bake.flag_table(grid)
-        if n_map is not None:
-            levels = np.full(len(tris), pairs.level_of_size(n_map), dtype=np.int64)
-        elif settings.dynamic_scale is not None:
-            levels = bake.dynamic_levels(tris, g.test.width, g.test.height, settings.dynamic_scale, settings.max_level)
-        else:
-            levels = np.full(len(tris), settings.level, dtype=np.int64)
+        levels = _triangle_levels(g.test, tris, settings, n_map)
         area = _texel_area(g.test, tris) if g.area is None else np.asarray(g.area, dtype=np.float64)
         idx = np.empty(len(tris), dtype=np.int32)
         n_blocks = 0
@@ -258,8 +261,6 @@ def build(geometries: list[Geometry], settings: OmmSettings = OmmSettings(), pro
                     rows = omm[starts[sel][:, None] + np.arange(1 << (2 * int(lvl)))]
                 idx[a + sel] = packer.add(rows, int(lvl))
                 level_hist[int(lvl)] = level_hist.get(int(lvl), 0) + len(sel)
-            if progress:
-                progress(b - a)
         index_parts.append(idx)
         info = {"name": g.name, "first_triangle": first, "triangles": len(tris), "texture": g.test.name,
                 "width": g.test.width, "height": g.test.height, "filter": g.test.filter,
