@@ -94,6 +94,8 @@ def _parser() -> argparse.ArgumentParser:
 
     from .trace_cli import add_parser as add_trace_parser
     add_trace_parser(sub)
+    from .omm.command import add_parser as add_omm_parser
+    add_omm_parser(sub)
     return p
 
 

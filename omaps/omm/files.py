@@ -1,0 +1,128 @@
+"""The OMM output folder: written whole or not at all, read back with every layout check.
+
+``write`` fills a temporary folder beside the target and renames it into place (an existing
+OMM folder is swapped out and removed only after that), so a failed run leaves no partial
+output. ``read`` checks sizes, record fields, offsets, index entries and the usage histograms
+against the files, and raises ``InputError`` naming the file and the problem.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import tempfile
+
+import numpy as np
+
+from ..errors import InputError
+from . import format as omm_format
+from .pipeline import OmmResult
+
+
+def check_target(folder) -> str:
+    """The absolute output folder, when it may be written: absent, empty, or an earlier output."""
+    folder = os.path.abspath(os.fspath(folder))
+    if os.path.exists(folder):
+        if not os.path.isdir(folder):
+            raise InputError("exists and is not a folder", folder)
+        if os.listdir(folder) and not os.path.isfile(os.path.join(folder, omm_format.SUMMARY_FILE)):
+            raise InputError(f"folder is not empty and holds no {omm_format.SUMMARY_FILE}: not replacing it", folder)
+    return folder
+
+
+def write(folder, result: OmmResult, extra_summary: dict | None = None) -> None:
+    folder = check_target(folder)
+    parent = os.path.dirname(folder)
+    os.makedirs(parent, exist_ok=True)
+    tmp = tempfile.mkdtemp(prefix=".omaps-omm-", dir=parent)
+    try:
+        summary = dict(result.summary, **(extra_summary or {}))
+        files = {
+            omm_format.DATA_FILE: result.data.astype(np.uint8).tobytes(),
+            omm_format.TRIANGLES_FILE: result.triangles.astype(omm_format.TRIANGLE_RECORD).tobytes(),
+            omm_format.INDEX_FILE: result.index.astype(omm_format.INDEX_DTYPE).tobytes(),
+            omm_format.USAGE_FILE: (json.dumps(result.usage, indent=1) + "\n").encode(),
+            omm_format.SUMMARY_FILE: (json.dumps(summary, indent=1) + "\n").encode(),
+        }
+        if result.pair_blocks is not None:
+            files[omm_format.PAIR_BLOCKS_FILE] = result.pair_blocks
+        for name, raw in files.items():
+            with open(os.path.join(tmp, name), "wb") as f:
+                f.write(raw)
+        if os.path.exists(folder):
+            old = tempfile.mkdtemp(prefix=".omaps-old-", dir=parent)
+            os.rmdir(old)
+            os.replace(folder, old)
+            os.replace(tmp, folder)
+            shutil.rmtree(old, ignore_errors=True)
+        else:
+            os.replace(tmp, folder)
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
+
+
+def _read(folder, name) -> bytes:
+    path = os.path.join(folder, name)
+    try:
+        with open(path, "rb") as f:
+            return f.read()
+    except FileNotFoundError:
+        raise InputError("missing", path) from None
+
+
+def _json(folder, name) -> dict:
+    path = os.path.join(folder, name)
+    try:
+        return json.loads(_read(folder, name))
+    except (ValueError, UnicodeDecodeError) as exc:
+        raise InputError(f"not valid JSON ({exc})", path) from None
+
+
+def read(folder) -> OmmResult:
+    """Load and check an OMM folder."""
+    folder = os.fspath(folder)
+    if not os.path.isdir(folder):
+        raise InputError("no such folder", folder)
+    data = np.frombuffer(_read(folder, omm_format.DATA_FILE), dtype=np.uint8)
+    raw_tri = _read(folder, omm_format.TRIANGLES_FILE)
+    raw_idx = _read(folder, omm_format.INDEX_FILE)
+    tri_path = os.path.join(folder, omm_format.TRIANGLES_FILE)
+    idx_path = os.path.join(folder, omm_format.INDEX_FILE)
+    if len(raw_tri) % omm_format.TRIANGLE_RECORD.itemsize:
+        raise InputError(f"size {len(raw_tri)} is not a multiple of the {omm_format.TRIANGLE_RECORD.itemsize}-byte record", tri_path)
+    if len(raw_idx) % 4:
+        raise InputError(f"size {len(raw_idx)} is not a multiple of 4 bytes", idx_path)
+    tris = np.frombuffer(raw_tri, dtype=omm_format.TRIANGLE_RECORD)
+    index = np.frombuffer(raw_idx, dtype=omm_format.INDEX_DTYPE)
+    bad = np.flatnonzero(~np.isin(tris["format"], list(omm_format.BITS)))
+    if len(bad):
+        raise InputError(f"micromap {bad[0]} has format {tris['format'][bad[0]]} (1 or 2 expected)", tri_path)
+    bad = np.flatnonzero(tris["level"] > omm_format.MAX_LEVEL)
+    if len(bad):
+        raise InputError(f"micromap {bad[0]} has level {tris['level'][bad[0]]} (at most {omm_format.MAX_LEVEL})", tri_path)
+    sizes = np.array([omm_format.micromap_bytes(lv, f) for lv, f in zip(tris["level"], tris["format"])], dtype=np.int64)
+    ends = tris["data_offset"].astype(np.int64) + sizes
+    bad = np.flatnonzero(ends > len(data))
+    if len(bad):
+        raise InputError(f"micromap {bad[0]} reads bytes up to {ends[bad[0]]} of a {len(data)}-byte "
+                         f"{omm_format.DATA_FILE}", tri_path)
+    bad = np.flatnonzero((index < -4) | (index >= len(tris)))
+    if len(bad):
+        raise InputError(f"triangle {bad[0]} has index {index[bad[0]]} ({len(tris)} micromaps; specials -1..-4)", idx_path)
+    usage = _json(folder, omm_format.USAGE_FILE)
+    want = omm_format.usage_histograms(tris["level"], tris["format"], index)
+    if usage != want:
+        raise InputError("usage counts do not match the triangle records and the index buffer",
+                         os.path.join(folder, omm_format.USAGE_FILE))
+    summary = _json(folder, omm_format.SUMMARY_FILE)
+    blocks = None
+    if os.path.exists(os.path.join(folder, omm_format.PAIR_BLOCKS_FILE)):
+        blocks = _read(folder, omm_format.PAIR_BLOCKS_FILE)
+    stats = summary.get("statistics", {})
+    for key, got in (("triangles", len(index)), ("micromaps", len(tris)), ("data_bytes", len(data))):
+        if stats.get(key) != got:
+            raise InputError(f"statistics.{key} is {stats.get(key)!r}, the files hold {got}",
+                             os.path.join(folder, omm_format.SUMMARY_FILE))
+    return OmmResult(data.copy(), tris.copy(), index.copy(), usage, summary, blocks)

@@ -1,0 +1,94 @@
+"""The standard opacity micromap format (VK_EXT/KHR_opacity_micromap, DXR 1.2): the one place
+its facts live. docs/FORMAT.md, section "Standard opacity micromaps (OMM)", states the same.
+
+* States of a micro-triangle: 0 transparent, 1 opaque, 2 unknown-transparent, 3 unknown-opaque.
+  omaps' T = 0 and O = 1 keep their codes; C becomes 2 or 3 (the promotion chooses which: the
+  state a ray with the "force 2-state" flag sees).
+* Formats: 1 = 2-state (1 bit per micro-triangle), 2 = 4-state (2 bits).
+* Data: micro-triangle i of a micromap at bit ``bits*(i mod per_byte)`` of byte ``i div per_byte``
+  (per_byte = 8 / bits), little-endian; every micromap starts on a byte.
+* Triangle records (VkMicromapTriangleEXT): u32 data byte offset, u16 level, u16 format.
+* Special indices (index buffer entries that need no micromap): -1 fully transparent, -2 fully
+  opaque, -3 fully unknown-transparent, -4 fully unknown-opaque.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+FORMAT_2_STATE = 1
+FORMAT_4_STATE = 2
+FORMAT_NAMES = {"2state": FORMAT_2_STATE, "4state": FORMAT_4_STATE}
+BITS = {FORMAT_2_STATE: 1, FORMAT_4_STATE: 2}
+MAX_LEVEL = 12  # the APIs' largest subdivision level
+
+TRANSPARENT = 0
+OPAQUE = 1
+UNKNOWN_TRANSPARENT = 2
+UNKNOWN_OPAQUE = 3
+
+# state -> special index of a micromap whose micro-triangles all have that state
+SPECIAL_INDEX = np.array([-1, -2, -3, -4], dtype=np.int32)
+
+TRIANGLE_RECORD = np.dtype([("data_offset", "<u4"), ("level", "<u2"), ("format", "<u2")])
+INDEX_DTYPE = np.dtype("<i4")
+
+DATA_FILE = "omm_data.bin"
+TRIANGLES_FILE = "omm_triangles.bin"
+INDEX_FILE = "omm_index.bin"
+USAGE_FILE = "omm_usage.json"
+SUMMARY_FILE = "omm.json"
+PAIR_BLOCKS_FILE = "pair_blocks.bin"  # --from CODEC: the compressed pair maps the OMMs expand from
+
+
+def micromap_bytes(level: int, fmt: int) -> int:
+    """Bytes one micromap of this level and format takes (at least one byte)."""
+    return max(1, (4 ** int(level) * BITS[int(fmt)] + 7) // 8)
+
+
+def pack(omm_states: np.ndarray, fmt: int) -> np.ndarray:
+    """Pack micromaps of one level, ``omm_states`` (M, 4**L) uint8 in 0..3 (0..1 for 2-state),
+    into (M, micromap_bytes) uint8 rows."""
+    s = np.asarray(omm_states, dtype=np.uint8)
+    m, n = s.shape
+    bits = BITS[fmt]
+    per_byte = 8 // bits
+    nbytes = max(1, (n * bits + 7) // 8)
+    padded = np.zeros((m, nbytes * per_byte), dtype=np.uint8)
+    padded[:, :n] = s
+    shifts = (np.arange(per_byte, dtype=np.uint8) * bits)
+    return np.bitwise_or.reduce(padded.reshape(m, nbytes, per_byte) << shifts, axis=2).astype(np.uint8)
+
+
+def unpack(packed: np.ndarray, level: int, fmt: int) -> np.ndarray:
+    """Inverse of ``pack``: (M, bytes) -> (M, 4**level) states."""
+    p = np.asarray(packed, dtype=np.uint8)
+    bits = BITS[fmt]
+    per_byte = 8 // bits
+    shifts = (np.arange(per_byte, dtype=np.uint8) * bits)
+    s = (p[:, :, None] >> shifts) & ((1 << bits) - 1)
+    return s.reshape(p.shape[0], -1)[:, :4 ** int(level)].astype(np.uint8)
+
+
+def usage_histograms(levels: np.ndarray, formats: np.ndarray, index: np.ndarray) -> dict:
+    """The usage counts an acceleration-structure build asks for (VkMicromapUsageEXT /
+    D3D12 opacity micromap histogram entries): per (level, format), how many micromaps the array
+    holds (``micromap_array``) and how many triangles of the geometry reference one
+    (``geometry``; special indices reference none)."""
+    levels = np.asarray(levels)
+    formats = np.asarray(formats)
+    index = np.asarray(index)
+    used = index[index >= 0]
+
+    def hist(lv, fm):
+        out = []
+        for (lvl, f), c in sorted(_count_pairs(lv, fm).items()):
+            out.append({"count": int(c), "subdivisionLevel": int(lvl), "format": int(f)})
+        return out
+
+    return {"micromap_array": hist(levels, formats), "geometry": hist(levels[used], formats[used])}
+
+
+def _count_pairs(a, b) -> dict:
+    keys, counts = np.unique(np.stack([a, b], axis=1).reshape(-1, 2), axis=0, return_counts=True)
+    return {(int(k[0]), int(k[1])): int(c) for k, c in zip(keys, counts)}

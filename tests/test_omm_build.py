@@ -1,0 +1,322 @@
+"""OMM buffers: packing, special indices, reuse, promotion, files, and an independent read-back
+checked against the baker and the texture."""
+
+import json
+import os
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+import omm_decoder
+import reference as ref
+from omaps import birdcurve, maps, states
+from omaps.errors import InputError
+from omaps.omm import alpha_test, bake, files, resolve
+from omaps.omm import format as omm_format
+from omaps.omm.pipeline import Geometry, OmmSettings, build
+from omaps.texture import AlphaTexture
+
+
+def _alpha(rng, h=16, w=16):
+    a = rng.integers(0, 256, size=(h, w)).astype(np.uint8)
+    a[:, : w // 3] = 0
+    a[: h // 4, :] = 255
+    return AlphaTexture("t", a, 255)
+
+
+def _tris(rng, n=24):
+    c = rng.uniform(0.1, 0.9, size=(n, 1, 2))
+    return c + rng.uniform(-0.15, 0.15, size=(n, 3, 2))
+
+
+# ---- packing -------------------------------------------------------------------------------
+
+@given(st.integers(0, 4), st.sampled_from([1, 2]), st.integers(1, 3), st.randoms())
+def test_pack_unpack_round_trip(level, fmt, m, r):
+    hi = 3 if fmt == 2 else 1
+    s = np.array([[r.randint(0, hi) for _ in range(4 ** level)] for _ in range(m)], dtype=np.uint8)
+    p = omm_format.pack(s, fmt)
+    assert p.shape == (m, omm_format.micromap_bytes(level, fmt))
+    np.testing.assert_array_equal(omm_format.unpack(p, level, fmt), s)
+
+
+def test_bit_positions_as_documented():
+    s = np.zeros((1, 16), dtype=np.uint8)
+    s[0, 5] = 3  # micro-triangle 5: byte 1, bits 2-3
+    s[0, 0] = 2
+    assert omm_format.pack(s, 2)[0].tolist() == [0b10, 0b1100, 0, 0]
+    s2 = np.zeros((1, 16), dtype=np.uint8)
+    s2[0, 9] = 1  # 2-state: byte 1, bit 1
+    assert omm_format.pack(s2, 1)[0].tolist() == [0, 2]
+    assert [omm_format.micromap_bytes(lv, 1) for lv in range(4)] == [1, 1, 2, 8]
+    assert [omm_format.micromap_bytes(lv, 2) for lv in range(4)] == [1, 1, 4, 16]
+
+
+# ---- special indices, reuse ----------------------------------------------------------------
+
+def test_special_indices_and_reuse(rng):
+    a = np.zeros((8, 8), dtype=np.uint8)
+    a[:, 4:] = 255
+    tex = AlphaTexture("half", a, 255)
+    test = alpha_test.AlphaTest.from_cutoff(tex, 0.5)
+    left = np.array([[0.05, 0.05], [0.4, 0.05], [0.05, 0.4]])  # all T
+    right = left + [0.55, 0]  # all O
+    straddle = np.array([[0.3, 0.1], [0.7, 0.1], [0.5, 0.6]])
+    tris = np.stack([left, right, straddle, straddle, left])
+    res = build([Geometry("g", test, tris)], OmmSettings(level=3))
+    assert res.index.tolist()[:2] == [-1, -2] and res.index[4] == -1
+    assert res.index[2] == res.index[3] == 0 and len(res.triangles) == 1
+    st_ = res.summary["statistics"]
+    assert (st_["micromaps_without_reuse"], st_["micromaps_after_special_indices"], st_["micromaps"]) == (5, 2, 1)
+    no_dedup = build([Geometry("g", test, tris)], OmmSettings(level=3, dedup=False))
+    assert no_dedup.index.tolist() == [-1, -2, 0, 1, -1]
+    plain = build([Geometry("g", test, tris)], OmmSettings(level=3, special=False, dedup=False))
+    assert plain.index.tolist() == [0, 1, 2, 3, 4]
+    np.testing.assert_array_equal(plain.micromap_states(0), 0)
+    np.testing.assert_array_equal(plain.micromap_states(1), 1)
+    assert res.usage == {"micromap_array": [{"count": 1, "subdivisionLevel": 3, "format": 2}],
+                         "geometry": [{"count": 2, "subdivisionLevel": 3, "format": 2}]}
+    # fully unknown triangle -> -3 / -4 by promotion
+    ones = alpha_test.AlphaTest("u", np.ones((2, 2)), 0.5, True, rule="unknown")
+    r2 = build([Geometry("u", ones, tris[:1])], OmmSettings(level=2, promotion="opaque"))
+    r3 = build([Geometry("u", ones, tris[:1])], OmmSettings(level=2, promotion="transparent"))
+    assert (r2.index[0], r3.index[0]) == (-4, -3)
+
+
+# ---- promotion -----------------------------------------------------------------------------
+
+def test_fractions_agree_with_known_states(rng):
+    """A T micro-triangle never has a passing sample, an O one never a failing one (the
+    baker's conservativeness seen from the alpha test itself), for both filters and all wraps."""
+    tex = _alpha(rng)
+    tris = _tris(rng, 12) * 1.5 - 0.25
+    for filter in ("nearest", "linear"):
+        for wrap in ("clamp", "wrap", "mirror"):
+            test = alpha_test.AlphaTest.from_cutoff(tex, 0.5, filter, wrap)
+            s, starts = bake.bake_levels(test.grid(), tris, 3)
+            f = alpha_test.opaque_fractions(test, tris, 3, starts)
+            assert np.all(f[s == states.T] == 0) and np.all(f[s == states.O] == 1)
+            assert (s == states.C).any()
+
+
+def test_promotion_rules(rng):
+    tex = _alpha(rng)
+    test = alpha_test.AlphaTest.from_cutoff(tex, 0.5, "linear", "wrap")
+    tris = _tris(rng)
+    s, starts = bake.bake_levels(test.grid(), tris, 4)
+    f = alpha_test.opaque_fractions(test, tris, 4, starts)
+    c = s == states.C
+    for fmt in (1, 2):
+        out = {m: resolve.resolve(s, starts, 4, test, tris, fmt, m) for m in resolve.PROMOTIONS}
+        base = 0 if fmt == 1 else 2
+        for m, o in out.items():
+            np.testing.assert_array_equal(o[~c], s[~c])  # T and O unchanged
+        assert np.all(out["opaque"][c] == base + 1) and np.all(out["transparent"][c] == base)
+        np.testing.assert_array_equal(out["nearest"][c] == base + 1, f[c] > 0.5)
+        h = out["hashed"][c] == base + 1
+        assert np.all(h[f[c] == 0] == 0) and np.all(h[f[c] == 1] == 1)
+        # unbiased: the opaque share of C regions follows their mean opaque fraction
+        assert abs(h.mean() - f[c].mean()) < 4 * np.sqrt(0.25 / c.sum())
+
+
+def test_hashed_threshold_is_uniform_and_spatial():
+    xs = np.random.default_rng(5).uniform(-100, 100, size=(20000, 2))
+    h = np.array([resolve.hashed_threshold(x, y, 7) for x, y in xs])
+    assert np.all((h > 0) & (h < 1))
+    assert abs(h.mean() - 0.5) < 0.01 and abs((h < 0.25).mean() - 0.25) < 0.015
+    assert resolve.hashed_threshold(3.2, 1.7, 7) == resolve.hashed_threshold(3.2 + 1e-4, 1.7, 7)
+    assert resolve.hashed_threshold(3.2, 1.7, 7) != resolve.hashed_threshold(3.2, 1.7, 8)
+
+
+def test_micro_vertices_follow_the_bird_curve():
+    for level in range(0, 4):
+        want = birdcurve.micro_triangles(level)
+        for k in range(4 ** level):
+            np.testing.assert_array_equal(alpha_test.micro_vertices(k, level), want[k])
+
+
+# ---- files: independent read-back ----------------------------------------------------------
+
+def _check_against_baker_and_texture(folder, tex, tris, level, filter, wrap, cutoff, fmt, rng):
+    """Read with the independent decoder; every micro-triangle must equal the baker's state
+    (4-state: T/O exactly, C as 2/3), and on a subset the brute-force reference from the
+    texture itself (a known state only where every texel it can read agrees)."""
+    per_tri = omm_decoder.triangle_states(folder)
+    grid = alpha_test.AlphaTest.from_cutoff(tex, cutoff, filter, wrap).grid()
+    baked = maps.bake_triangles(grid, tris, level)
+    img = ref.texel_states(tex.alpha8, "cutoff", cutoff=cutoff)
+    for t, (lv, got) in enumerate(per_tri):
+        got = np.array(got if lv is not None else got * 4 ** level)
+        want = baked[t]
+        known = want != states.C
+        np.testing.assert_array_equal(got[known], want[known])
+        if fmt == 2:
+            assert np.all(got[~known] >= 2)
+        if t < 3:
+            truth = ref.triangle_states(img, tris[t], level, filter, wrap)
+            micro = birdcurve.uv_micro_triangles(tris[t], level)
+            for k in rng.choice(4 ** level, 40, replace=False):
+                r = truth[tuple(sorted(map(tuple, np.round(micro[k], 12))))]
+                assert r == want[k]
+
+
+@pytest.mark.parametrize("fmt,filter,wrap", [("4state", "nearest", "clamp"), ("4state", "linear", "wrap"),
+                                             ("2state", "linear", "mirror")])
+def test_written_files_read_back_independently(tmp_path, rng, fmt, filter, wrap):
+    tex = _alpha(rng, 12, 20)
+    tris = _tris(rng)
+    tris[1] = tris[0]  # a duplicate, to exercise reuse
+    test = alpha_test.AlphaTest.from_cutoff(tex, 0.4, filter, wrap)
+    res = build([Geometry("g", test, tris)], OmmSettings(format=fmt, level=3))
+    files.write(tmp_path / "omm", res)
+    folder = tmp_path / "omm"
+    _check_against_baker_and_texture(folder, tex, tris, 3, filter, wrap, 0.4, omm_format.FORMAT_NAMES[fmt], rng)
+    arr, geo = omm_decoder.usage_counts(folder)
+    usage = json.loads((folder / "omm_usage.json").read_text())
+    assert {(e["subdivisionLevel"], e["format"]): e["count"] for e in usage["micromap_array"]} == arr
+    assert {(e["subdivisionLevel"], e["format"]): e["count"] for e in usage["geometry"]} == geo
+    back = files.read(folder)
+    np.testing.assert_array_equal(back.index, res.index)
+    _, records, index, summary, _ = omm_decoder.read_folder(folder)
+    assert index[0] == index[1]
+    assert summary["statistics"]["triangles"] == len(tris)
+    assert all(r[2] == omm_format.FORMAT_NAMES[fmt] for r in records)
+
+
+def test_dynamic_levels_in_files(tmp_path, rng):
+    tex = _alpha(rng, 32, 32)
+    tris = _tris(rng, 10) * np.linspace(0.2, 1, 10)[:, None, None]
+    test = alpha_test.AlphaTest.from_cutoff(tex, 0.5)
+    res = build([Geometry("g", test, tris)], OmmSettings(dynamic_scale=1.0, max_level=5, special=False,
+                                                         dedup=False))
+    files.write(tmp_path / "o", res)
+    per = omm_decoder.triangle_states(tmp_path / "o")
+    want = bake.dynamic_levels(tris, 32, 32, 1.0, 5)
+    assert [lv for lv, _ in per] == want.tolist() and len(set(want.tolist())) > 1
+    for t, (lv, s) in enumerate(per):
+        baked = maps.bake_triangles(test.grid(), tris[t:t + 1], lv)[0]
+        np.testing.assert_array_equal(np.array(s)[baked != 2], baked[baked != 2])
+
+
+def test_writer_is_all_or_nothing(tmp_path, rng, monkeypatch):
+    tex = _alpha(rng)
+    res = build([Geometry("g", alpha_test.AlphaTest.from_cutoff(tex, 0.5), _tris(rng, 4))], OmmSettings(level=2))
+    files.write(tmp_path / "o", res)
+    before = sorted(os.listdir(tmp_path / "o"))
+    calls = []
+
+    real_open = open
+
+    def failing_open(path, mode="r", *a, **k):
+        calls.append(path)
+        if "w" in mode and str(path).endswith("omm_index.bin"):
+            raise OSError(28, "No space left on device")
+        return real_open(path, mode, *a, **k)
+
+    monkeypatch.setattr("builtins.open", failing_open)
+    with pytest.raises(OSError):
+        files.write(tmp_path / "o", res)
+    with pytest.raises(OSError):
+        files.write(tmp_path / "new", res)
+    monkeypatch.undo()
+    assert sorted(os.listdir(tmp_path / "o")) == before  # the earlier output is intact
+    assert not (tmp_path / "new").exists()
+    assert [p for p in os.listdir(tmp_path) if p.startswith(".omaps")] == []
+    (tmp_path / "other").mkdir()
+    (tmp_path / "other" / "keep.txt").write_text("x")
+    with pytest.raises(InputError, match="holds no omm.json"):
+        files.write(tmp_path / "other", res)
+
+
+def test_reader_rejects_broken_folders(tmp_path, rng):
+    tex = _alpha(rng)
+    res = build([Geometry("g", alpha_test.AlphaTest.from_cutoff(tex, 0.5), _tris(rng, 6))], OmmSettings(level=3))
+    cases = {
+        "omm_triangles.bin": (lambda b: b[:-3], "multiple of the 8-byte record"),
+        "omm_data.bin": (lambda b: b[:-1], "reads bytes up to"),
+        "omm_index.bin": (lambda b: b[:4] + np.int32(99).tobytes() + b[8:], "has index 99"),
+        "omm_usage.json": (lambda b: b.replace(b'"count": ', b'"count": 1'), "usage counts"),
+        "omm.json": (lambda b: b[:10], "not valid JSON"),
+    }
+    for name, (damage, msg) in cases.items():
+        d = tmp_path / name.replace(".", "_")
+        files.write(d, res)
+        p = d / name
+        p.write_bytes(damage(p.read_bytes()))
+        with pytest.raises(InputError, match=msg) as e:
+            files.read(d)
+        assert name in str(e.value)
+    files.write(tmp_path / "ok", res)
+    os.remove(tmp_path / "ok" / "omm_data.bin")
+    with pytest.raises(InputError, match="missing"):
+        files.read(tmp_path / "ok")
+
+
+@settings(max_examples=25, deadline=None)
+@given(st.integers(0, 2 ** 31), st.sampled_from(["nearest", "linear"]), st.sampled_from(["clamp", "wrap", "mirror"]),
+       st.integers(0, 4), st.sampled_from(["4state", "2state"]))
+def test_buffers_decode_to_the_baked_states(seed, filter, wrap, level, fmt):
+    rng = np.random.default_rng(seed)
+    tex = _alpha(rng, int(rng.integers(2, 12)), int(rng.integers(2, 12)))
+    tris = _tris(rng, 6) * 2 - 0.5
+    test = alpha_test.AlphaTest.from_cutoff(tex, 0.5, filter, wrap)
+    res = build([Geometry("g", test, tris)], OmmSettings(format=fmt, level=level, promotion="hashed"))
+    baked = maps.bake_triangles(test.grid(), tris, level)
+    for t in range(len(tris)):
+        got = np.broadcast_to(res.triangle_states(t), (4 ** level,))
+        known = baked[t] != states.C
+        np.testing.assert_array_equal(got[known], baked[t][known])
+
+
+def test_resolve_regions_matches_the_micromap_resolution(rng):
+    """The tracer's 2-state mode over any regions gives what 2-state OMM output holds."""
+    tex = _alpha(rng)
+    test = alpha_test.AlphaTest.from_cutoff(tex, 0.5, "linear", "wrap")
+    tris = _tris(rng, 6)
+    s, starts = bake.bake_levels(test.grid(), tris, 3)
+    f = alpha_test.opaque_fractions(test, tris, 3, starts)
+    cen = np.concatenate([birdcurve.uv_micro_triangles(t, 3).mean(axis=1) for t in tris]) * [16, 16]
+    for m in resolve.PROMOTIONS:
+        want = resolve.resolve(s, starts, 3, test, tris, omm_format.FORMAT_2_STATE, m, seed=3)
+        np.testing.assert_array_equal(resolve.resolve_regions(s, f, cen, m, seed=3), want)
+
+
+def test_square_fractions(rng):
+    """A cell's fraction is the mean of its two micro-triangles' (the corpus pair), and a known
+    cell's fraction agrees with its state."""
+    from omaps import pair
+    from omaps.omm import pairs
+
+    tex = _alpha(rng)
+    test = alpha_test.AlphaTest.from_cutoff(tex, 0.5, "linear", "clamp")
+    f, c = pairs.square_fractions(test, pair.PAIR, 8)
+    sq = maps.bake_square(test.grid(), 8)
+    assert np.all(f[sq == states.T] == 0) and np.all(f[sq == states.O] == 1)
+    j, i = np.mgrid[0:8, 0:8]
+    np.testing.assert_allclose(c[..., 0], (i + 0.5) * 2, atol=1e-9)  # the cell centre
+    np.testing.assert_allclose(c[..., 1], (j + 0.5) * 2, atol=1e-9)
+    two = resolve.resolve_regions(sq, f, c, "nearest")
+    np.testing.assert_array_equal(two[sq != states.C], sq[sq != states.C])
+
+
+@pytest.mark.parametrize("source,dynamic", [("texture", None), ("texture", 1.0), ("sq4", None), ("vq2", None)])
+def test_chunked_baking_gives_the_same_buffers(rng, monkeypatch, source, dynamic):
+    """Large inputs are baked a chunk of triangles at a time (pairs never split): the buffers
+    must not depend on where the chunks fall."""
+    from omaps.omm import pipeline
+
+    tex = _alpha(rng, 32, 32)
+    tris = _tris(rng, 13) * np.linspace(0.3, 1, 13)[:, None, None]
+    test = alpha_test.AlphaTest.from_cutoff(tex, 0.5, "linear", "wrap")
+    s = OmmSettings(level=3, dynamic_scale=dynamic, max_level=4, source=source, effort="fast")
+    whole = build([Geometry("g", test, tris)], s)
+    monkeypatch.setattr(pipeline, "CHUNK_MICRO_TRIANGLES", 150)
+    parts = build([Geometry("g", test, tris)], s)
+    for k in ("data", "triangles", "index"):
+        np.testing.assert_array_equal(getattr(parts, k), getattr(whole, k))
+    assert parts.pair_blocks == whole.pair_blocks
+    a, b = parts.summary["statistics"], whole.summary["statistics"]
+    assert a.pop("known_area_fraction") == pytest.approx(b.pop("known_area_fraction"), rel=1e-12)
+    assert a == b, {k: (a[k], b[k]) for k in a if a[k] != b[k]}
