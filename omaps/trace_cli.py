@@ -44,6 +44,10 @@ def add_parser(sub) -> None:
     t.add_argument("--effort", default="medium", help="codec encoder effort (default: %(default)s)")
     t.add_argument("--jobs", type=int, default=None, metavar="N", help="processes for baking and encoding "
                    "(default: all cores)")
+    t.add_argument("--two-state", metavar="MODES", default=None,
+                   help="also trace each square or codec scheme with its C cells resolved to O or T (no "
+                        "alpha tests; not exact) by these comma-separated rules: nearest, opaque, "
+                        "transparent, hashed, or 'all'; reports the per-pixel coverage error")
     t.add_argument("--json", metavar="FILE", help="write the results as JSON")
     t.add_argument("--heatmap", metavar="FILE.png", help="alpha tests per pixel, 'none' beside each scheme")
     t.add_argument("--render", metavar="FILE.png", help="the alpha-tested albedo image")
@@ -109,6 +113,7 @@ def cmd_trace(a) -> int:
     from .scene import SceneWarning, load_scene
 
     names = scene_maps.parse_trace_schemes(a.schemes or default_schemes())
+    modes = parse_two_state(a.two_state)
     w, h = parse_size(a.size)
     if a.jobs is not None and a.jobs < 1:
         raise InputError(f"--jobs must be >= 1, got {a.jobs}")
@@ -136,8 +141,9 @@ def cmd_trace(a) -> int:
     for n in tqdm(traced, desc="trace", unit="scheme", disable=not progress, leave=False):
         runs[n] = trace.trace_scheme(prep, n, cam, w, h, light, tnear, deferred=a.shadows)
     opaque = trace.trace_scheme(prep, None, cam, w, h, light, tnear)
-    total = time.perf_counter() - t_start
     ref = runs["none"]
+    two_state = _trace_two_state(prep, names, modes, cam, w, h, ref) if modes else {}
+    total = time.perf_counter() - t_start
     report = {
         "scene": {"file": a.scene, **scene.counts(), "paired_fraction": prep.alpha.paired_fraction,
                   "pairs": int(len(prep.alpha.pair_first)), "bounds": bounds.tolist(),
@@ -147,6 +153,7 @@ def cmd_trace(a) -> int:
         "embree": prep.device.version_text,
         "schemes": {n: trace.summary(runs[n], ref, prep.maps[n], w, h) for n in names},
         "opaque_only": trace.summary(opaque, ref, None, w, h),
+        "two_state": two_state,
         "timings": {"load_s": t_load, **prep.timings, "total_s": total},
     }
     none_tests = report["schemes"]["none"]["alpha_tests_per_primary_ray"] if "none" in names else \
@@ -159,6 +166,8 @@ def cmd_trace(a) -> int:
     bad = {n: r["differing_pixels"] + r.get("differing_shadow_rays", 0) + r.get("deferred_differing_shadow_rays", 0)
            for n, r in report["schemes"].items()}
     _print_report(report, names, a.shadows)
+    if two_state:
+        _print_two_state(two_state)
     if a.json:
         from .atomic import write_text
         write_text(a.json, json.dumps(report, indent=1))
@@ -171,6 +180,49 @@ def cmd_trace(a) -> int:
               ", ".join(f"{n} ({v})" for n, v in bad.items() if v), file=sys.stderr)
         return 1
     return 0
+
+
+def parse_two_state(text: str | None) -> list[str]:
+    from .two_state import MODES
+
+    if not text:
+        return []
+    modes = list(MODES) if text.strip().lower() == "all" else [m.strip().lower() for m in text.split(",") if m.strip()]
+    bad = [m for m in modes if m not in MODES]
+    if bad or not modes:
+        raise InputError(f"--two-state: unknown rule {bad[0] if bad else text!r} (choose from {', '.join(MODES)} "
+                         "or all)")
+    return list(dict.fromkeys(modes))
+
+
+def _trace_two_state(prep, names, modes, cam, w, h, ref) -> dict:
+    """Each square / codec scheme traced again with its C cells resolved by each rule."""
+    from . import trace
+    from .two_state import coverage_error, two_state_maps
+
+    out: dict = {}
+    cache: dict = {}
+    for n in names:
+        sm = prep.maps[n]
+        if sm.kind not in ("square", "codec"):
+            continue
+        out[n] = {}
+        for mode in modes:
+            sm2 = two_state_maps(prep.scene, prep.alpha, sm, mode, cache=cache)
+            prep.maps[sm2.name] = sm2
+            run = trace.trace_scheme(prep, sm2.name, cam, w, h)
+            out[n][mode] = coverage_error(run, ref)
+            del prep.maps[sm2.name]
+    return out
+
+
+def _print_two_state(two_state: dict) -> None:
+    print("2-state (C cells resolved, no alpha tests): pixels whose visible hit differs from 'none' "
+          "(stopped early / passed through)")
+    for n, by_mode in two_state.items():
+        cells = [f"{m} {r['differing_fraction']:.2%} ({r['stopped_early_fraction']:.2%}/"
+                 f"{r['passed_through_fraction']:.2%})" for m, r in by_mode.items()]
+        print(f"  {n:8} " + "   ".join(cells))
 
 
 def _print_report(report: dict, names: list[str], shadows: bool) -> None:
