@@ -17,6 +17,7 @@ or by clamping (period 0: indices clamp to the grid's edge).
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -42,6 +43,37 @@ def address(i, n, mode):
     if r < 0:
         r += p
     return r if r < n else p - 1 - r
+
+
+@njit(cache=True)
+def sample_texture(value, filt, mode_u, mode_v, x, y):
+    """What a shader's texture fetch returns at texel coordinate (x, y) of ``value`` (H, W):
+    filter 0 reads texel floor(p); filter 1 blends the taps floor(p - 0.5) and + 1 on each axis,
+    clamped into the range of its taps (where exact arithmetic puts it), so rounding cannot flip
+    a comparison every tap agrees on -- which the conservative maps rely on."""
+    h, w = value.shape
+    if filt == 0:
+        return np.float64(value[address(int(math.floor(y)), h, mode_v), address(int(math.floor(x)), w, mode_u)])
+    fx = x - 0.5
+    fy = y - 0.5
+    x0 = int(math.floor(fx))
+    y0 = int(math.floor(fy))
+    ax = fx - x0
+    ay = fy - y0
+    xa = address(x0, w, mode_u)
+    xb = address(x0 + 1, w, mode_u)
+    ya = address(y0, h, mode_v)
+    yb = address(y0 + 1, h, mode_v)
+    a00 = np.float64(value[ya, xa])
+    a01 = np.float64(value[ya, xb])
+    a10 = np.float64(value[yb, xa])
+    a11 = np.float64(value[yb, xb])
+    top = a00 + ax * (a01 - a00)
+    bot = a10 + ax * (a11 - a10)
+    a = top + ay * (bot - top)
+    lo = min(min(a00, a01), min(a10, a11))
+    hi = max(max(a00, a01), max(a10, a11))
+    return min(max(a, lo), hi)
 
 
 def wrap_code(wrap: str) -> int:

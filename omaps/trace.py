@@ -31,7 +31,7 @@ from . import birdcurve, pair, states
 from .embree import (ARGS_WORDS, CONTEXT_BYTES, RAYHIT_WORDS, RTC_FEATURE_FLAG_ALL, RTC_INVALID_GEOMETRY_ID,
                      W_GEOM, W_INST, W_PRIM, W_TFAR, W_U, W_V, call3, f32_ptr, f64_ptr, i8_ptr, i32_ptr,
                      i64_ptr, u8_ptr, u32_ptr)
-from .sampling import address, wrap_code
+from .sampling import sample_texture, wrap_code
 
 # ---- the table of addresses a filter reads (int64 words) -------------------------------------
 T_PROTO_OF_INST, T_ALPHA_BASE, T_TRI_MAT, T_TRI_UV, T_TRI_CORNER = 0, 1, 2, 3, 4
@@ -91,9 +91,8 @@ def read_2bit(data, start, k):
 @njit(cache=True)
 def alpha_test(table, tri, b1, b2):
     """The any-hit shader: base colour alpha at the hit (mip level 0, the material's filter and
-    wrap), opaque iff at or above the material's threshold. Bilinear results are clamped into
-    the range of their taps (where exact arithmetic puts them) so rounding cannot flip a
-    comparison that every tap agrees on."""
+    wrap, fetched by ``sampling.sample_texture``), opaque iff at or above the material's
+    threshold."""
     m = i32_ptr(table[T_TRI_MAT])[tri]
     uv = f64_ptr(table[T_TRI_UV])
     w0 = 1.0 - b1 - b2
@@ -102,38 +101,10 @@ def alpha_test(table, tri, b1, b2):
     v = w0 * uv[o + 1] + b1 * uv[o + 3] + b2 * uv[o + 5]
     w = i64_ptr(table[T_MAT_W])[m]
     h = i64_ptr(table[T_MAT_H])[m]
-    start = i64_ptr(table[T_MAT_TEX_START])[m]
-    wu = i64_ptr(table[T_MAT_WRAP_U])[m]
-    wv = i64_ptr(table[T_MAT_WRAP_V])[m]
+    tex = carray(u8_ptr(table[T_TEX] + i64_ptr(table[T_MAT_TEX_START])[m]), (h, w))
+    filt = 0 if i64_ptr(table[T_MAT_FILTER])[m] == NEAREST else 1
+    a = sample_texture(tex, filt, i64_ptr(table[T_MAT_WRAP_U])[m], i64_ptr(table[T_MAT_WRAP_V])[m], u * w, v * h)
     thr = f64_ptr(table[T_MAT_THR])[m]
-    tex = u8_ptr(table[T_TEX])
-    px = u * w
-    py = v * h
-    if i64_ptr(table[T_MAT_FILTER])[m] == NEAREST:
-        x = address(int(math.floor(px)), w, wu)
-        y = address(int(math.floor(py)), h, wv)
-        a = np.float64(tex[start + y * w + x])
-    else:
-        fx = px - 0.5
-        fy = py - 0.5
-        x0 = int(math.floor(fx))
-        y0 = int(math.floor(fy))
-        ax = fx - x0
-        ay = fy - y0
-        xa = address(x0, w, wu)
-        xb = address(x0 + 1, w, wu)
-        ya = address(y0, h, wv)
-        yb = address(y0 + 1, h, wv)
-        a00 = np.float64(tex[start + ya * w + xa])
-        a01 = np.float64(tex[start + ya * w + xb])
-        a10 = np.float64(tex[start + yb * w + xa])
-        a11 = np.float64(tex[start + yb * w + xb])
-        top = a00 + ax * (a01 - a00)
-        bot = a10 + ax * (a11 - a10)
-        a = top + ay * (bot - top)
-        lo = min(min(a00, a01), min(a10, a11))
-        hi = max(max(a00, a01), max(a10, a11))
-        a = min(max(a, lo), hi)
     return a >= thr
 
 

@@ -10,7 +10,6 @@ its promotion (unknown-opaque or unknown-transparent, or O / T in 2-state output
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -18,7 +17,7 @@ from numba import njit, prange
 
 from .. import birdcurve, states
 from ..errors import InputError
-from ..sampling import FILTERS, address, footprint_grid, wrap_code
+from ..sampling import FILTERS, footprint_grid, sample_texture, wrap_code
 from ..texel_states import StateRule
 from ..texture import AlphaTexture
 
@@ -99,32 +98,9 @@ class AlphaTest:
 
 @njit(cache=True)
 def sample_passes(value, threshold, inclusive, filt, mode_u, mode_v, x, y):
-    """The alpha test at texel coordinate (x, y): nearest reads texel floor(p), linear blends
-    the taps floor(p - 0.5) and + 1 on each axis, all addressed."""
-    h, w = value.shape
-    if filt == 0:
-        a = value[address(int(math.floor(y)), h, mode_v), address(int(math.floor(x)), w, mode_u)]
-    else:
-        fx = x - 0.5
-        fy = y - 0.5
-        x0 = int(math.floor(fx))
-        y0 = int(math.floor(fy))
-        tx = fx - x0
-        ty = fy - y0
-        if 0 <= x0 and x0 + 1 < w:  # inside the texture every mode addresses as is
-            xa = x0
-            xb = x0 + 1
-        else:
-            xa = address(x0, w, mode_u)
-            xb = address(x0 + 1, w, mode_u)
-        if 0 <= y0 and y0 + 1 < h:
-            ya = y0
-            yb = y0 + 1
-        else:
-            ya = address(y0, h, mode_v)
-            yb = address(y0 + 1, h, mode_v)
-        a = ((1 - ty) * ((1 - tx) * value[ya, xa] + tx * value[ya, xb])
-             + ty * ((1 - tx) * value[yb, xa] + tx * value[yb, xb]))
+    """The alpha test at texel coordinate (x, y): the fetch ``sampling.sample_texture`` (the
+    tracer's too) compared with the threshold."""
+    a = sample_texture(value, filt, mode_u, mode_v, x, y)
     return a >= threshold if inclusive else a > threshold
 
 
