@@ -154,9 +154,16 @@ def lookup(block, x, y):
 
 
 @njit(cache=True)
+def lookup_x64_at(data, base, x, y):
+    """State of cell (x, y), 0..63, of the VQ4x64 map at byte ``base``: its block
+    2*(y >> 5) + (x >> 5)."""
+    return lookup_at(data, base + BLOCK_BYTES * (((y >> 5) << 1) | (x >> 5)), x & 31, y & 31)
+
+
+@njit(cache=True)
 def lookup_x64(data, x, y):
     """State of cell (x, y), 0..63, of a 256-byte VQ4x64 map."""
-    return lookup_at(data, BLOCK_BYTES * (((y >> 5) << 1) | (x >> 5)), x & 31, y & 31)
+    return lookup_x64_at(data, 0, x, y)
 
 
 @njit(cache=True)
@@ -175,6 +182,5 @@ def lookup_batch_x64(maps, map_ids, xs, ys):
     flat = maps.reshape(-1)
     out = np.empty(xs.shape[0], dtype=np.uint8)
     for i in range(xs.shape[0]):
-        x, y = xs[i], ys[i]
-        out[i] = lookup_at(flat, X64_BYTES * map_ids[i] + BLOCK_BYTES * (((y >> 5) << 1) | (x >> 5)), x & 31, y & 31)
+        out[i] = lookup_x64_at(flat, X64_BYTES * map_ids[i], xs[i], ys[i])
     return out

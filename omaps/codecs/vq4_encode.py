@@ -335,7 +335,7 @@ def _swap(g, sp, ck, w, chosen, target, max_passes):
 
 
 @njit(cache=True)
-def _served_merges(g, ct, co, chosen, it, io, w):
+def _served_merges(g, chosen, it, io, w):
     """For each entry, the conservative merge of the items it serves best plus each further item
     it could serve: new base patterns that merge more than two vectors."""
     n = it.shape[0]
@@ -399,7 +399,7 @@ def _codebook(it, io, w, level, target):
         value = _swap(g, sp, ck, w, chosen, target, 8)
     if level >= 3 and value < target:
         for _ in range(3):
-            nt, no = _served_merges(g, ct, co, chosen, it, io, w)
+            nt, no = _served_merges(g, chosen, it, io, w)
             old_keys = (ck << 32) | (ct << 16) | co
             ck, ct, co = _extend_pool(ck, ct, co, nt, no)
             if ck.shape[0] == old_keys.shape[0]:
@@ -607,7 +607,7 @@ def _search(dt, do, encoder, start, cd_level, cd_passes, final_level):
     ranking of every combination (3); coordinate descent over quadrants 1..3 scored by the
     codebook at ``cd_level``; the winner re-encoded at ``final_level``."""
     if start == 3:  # rank every combination cheaply, refine the best few
-        return _search_ranked(dt, do, cd_level, final_level)
+        return _search_ranked(dt, do, cd_level, cd_passes, final_level)
     used = _quadrant_used(dt, do)
     start_tr = _aligned_transforms(dt, do) if start == 1 else np.zeros(4, dtype=np.int64)
     for q in range(4):
@@ -617,9 +617,10 @@ def _search(dt, do, encoder, start, cd_level, cd_passes, final_level):
 
 
 @njit(cache=True)
-def _search_ranked(dt, do, level, final_level):
+def _search_ranked(dt, do, level, passes, final_level):
     """Every transform combination scored by the items-only greedy; the TOP_K best re-scored at
-    ``level``; coordinate descent at ``level`` from the winner; re-encoded at ``final_level``."""
+    ``level``; ``passes`` of coordinate descent at ``level`` from the winner; re-encoded at
+    ``final_level``."""
     used = _quadrant_used(dt, do)
     tr = np.zeros(4, dtype=np.int64)
     score = np.full(512, -1, dtype=np.int64)
@@ -638,7 +639,7 @@ def _search_ranked(dt, do, level, final_level):
         v = _evaluate(dt, do, tr, 1, level)[0]
         if v > best_v:
             best_v, best_tr[:] = v, tr
-    return _descend(dt, do, 1, best_tr, used, level, 1, final_level)[1:]
+    return _descend(dt, do, 1, best_tr, used, level, passes, final_level)[1:]
 
 
 @njit(cache=True)
