@@ -29,7 +29,7 @@ from numba import njit
 from tqdm import tqdm
 
 from . import birdcurve, maps, raster, states
-from .pairing import CORNERS, Pairing, pair_triangles
+from .pairing import Pairing, pair_triangles
 from .sampling import footprint_grid
 from .scene import Scene
 
@@ -132,6 +132,15 @@ def region_flag(flags, px, py, off, w, h, uvpoly, k, eps, pts):
     return raster.polygon_flags(flags, px, py, pts[:k], eps)
 
 
+@njit(cache=True, inline="always")
+def pair_weights(tri, s, t):
+    """Weights of a square point (s, t) on the corners of triangle A (tri 0: (0,0), (1,0), (1,1),
+    where t <= s) or B (tri 1: (0,0), (1,1), (0,1)), as docs/FORMAT.md's "Scenes" states."""
+    if tri == 0:
+        return 1.0 - s, s - t, t
+    return 1.0 - t, s, t - s
+
+
 @njit(cache=True)
 def bake_pairs_kernel(uv, has_b, mat, n, eps, gflags, gstart, grows, gcols, gpx, gpy, goff, gw, gh):
     """Flags (P, n, n) of square maps. uv (P, 6, 2): UVs at corners (0,0), (1,0), (1,1) of A,
@@ -177,12 +186,8 @@ def bake_pairs_kernel(uv, has_b, mat, n, eps, gflags, gstart, grows, gcols, gpx,
                     for v in range(k):
                         s = poly[v, 0]
                         t = poly[v, 1]
-                        if tri == 0:  # weights of the corners (0,0), (1,0), (1,1)
-                            w0, w1, w2 = 1.0 - s, s - t, t
-                            b = 0
-                        else:  # (0,0), (1,1), (0,1)
-                            w0, w1, w2 = 1.0 - t, s, t - s
-                            b = 3
+                        w0, w1, w2 = pair_weights(tri, s, t)
+                        b = 3 * tri
                         for d in range(2):
                             poly_uv[v, d] = w0 * uv[p, b, d] + w1 * uv[p, b + 1, d] + w2 * uv[p, b + 2, d]
                     acc |= region_flag(flags, gpx[m], gpy[m], goff[m], gw[m], gh[m], poly_uv, k, eps, scratch)

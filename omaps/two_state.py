@@ -18,6 +18,7 @@ from . import states
 from .omm.alpha_test import sample_passes
 from .omm.resolve import PROMOTIONS, resolve_regions
 from .sampling import wrap_code
+from .scene_maps import pair_weights
 
 MODES = PROMOTIONS  # nearest (majority), opaque, transparent, hashed
 SAMPLES = 4  # K: K x K sample points per cell
@@ -25,17 +26,15 @@ SAMPLES = 4  # K: K x K sample points per cell
 
 @njit(cache=True)
 def _st_to_uv(uv6, has_b, s, t):
-    """Texture (u, v) of square point (s, t) of a pair: triangle A = corners (0,0), (1,0), (1,1)
-    holds t <= s, B = (0,0), (1,1), (0,1) the rest; ok False where a lone triangle has no B."""
-    if t <= s:
-        b1, b2, o = s - t, t, 0
-    else:
-        if not has_b:
-            return 0.0, 0.0, False
-        b1, b2, o = s, t - s, 3
-    w0 = 1.0 - b1 - b2
-    u = w0 * uv6[o, 0] + b1 * uv6[o + 1, 0] + b2 * uv6[o + 2, 0]
-    v = w0 * uv6[o, 1] + b1 * uv6[o + 1, 1] + b2 * uv6[o + 2, 1]
+    """Texture (u, v) of square point (s, t) of a pair (``scene_maps.pair_weights``); ok False
+    where a lone triangle has no B."""
+    tri = 0 if t <= s else 1
+    if tri == 1 and not has_b:
+        return 0.0, 0.0, False
+    w0, w1, w2 = pair_weights(tri, s, t)
+    o = 3 * tri
+    u = w0 * uv6[o, 0] + w1 * uv6[o + 1, 0] + w2 * uv6[o + 2, 0]
+    v = w0 * uv6[o, 1] + w1 * uv6[o + 1, 1] + w2 * uv6[o + 2, 1]
     return u, v, True
 
 
