@@ -111,15 +111,15 @@ def two_state_maps(scene, at, sm, mode: str, seed: int = 0, cache: dict | None =
     if mode not in MODES:
         raise ValueError(f"unknown 2-state mode {mode!r} (choose from {', '.join(MODES)})")
     n = sm.param
-    uv, has_b, mat = scene_maps.pair_corner_uvs(at)
-    reps, inverse = scene_maps.distinct_rows(uv, has_b, mat)
+    cache = {} if cache is None else cache
+    if "pairs" not in cache:  # the same for every scheme and rule
+        uv, has_b, mat = scene_maps.pair_corner_uvs(at)
+        cache["pairs"] = (uv, has_b, mat) + scene_maps.distinct_rows(uv, has_b, mat)
+    uv, has_b, mat, reps, inverse = cache["pairs"]
     key = ("fractions", n)
-    if cache is not None and key in cache:
-        frac, centre = cache[key]
-    else:
-        frac, centre = cell_fractions(scene, uv[reps], has_b[reps], mat[reps], n)
-        if cache is not None:
-            cache[key] = frac, centre
+    if key not in cache:
+        cache[key] = cell_fractions(scene, uv[reps], has_b[reps], mat[reps], n)
+    frac, centre = cache[key]
     three = decoded_pair_maps(sm, at)[reps]
     two = resolve_regions(three, frac, centre, mode, seed)
     assert not np.any((three != states.C) & (two != three))  # known cells keep their state
