@@ -1,114 +1,130 @@
-"""Map schemes by name (``sq16``, ``tri3``, ``texel``): what they bake and what they cost.
+"""Scheme names: the one grammar of ``omaps eval``, ``omaps trace`` and ``omaps omm --from``.
 
-Every scheme evaluated by ``omaps eval`` is a ``Scheme``; codecs add theirs with ``register``.
-Savings = fraction of hits, uniform over the pair's area, that land in a T or O region.
+    none                 no map: every candidate hit runs the any-hit shader (trace)
+    texel                the per-texel limit of an infinitely fine map (eval)
+    triL                 two per-triangle micromaps of 4^L micro-triangles, L = 0..12
+    sqN                  the raw N x N square map over a pair, N a power of two up to 128
+    CODEC[-VARIANT]      vq2, vq4 or vq4x64; VARIANT: paper (the deck's encoder) or an effort of
+                         our encoder (fast, medium, thorough); none: the command's --encoder /
+                         --effort, else the codec's defaults
+
+A ``Scheme`` says what is stored (its ``kind``: none, texel, micromap or square with its
+``codec``) and what it costs (``bits_for``: storage bits per pair). The bakers make the maps.
+
+Example::
+
+    >>> from omaps.schemes import parse_schemes
+    >>> [(s.name, s.kind, s.encoder, s.effort) for s in parse_schemes("sq16,vq4-paper,tri3")]
+    [('sq16', 'square', None, None), ('vq4-paper', 'square', 'paper', 'medium'), ('tri3', 'micromap', None, None)]
 """
 
 from __future__ import annotations
 
 import re
 from dataclasses import dataclass
-from typing import Callable
 
-import numpy as np
-
-from . import maps, states
+from .codecs.options import EFFORTS
+from .codecs.registry import Codec, check_choice, codec_names, get_codec
 from .errors import InputError
-from .sampling import FootprintGrid
 
+__all__ = ["Scheme", "get_scheme", "parse_schemes", "DEFAULT_SCHEMES", "KINDS", "VARIANTS"]
+
+KINDS = ("none", "texel", "micromap", "square")
+VARIANTS = ("paper",) + tuple(EFFORTS)
 DEFAULT_SCHEMES = ("sq4", "sq8", "sq16", "sq32", "sq64", "tri2", "tri3", "tri4", "tri5", "texel")
+_TRI = re.compile(r"tri(\d+)")
+_SQ = re.compile(r"sq(\d+)")
 
 
 @dataclass(frozen=True)
 class Scheme:
     name: str
-    family: str  # lines of a plot connect schemes of one family
-    bake: Callable[[FootprintGrid], np.ndarray]  # symbolic map (states) of the corpus pair
-    bits_for: Callable[[int, int], int]  # storage bits per pair for a W x H texture
+    kind: str  # none | texel | micromap | square
+    level: int | None = None  # micromap
+    codec: Codec | None = None  # square: raw sqN or a compressed codec
+    encoder: str | None = None
+    effort: str | None = None
 
-    def savings(self, grid: FootprintGrid) -> float:
-        return self.savings_of(grid, self.bake(grid))
+    @property
+    def family(self) -> str:
+        """Lines of a plot connect schemes of one family: sq, tri, a codec (vq4 and vq4x64 share
+        one) with its variant."""
+        if self.kind == "micromap":
+            return "tri"
+        if self.kind == "square" and not self.codec.compressed:
+            return "sq"
+        if self.kind == "square":
+            base = "vq4" if self.codec.name == "vq4x64" else self.codec.name
+            return base + self.name[len(self.codec.name):]
+        return self.name
 
-    def savings_of(self, grid: FootprintGrid, map_states: np.ndarray) -> float:
-        """Savings of a map this scheme baked (regions of equal area)."""
-        return maps.known_fraction(map_states)
+    @property
+    def map_size(self) -> int | None:
+        return self.codec.map_size if self.codec is not None else None
 
+    def bits_for(self, width: int, height: int) -> int:
+        """Storage bits per pair for a width x height texture."""
+        if self.kind == "micromap":
+            return 2 * 4 ** self.level * 2  # two triangles, 2 bits per micro-triangle
+        if self.kind == "square":
+            return self.codec.bits
+        if self.kind == "texel":
+            return 2 * width * height
+        return 0
 
-def _square(n: int) -> Scheme:
-    n = maps.check_square_size(n)
-    return Scheme(f"sq{n}", "sq", lambda g: maps.bake_square(g, n), lambda w, h: 2 * n * n)
-
-
-def _tri(level: int) -> Scheme:
-    level = maps.check_tri_level(level)
-    # two triangles, 4**L micro-triangles each, 2 bits per micro-triangle
-    return Scheme(f"tri{level}", "tri", lambda g: maps.bake_pair_triangles(g, level),
-                  lambda w, h: 2 * 4 ** level * 2)
-
-
-class _Texel(Scheme):
-    def savings_of(self, grid: FootprintGrid, map_states: np.ndarray) -> float:
-        return maps.texel_limit(grid)  # border cells of a linear footprint have half area
-
-
-TEXEL = _Texel("texel", "texel", lambda g: states.FLAG_TO_STATE[g.cells_within_texture()[0]],
-               lambda w, h: 2 * w * h)
-
-_FIXED: dict[str, Callable[[], Scheme]] = {"texel": lambda: TEXEL}
-_PATTERNS: list[tuple[re.Pattern, Callable[[int], Scheme]]] = [
-    (re.compile(r"sq(\d+)"), _square),
-    (re.compile(r"tri(\d+)"), _tri),
-]
-
-
-def register(name: str, factory: Callable[[], Scheme]) -> None:
-    """Add a fixed-name scheme (a codec) to the registry."""
-    _FIXED[name] = factory
-
-
-def _codec_scheme(name: str, codec_name: str, encoder: str, effort: str, family: str) -> Scheme:
-    """A compressed square map: bake the codec's N x N map, encode, decode what was stored."""
-    from .codecs.registry import get_codec
-
-    codec = get_codec(codec_name)
-
-    def bake(g: FootprintGrid) -> np.ndarray:
-        return codec.decode(codec.encode(maps.bake_square(g, codec.map_size), encoder, effort))
-
-    return Scheme(name, family, bake, lambda w, h: 8 * codec.block_bytes)
+    def settings(self) -> dict:
+        out = {"kind": self.kind}
+        if self.level is not None:
+            out["level"] = self.level
+        if self.codec is not None:
+            out.update(codec=self.codec.name, map_size=self.codec.map_size, bits=self.codec.bits)
+            if self.codec.compressed:
+                out.update(encoder=self.encoder, effort=self.effort)
+        return out
 
 
-# "vq2" is the best encoder at medium effort (thorough gains little there); "vq4" and "vq4x64" at
-# thorough effort, which the corpus affords (about 60 blocks/s). Suffixes name the others.
-for _codec, _main in (("vq2", "medium"), ("vq4", "thorough"), ("vq4x64", "thorough")):
-    for _suffix, _enc, _eff in [("", "best", _main), ("-paper", "paper", "medium"), ("-fast", "best", "fast"),
-                                ("-medium", "best", "medium"), ("-thorough", "best", "thorough")]:
-        _name = _codec + _suffix
-        if _suffix != "-" + _main:  # the main effort has the plain name
-            register(_name, lambda n=_name, c=_codec, e=_enc, f=_eff: _codec_scheme(n, c, e, f, n))
+def get_scheme(name: str, encoder: str | None = None, effort: str | None = None) -> Scheme:
+    """A scheme by name; ``encoder`` / ``effort`` apply to a codec named without a variant."""
+    check_choice("encoder", encoder, ("paper", "best"))
+    check_choice("effort", effort, tuple(EFFORTS))
+    key = str(name).strip().lower()
+    if key in ("none", "texel"):
+        return Scheme(key, key)
+    m = _TRI.fullmatch(key)
+    if m:
+        from .bake.micromap import check_level
+
+        return Scheme(key, "micromap", level=check_level(int(m.group(1)), "triL level"))
+    if _SQ.fullmatch(key):
+        return Scheme(key, "square", codec=get_codec(key))
+    base, _, variant = key.partition("-")
+    if base in codec_names():
+        codec = get_codec(base)
+        if variant == "paper":
+            encoder = "paper"
+        elif variant:
+            if variant not in EFFORTS:
+                raise InputError(f"unknown variant {variant!r} of {base} (choose from {', '.join(VARIANTS)})")
+            encoder, effort = "best", variant
+        enc, eff = codec.options(encoder, effort)
+        return Scheme(key, "square", codec=codec, encoder=enc, effort=eff)
+    raise InputError(f"unknown scheme {name!r} (known: none, texel, triL, sqN, "
+                     f"{', '.join(c + '[-' + '|'.join(VARIANTS) + ']' for c in codec_names())})")
 
 
-def get_scheme(name: str) -> Scheme:
-    key = name.strip().lower()
-    if key in _FIXED:
-        return _FIXED[key]()
-    for pattern, factory in _PATTERNS:
-        m = pattern.fullmatch(key)
-        if m:
-            return factory(int(m.group(1)))
-    known = ", ".join(sorted(_FIXED)) + ", sq<N>, tri<L>"
-    raise InputError(f"unknown scheme {name!r} (known: {known})")
-
-
-def parse_schemes(text) -> list[Scheme]:
-    """Schemes from a comma-separated string or a list of names, in order, without repeats."""
+def parse_schemes(text, kinds=KINDS, encoder: str | None = None, effort: str | None = None,
+                  command: str = "this command") -> list[Scheme]:
+    """Schemes from a comma-separated string or a list of names, in order, without repeats;
+    InputError for a scheme whose kind the command cannot use."""
     names = text.split(",") if isinstance(text, str) else list(text)
     names = [n.strip() for n in names if n.strip()]
     if not names:
         raise InputError("no schemes given")
     out, seen = [], set()
     for n in names:
-        s = get_scheme(n)
+        s = get_scheme(n, encoder, effort)
+        if s.kind not in kinds:
+            raise InputError(f"scheme {s.name!r} ({s.kind}) is not available in {command}")
         if s.name not in seen:
             seen.add(s.name)
             out.append(s)

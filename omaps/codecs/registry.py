@@ -1,65 +1,164 @@
-"""Codecs by name: block size, map size, encode (map -> bytes) and decode (bytes -> map)."""
+"""Stored square maps by name: the raw ``sqN`` map and the compressed codecs, one interface.
+
+A ``Codec`` stores one N x N map in a fixed number of bytes: ``encode`` (map -> bytes, the same
+kind of object for every codec), ``decode`` (bytes -> map) and a numba ``lookup(block, x, y)``
+that reads one cell by random access (the tracer's any-hit filter calls it). The codec owns its
+encoder and effort choices, their defaults and their validation (``options``: an unknown value is
+an error in every command), and the post-encode check that a decoded map only ever turned O or T
+into C (``encode_many``), so every command gets the same blocks and the same guarantee.
+
+Example::
+
+    >>> import numpy as np
+    >>> from omaps.codecs import get_codec
+    >>> codec = get_codec("vq2")
+    >>> m = np.zeros((16, 16), np.uint8); m[:, 8:] = 1
+    >>> block = codec.encode(m)
+    >>> len(block), bool((codec.decode(block) == m).all()), int(codec.lookup(np.frombuffer(block, np.uint8), 9, 0))
+    (32, True, 1)
+"""
 
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass
 from typing import Callable
 
 import numpy as np
 
+from .. import states
 from ..errors import InputError
+from .options import EFFORTS, ENCODERS
+
+__all__ = ["Codec", "get_codec", "codec_names", "ENCODERS", "EFFORTS", "check_choice"]
+
+
+def check_choice(kind: str, value, allowed) -> None:
+    """InputError unless ``value`` (an encoder or effort name; None means the default) is known."""
+    if value is not None and value not in allowed:
+        raise InputError(f"unknown {kind} {value!r} (choose from {', '.join(allowed)})")
 
 
 @dataclass(frozen=True)
 class Codec:
     name: str
     map_size: int  # the codec stores an N x N square map
+    bits: int  # storage bits of one map
     block_bytes: int
-    encoders: tuple[str, ...]
+    encoders: tuple[str, ...]  # () when there is nothing to choose (raw maps)
     efforts: tuple[str, ...]
-    encode: Callable[..., bytes]  # (map, encoder, effort) -> physical block(s)
-    decode: Callable[[bytes], np.ndarray]  # physical block(s) -> map
+    default_encoder: str | None
+    default_effort: str | None
+    _encode_many: Callable[[np.ndarray, str, str], np.ndarray]  # (P, N, N) -> (P, block_bytes) uint8
+    _decode: Callable[[bytes], np.ndarray]
     # numba @njit (data: uint8[block_bytes], x, y) -> state of cell (x, y), reading only the bits it
     # needs; callable from other numba code (the tracer's any-hit filter)
     lookup: Callable
 
+    @property
+    def compressed(self) -> bool:
+        return bool(self.encoders)
 
-def _vq2() -> Codec:
-    from . import vq2_block, vq2_encode
+    def options(self, encoder: str | None = None, effort: str | None = None) -> tuple[str | None, str | None]:
+        """(encoder, effort) with defaults filled in; InputError for a name no codec knows. A raw
+        map has no choices and ignores valid ones (a command's ``--effort`` applies to its
+        codecs)."""
+        check_choice("encoder", encoder, ENCODERS)
+        check_choice("effort", effort, tuple(EFFORTS))
+        if not self.compressed:
+            return None, None
+        if encoder is not None and encoder not in self.encoders:
+            raise InputError(f"{self.name} has no encoder {encoder!r} (choose from {', '.join(self.encoders)})")
+        return encoder or self.default_encoder, effort or self.default_effort
 
-    def enc(m, encoder="best", effort="medium"):
-        return vq2_encode.encode(m, encoder, effort).pack()
+    def encode(self, m, encoder: str | None = None, effort: str | None = None) -> bytes:
+        """One N x N map of states -> its block (``block_bytes`` bytes)."""
+        blocks, _ = self.encode_many(np.asarray(m)[None], encoder, effort)
+        return blocks[0].tobytes()
 
-    return Codec("vq2", vq2_block.SIZE, vq2_block.BLOCK_BYTES, vq2_encode.ENCODERS, tuple(vq2_encode.EFFORTS),
-                 enc, vq2_block.decode, vq2_block.lookup)
+    def encode_many(self, maps, encoder: str | None = None, effort: str | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """Maps (P, N, N) -> (blocks (P, block_bytes) uint8, decoded maps (P, N, N)). Every block is
+        decoded again and must be conservative (only O->C or T->C): a RuntimeError otherwise."""
+        enc, eff = self.options(encoder, effort)
+        m = np.ascontiguousarray(maps, dtype=np.uint8)
+        n = self.map_size
+        if m.ndim != 3 or m.shape[1:] != (n, n) or m.max(initial=0) > states.C:
+            raise InputError(f"{self.name} stores {n}x{n} maps of states 0..2, got shape {m.shape}")
+        if len(m) == 0:
+            return np.zeros((0, self.block_bytes), np.uint8), m.copy()
+        blocks = np.ascontiguousarray(self._encode_many(m, enc, eff), dtype=np.uint8)
+        decoded = self.decode_many(blocks)
+        if blocks.shape != (len(m), self.block_bytes) or not states.is_conservative(m, decoded):
+            raise RuntimeError(f"internal error: the {self.name} encoder changed a known state")
+        return blocks, decoded
+
+    def decode(self, data) -> np.ndarray:
+        """A block (bytes or uint8 array) -> its N x N map."""
+        b = bytes(data) if not isinstance(data, bytes) else data
+        if len(b) != self.block_bytes:
+            raise InputError(f"a {self.name} block is {self.block_bytes} bytes, got {len(b)}")
+        return self._decode(b)
+
+    def decode_many(self, blocks) -> np.ndarray:
+        b = np.ascontiguousarray(blocks, dtype=np.uint8).reshape(-1, self.block_bytes)
+        out = np.empty((len(b), self.map_size, self.map_size), np.uint8)
+        for i, row in enumerate(b):
+            out[i] = self._decode(row.tobytes())
+        return out
 
 
-def _vq4() -> Codec:
-    from . import vq4_block, vq4_encode
+def _raw(n: int) -> Codec:
+    from ..bake.square import check_square_size
+    from .raw import pack_states, row_bytes, square_lookup, unpack_states
 
-    def enc(m, encoder="best", effort="medium"):
-        return vq4_encode.encode(m, encoder, effort).pack()
+    n = check_square_size(n)
 
-    return Codec("vq4", vq4_block.SIZE, vq4_block.BLOCK_BYTES, vq4_encode.ENCODERS, tuple(vq4_encode.EFFORTS),
-                 enc, vq4_block.decode, vq4_block.lookup)
+    def enc(maps, encoder, effort):
+        return pack_states(maps.reshape(len(maps), -1))
 
+    def dec(data):
+        return unpack_states(np.frombuffer(data, np.uint8), n * n)[0].reshape(n, n)
 
-def _vq4x64() -> Codec:
-    from . import vq4_block, vq4_encode
-
-    return Codec("vq4x64", vq4_block.X64_SIZE, vq4_block.X64_BYTES, vq4_encode.ENCODERS,
-                 tuple(vq4_encode.EFFORTS), vq4_encode.encode_x64, vq4_block.decode_x64, vq4_block.lookup_x64)
+    return Codec(f"sq{n}", n, 2 * n * n, row_bytes(n * n), (), (), None, None, enc, dec, square_lookup(n))
 
 
-_FACTORIES: dict[str, Callable[[], Codec]] = {"vq2": _vq2, "vq4": _vq4, "vq4x64": _vq4x64}
+def _vq(name: str) -> Codec:
+    if name == "vq2":
+        from . import vq2_block as block, vq2_encode as encoder
+    else:
+        from . import vq4_block as block, vq4_encode as encoder
+    x64 = name == "vq4x64"
+
+    def enc(maps, e, f):
+        if x64:
+            return np.stack([np.frombuffer(encoder.encode_x64(m, e, f), np.uint8) for m in maps])
+        return np.stack([np.frombuffer(b.pack(), np.uint8) for b in encoder.encode_many(maps, e, f)])
+
+    size = block.X64_SIZE if x64 else block.SIZE
+    nbytes = block.X64_BYTES if x64 else block.BLOCK_BYTES
+    return Codec(name, size, 8 * nbytes, nbytes, ENCODERS, tuple(EFFORTS), "best", "medium", enc,
+                 block.decode_x64 if x64 else block.decode, block.lookup_x64 if x64 else block.lookup)
+
+
+_COMPRESSED = ("vq2", "vq4", "vq4x64")
+_CACHE: dict[str, Codec] = {}
+_RAW = re.compile(r"sq(\d+)")
 
 
 def codec_names() -> list[str]:
-    return list(_FACTORIES)
+    """The compressed codecs (raw maps are ``sqN``, N a power of two up to 128)."""
+    return list(_COMPRESSED)
 
 
 def get_codec(name: str) -> Codec:
-    try:
-        return _FACTORIES[name]()
-    except KeyError:
-        raise InputError(f"unknown codec {name!r} (choose from {', '.join(_FACTORIES)})") from None
+    """A codec by name: ``sqN`` (raw 2-bit map), ``vq2``, ``vq4`` or ``vq4x64``."""
+    key = str(name).strip().lower()
+    if key not in _CACHE:
+        m = _RAW.fullmatch(key)
+        if m:
+            _CACHE[key] = _raw(int(m.group(1)))
+        elif key in _COMPRESSED:
+            _CACHE[key] = _vq(key)
+        else:
+            raise InputError(f"unknown codec {name!r} (choose from sqN, {', '.join(_COMPRESSED)})")
+    return _CACHE[key]

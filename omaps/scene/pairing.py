@@ -21,9 +21,9 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
-# the square's corners by code; a triangle's vertices get codes from this table
-CORNERS = np.array([[0, 0], [1, 0], [1, 1], [0, 1]], dtype=np.int8)
-CORNER_00, CORNER_10, CORNER_11, CORNER_01 = 0, 1, 2, 3
+from ..pair import CORNER_00, CORNER_01, CORNER_10, CORNER_11, CORNERS  # noqa: F401 (CORNERS re-exported)
+
+__all__ = ["Pairing", "pair_triangles", "weld", "adjacency", "CORNERS"]
 
 
 @dataclass(frozen=True)

@@ -1,8 +1,11 @@
-"""Fast micromap baking: the same states as ``maps.bake_triangles``, for any level up to 12.
+"""The micromap baker: T/O/C states of every micro-triangle of UV triangles, levels 0..12.
 
-``maps.bake_triangles`` rasterises every micro-triangle over its footprint cells (~1e6 regions/s).
-Here each triangle is walked down the subdivision tree in the bird-curve order, and two facts
-make it fast without changing a single state:
+One baker serves every per-triangle map: eval's ``triL`` (the corpus pair's two triangles), the
+tracer's ``triL`` and the standard OMMs. A micro-triangle's state is the OR of the footprint
+flags of every cell its interior overlaps, exactly as ``raster.polygon_flags`` computes it -- the
+same vertex arithmetic, row bands and x-extents, and the same optional growth ``grow`` (texels,
+the Minkowski sum with a square; see ``GROW_TEXEL``). Each triangle is walked down the
+subdivision tree in the bird-curve order, and two facts make it fast without changing a state:
 
 * a summed-area table of the grid's T and O flag bits counts a box of cells in O(1): when the
   box around a node (its bounding box, widened by a margin far above float rounding) is all T,
@@ -13,6 +16,17 @@ make it fast without changing a single state:
   span is read from the table in O(1) instead of cell by cell.
 
 Triangles run in parallel (numba ``prange``); ``numba.set_num_threads`` picks the thread count.
+
+Example::
+
+    >>> import numpy as np
+    >>> from omaps.alpha_test import StateRule
+    >>> from omaps.bake.micromap import bake_micromaps
+    >>> from omaps.texture import load_alpha
+    >>> grid = StateRule("cutoff").alpha_test(load_alpha(np.array([[0, 255]], np.uint8))).grid()
+    >>> states, starts = bake_micromaps(grid, np.array([[[0, 0], [1, 0], [0, 1]]]), 1)
+    >>> states.tolist()
+    [0, 2, 2, 0]
 """
 
 from __future__ import annotations
@@ -23,18 +37,37 @@ import numba
 import numpy as np
 from numba import njit, prange
 
+from ..birdcurve import MAX_LEVEL
 from ..errors import InputError
-from ..maps import check_uv_triangles
 from ..sampling import FootprintGrid
-from . import format as omm_format
+
+__all__ = ["bake_micromaps", "bake_micromap_rows", "dynamic_levels", "micro_starts", "check_level",
+           "check_uv_triangles", "flag_table", "GROW_TEXEL", "MAX_LEVEL"]
 
 MARGIN = 1e-9  # relative widening of node boxes; float rounding of the coordinates is ~1e-15
+# Growth of every region of real geometry, in texels: a hit's region (from barycentrics) and its
+# texel (from interpolated UVs) are two floating-point computations of one point, so a hit on a
+# region edge that is also a texel edge could otherwise read a texel the region did not count.
+# The corpus pair (exact dyadic regions, no rays) is baked with no growth.
+GROW_TEXEL = 2.0 ** -20
 
 
 def check_level(level, name="level") -> int:
-    if not isinstance(level, (int, np.integer)) or not 0 <= level <= omm_format.MAX_LEVEL:
-        raise InputError(f"{name} must be an integer from 0 to {omm_format.MAX_LEVEL}, got {level!r}")
+    """A subdivision level of the APIs (0 .. 12)."""
+    if not isinstance(level, (int, np.integer)) or not 0 <= level <= MAX_LEVEL:
+        raise InputError(f"{name} must be an integer from 0 to {MAX_LEVEL}, got {level!r}")
     return int(level)
+
+
+def check_uv_triangles(tris_uv) -> np.ndarray:
+    """UV triangles as float64 (T, 3, 2); NaN or infinite coordinates are an error."""
+    t = np.asarray(tris_uv, dtype=np.float64)
+    if t.ndim != 3 or t.shape[1:] != (3, 2):
+        raise InputError(f"UV triangles must have shape (T, 3, 2), got {t.shape}")
+    finite = np.isfinite(t).all(axis=(1, 2))
+    if not finite.all():
+        raise InputError(f"UV triangle {int(np.flatnonzero(~finite)[0])} has NaN or infinite coordinates")
+    return t
 
 
 def flag_table(grid: FootprintGrid) -> np.ndarray:
@@ -124,21 +157,24 @@ def _edge_extent(ax, ay, bx, by, y0, y1, xmin, xmax):
 
 
 @njit(cache=True)
-def _leaf_flag(sat, period_y, period_x, x0, y0, x1, y1, x2, y2):
-    """OR of the flags of the cells a micro-triangle overlaps (0: no area), row spans in O(1)."""
+def _leaf_flag(sat, period_y, period_x, x0, y0, x1, y1, x2, y2, grow):
+    """OR of the flags of the cells a micro-triangle (grown by ``grow``) overlaps (0: no area):
+    ``raster.polygon_flags``' arithmetic, each row's cell span read in O(1)."""
     ymin = min(y0, min(y1, y2))
     ymax = max(y0, max(y1, y2))
     acc = 0
-    for r in range(int(math.floor(ymin)), int(math.ceil(ymax))):
-        b0 = max(float(r), ymin)
-        b1 = min(float(r + 1), ymax)
-        if b1 <= b0:
+    for r in range(int(math.floor(ymin - grow)), int(math.ceil(ymax + grow))):
+        b0 = max(float(r) - grow, ymin)
+        b1 = min(float(r + 1) + grow, ymax)
+        if b1 < b0 or (b1 == b0 and grow == 0.0):
             continue
         xmin = np.inf
         xmax = -np.inf
         xmin, xmax = _edge_extent(x0, y0, x1, y1, b0, b1, xmin, xmax)
         xmin, xmax = _edge_extent(x1, y1, x2, y2, b0, b1, xmin, xmax)
         xmin, xmax = _edge_extent(x2, y2, x0, y0, b0, b1, xmin, xmax)
+        xmin -= grow
+        xmax += grow
         if not xmax > xmin:
             continue
         nt, no, n = _box(sat, r, r + 1, int(math.floor(xmin)), int(math.ceil(xmax)), period_y, period_x)
@@ -154,7 +190,7 @@ def _leaf_flag(sat, period_y, period_x, x0, y0, x1, y1, x2, y2):
 @njit(cache=True, inline="always")
 def _vertex(tri, i, j, inv_n, w, h, offset):
     """Texel coordinates (plus the grid offset) of barycentric grid point (i, j)/N: the same
-    operations, in the same order, as ``maps.bake_triangles`` + ``raster.region_states``."""
+    operations, in the same order, as ``bake.square`` maps a pair's points."""
     b1 = i * inv_n
     b2 = j * inv_n
     b0 = 1.0 - b1 - b2
@@ -163,11 +199,11 @@ def _vertex(tri, i, j, inv_n, w, h, offset):
     return u * w + offset, v * h + offset
 
 
-STACK = 3 * omm_format.MAX_LEVEL + 4  # nodes pending: 3 more per level down, plus the root
+STACK = 3 * MAX_LEVEL + 4  # nodes pending: 3 more per level down, plus the root
 
 
 @njit(cache=True)
-def _bake_one(sat, period_y, period_x, tri, level, w, h, offset, out, st_l, st_k, st_v):
+def _bake_one(sat, period_y, period_x, tri, level, w, h, offset, grow, out, st_l, st_k, st_v):
     """States of one triangle's 4**level micro-triangles into ``out``; returns how many
     micro-triangles had no area (the reference raises on those). ``st_*``: the node stack
     (level, index, barycentric grid coordinates of p0, p1, p2), STACK entries."""
@@ -176,7 +212,7 @@ def _bake_one(sat, period_y, period_x, tri, level, w, h, offset, out, st_l, st_k
     scale = 1.0
     for k in range(3):
         scale = max(scale, abs(tri[k, 0] * w) + abs(offset), abs(tri[k, 1] * h) + abs(offset))
-    margin = MARGIN * scale
+    margin = MARGIN * scale + grow
     st_l[0] = 0
     st_k[0] = 0
     st_v[0, 0] = 0
@@ -197,7 +233,7 @@ def _bake_one(sat, period_y, period_x, tri, level, w, h, offset, out, st_l, st_k
         x2, y2 = _vertex(tri, i2, j2, inv_n, w, h, offset)
         state = -1
         if lv == level:  # a leaf: rasterise exactly (its box was mixed at the parent already)
-            f = _leaf_flag(sat, period_y, period_x, x0, y0, x1, y1, x2, y2)
+            f = _leaf_flag(sat, period_y, period_x, x0, y0, x1, y1, x2, y2, grow)
             if f == 0:
                 empty += 1
                 state = 2
@@ -248,7 +284,7 @@ CHUNK = 64  # triangles per parallel work item (one node stack each)
 
 
 @njit(cache=True, parallel=True)
-def _bake_all(sat, period_y, period_x, tris, levels, starts, w, h, offset, out):
+def _bake_all(sat, period_y, period_x, tris, levels, starts, w, h, offset, grow, out):
     empty = np.zeros(tris.shape[0], dtype=np.int64)
     n_chunks = (tris.shape[0] + CHUNK - 1) // CHUNK
     for c in prange(n_chunks):
@@ -257,7 +293,7 @@ def _bake_all(sat, period_y, period_x, tris, levels, starts, w, h, offset, out):
         st_v = np.empty((STACK, 6), dtype=np.int64)
         for t in range(c * CHUNK, min((c + 1) * CHUNK, tris.shape[0])):
             n = 1 << (2 * levels[t])
-            empty[t] = _bake_one(sat, period_y, period_x, tris[t], levels[t], w, h, offset,
+            empty[t] = _bake_one(sat, period_y, period_x, tris[t], levels[t], w, h, offset, grow,
                                  out[starts[t]:starts[t] + n], st_l, st_k, st_v)
     return empty
 
@@ -268,12 +304,17 @@ def micro_starts(levels: np.ndarray) -> np.ndarray:
     return np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64)
 
 
-def bake_levels(grid: FootprintGrid, tris_uv, levels, sat: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+def bake_micromaps(grid: FootprintGrid, tris_uv, levels, grow: float = 0.0,
+                   sat: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Micromaps of UV triangles (T, 3, 2), triangle t at ``levels[t]`` (or one level for all).
 
+    Parameters: ``grid`` the footprint grid (``AlphaTest.grid()``); ``grow`` the region growth in
+    texels (``GROW_TEXEL`` for real geometry, 0 for the exact corpus pair); ``sat`` is
+    ``flag_table(grid)`` when the caller bakes the same grid repeatedly.
+
     Returns (states, starts): states uint8 (0 T, 1 O, 2 C), triangle t's micro-triangles in
-    bird-curve order at ``states[starts[t]:starts[t+1]]``. Identical to ``maps.bake_triangles``.
-    ``sat`` is ``flag_table(grid)`` when the caller bakes the same grid repeatedly."""
+    bird-curve order at ``states[starts[t]:starts[t+1]]``. With no growth, a micro-triangle of
+    no area is an error (it reads nothing); with growth it reads the texels it touches."""
     t = np.ascontiguousarray(check_uv_triangles(tris_uv))
     lv = np.broadcast_to(np.asarray(levels), (len(t),))
     for x in np.unique(lv):
@@ -285,17 +326,17 @@ def bake_levels(grid: FootprintGrid, tris_uv, levels, sat: np.ndarray | None = N
         sat = flag_table(grid) if sat is None else sat
         with numba.parallel_chunksize(1):  # hand out chunks dynamically: threads may be slowed unevenly
             empty = _bake_all(sat, grid.period_y, grid.period_x, t, lv, starts, float(grid.width),
-                              float(grid.height), float(grid.offset), out)
+                              float(grid.height), float(grid.offset), float(grow), out)
         if empty.any():
             bad = int(np.flatnonzero(empty)[0])
-            raise ValueError(f"triangle {bad} has micro-triangles with no area")
+            raise InputError(f"UV triangle {bad} has micro-triangles with no area")
     return out, starts
 
 
-def bake(grid: FootprintGrid, tris_uv, level: int) -> np.ndarray:
-    """``maps.bake_triangles`` for any level 0..12: states (T, 4**level)."""
+def bake_micromap_rows(grid: FootprintGrid, tris_uv, level: int, grow: float = 0.0) -> np.ndarray:
+    """``bake_micromaps`` at one level: states (T, 4**level)."""
     level = check_level(level)
-    s, _ = bake_levels(grid, tris_uv, level)
+    s, _ = bake_micromaps(grid, tris_uv, level, grow)
     return s.reshape(-1, 4 ** level)
 
 

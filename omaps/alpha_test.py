@@ -1,0 +1,253 @@
+"""The alpha test: the one place where alpha becomes a decision, for every command.
+
+An ``AlphaTest`` is what an any-hit shader compares -- a texture's values (``value[y, x]``),
+a threshold and whether equality passes -- plus the filter and addressing it samples with, and
+the *rule* that turns texel values into T/O/C states for the bakers:
+
+* ``test``: O where the shader's comparison passes, T elsewhere; texels within ``tolerance`` of
+  the threshold are C (a shader computing alpha x factor in its own precision may decide them
+  either way);
+* ``levels``: T iff value <= ``low``, O iff value >= ``high``, C between (the deck's corpus rule;
+  and glTF BLEND materials, whose partial alpha no map can decide);
+* ``unknown``: every texel C (a texture that could not be read).
+
+The corpus rules (``StateRule``: ``levels`` and ``cutoff`` in 8-bit units) and the glTF material
+rule (``material_test``: MASK ``alphaCutoff``, the BLEND policy, base colour factor x texture
+alpha, the sampler's filter and wrap) both build an ``AlphaTest``. The bakers read its texel
+states through ``grid()``; the tracer's any-hit shader, the OMM promotion and the 2-state modes
+evaluate ``sample_passes`` on the same ``value`` and ``threshold``. docs/FORMAT.md "The alpha
+test" states the same rules.
+
+Example::
+
+    >>> import numpy as np
+    >>> from omaps.alpha_test import StateRule
+    >>> from omaps.texture import load_alpha
+    >>> test = StateRule("cutoff", cutoff=0.5).alpha_test(load_alpha(np.array([[0, 200]], np.uint8)))
+    >>> test.texel_states().tolist()
+    [[0, 1]]
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numba import njit
+
+from . import states
+from .errors import InputError
+from .sampling import FILTERS, FootprintGrid, footprint_grid, sample_texture, wrap_code
+from .texture import AlphaTexture
+
+__all__ = ["AlphaTest", "StateRule", "MaterialRules", "material_test", "sample_passes", "MODES", "BLEND_RULES",
+           "RULES", "CUTOFF_TOLERANCE"]
+
+RULES = ("test", "levels", "unknown")
+MODES = ("levels", "cutoff")  # the corpus rules of ``omaps eval`` (``StateRule``)
+BLEND_RULES = ("levels", "cutoff", "skip")  # glTF BLEND materials (``MaterialRules.blend``)
+# glTF texels whose alpha x baseColorFactor.a is this close to the cut-off are unknown: a shader's
+# float32 product may fall on either side (exact 8-bit alphas are 1/255 = 0.0039 apart)
+CUTOFF_TOLERANCE = 1e-6
+
+
+@dataclass(frozen=True)
+class AlphaTest:
+    """``value[y, x]`` passes when ``value > threshold`` (``>=`` if ``inclusive``), sampled with
+    ``filter`` and the addressing ``wrap_u`` / ``wrap_v``; ``rule`` (with ``low``, ``high``,
+    ``tolerance``) makes texel states. See the module docstring."""
+
+    name: str
+    value: np.ndarray  # (H, W) any real dtype; integer textures keep their raw values
+    threshold: float
+    inclusive: bool = False
+    filter: str = "nearest"
+    wrap_u: str = "clamp"
+    wrap_v: str = "clamp"
+    rule: str = "test"
+    low: float = 0.0
+    high: float = 1.0
+    tolerance: float = 0.0
+
+    def __post_init__(self):
+        if self.filter not in FILTERS:
+            raise InputError(f"unknown filter {self.filter!r} (choose from {', '.join(FILTERS)})", self.name)
+        wrap_code(self.wrap_u)
+        wrap_code(self.wrap_v)
+        if self.rule not in RULES:
+            raise InputError(f"unknown state rule {self.rule!r} (choose from {', '.join(RULES)})", self.name)
+        v = np.asarray(self.value)
+        if v.ndim != 2 or v.size == 0:
+            raise InputError(f"alpha must be a non-empty 2-D array, got shape {v.shape}", self.name)
+
+    @property
+    def width(self) -> int:
+        return int(self.value.shape[1])
+
+    @property
+    def height(self) -> int:
+        return int(self.value.shape[0])
+
+    def passes(self, values) -> np.ndarray:
+        """The shader's comparison on values (vectorised)."""
+        v = np.asarray(values)
+        return v >= self.threshold if self.inclusive else v > self.threshold
+
+    def texel_states(self) -> np.ndarray:
+        """T/O/C code of every texel, uint8 (H, W)."""
+        v = np.asarray(self.value)
+        if self.rule == "unknown":
+            return np.full(v.shape, states.C, dtype=np.uint8)
+        if self.rule == "levels":
+            out = np.full(v.shape, states.C, dtype=np.uint8)
+            out[v <= self.low] = states.T
+            out[v >= self.high] = states.O
+            return out
+        out = np.where(self.passes(v), states.O, states.T).astype(np.uint8)
+        if self.tolerance > 0:
+            out[np.abs(v - self.threshold) <= self.tolerance] = states.C
+        return out
+
+    def grid(self) -> FootprintGrid:
+        """The footprint grid the bakers rasterise over."""
+        return footprint_grid(self.texel_states(), self.filter, self.wrap_u, self.wrap_v)
+
+    def codes(self) -> tuple[int, int, int]:
+        """(filter 0 nearest / 1 linear, wrap code of u, of v) for the numba kernels."""
+        return FILTERS.index(self.filter), wrap_code(self.wrap_u), wrap_code(self.wrap_v)
+
+    def settings(self) -> dict:
+        """What decides this test, as JSON (outputs record it)."""
+        out = {"name": self.name, "width": self.width, "height": self.height, "rule": self.rule,
+               "threshold": float(self.threshold), "inclusive": bool(self.inclusive), "filter": self.filter,
+               "wrap_u": self.wrap_u, "wrap_v": self.wrap_v}
+        if self.rule == "levels":
+            out.update(low=float(self.low), high=float(self.high))
+        if self.rule == "test" and self.tolerance:
+            out["tolerance"] = float(self.tolerance)
+        return out
+
+
+@njit(cache=True)
+def sample_passes(value, threshold, inclusive, filt, mode_u, mode_v, x, y):
+    """The any-hit shader's alpha test at texel coordinate (x, y): the texture fetch
+    ``sampling.sample_texture`` compared with the threshold."""
+    a = sample_texture(value, filt, mode_u, mode_v, x, y)
+    return a >= threshold if inclusive else a > threshold
+
+
+# ---- the corpus rules -------------------------------------------------------------------------
+
+@dataclass(frozen=True)
+class StateRule:
+    """The corpus rules of ``omaps eval``, in 8-bit units (``alpha8 = raw * 255 / maxval``):
+    ``levels`` (the deck's: T if alpha8 <= t_max, O if alpha8 >= o_min) or ``cutoff`` (opaque iff
+    alpha8 > cutoff * 255; cutoff in [0, 1] like glTF's alphaCutoff)."""
+
+    mode: str = "levels"
+    t_max: float = 30.0
+    o_min: float = 225.0
+    cutoff: float = 0.5
+
+    def __post_init__(self):
+        if self.mode not in MODES:
+            raise InputError(f"unknown state mode {self.mode!r} (choose from {', '.join(MODES)})")
+        for name in ("t_max", "o_min", "cutoff"):
+            if not np.isfinite(getattr(self, name)):
+                raise InputError(f"{name} must be finite")
+        if self.mode == "levels" and not (0 <= self.t_max < self.o_min <= 255):
+            raise InputError(f"levels need 0 <= t_max < o_min <= 255, got {self.t_max}, {self.o_min}")
+        if self.mode == "cutoff" and not (0 <= self.cutoff <= 1):
+            raise InputError(f"cutoff must be in [0, 1], got {self.cutoff}")
+
+    def alpha_test(self, texture: AlphaTexture, filter: str = "nearest", wrap: str = "clamp",
+                   wrap_v: str | None = None) -> AlphaTest:
+        """The test of a texture under this rule. ``levels`` has no shader decision of its own;
+        its threshold (alpha8 > 127.5) only serves promotions to 2-state."""
+        a8 = texture.alpha8
+        wv = wrap if wrap_v is None else wrap_v
+        if self.mode == "levels":
+            return AlphaTest(texture.name, a8, 127.5, False, filter, wrap, wv, "levels", self.t_max, self.o_min)
+        return AlphaTest(texture.name, a8, self.cutoff * 255.0, False, filter, wrap, wv, "test")
+
+    def classify(self, texture: AlphaTexture) -> np.ndarray:
+        """Texel states (uint8 codes of ``omaps.states``), shape (H, W)."""
+        return self.alpha_test(texture).texel_states()
+
+    def settings(self) -> dict:
+        if self.mode == "levels":
+            return {"mode": "levels", "t_max": self.t_max, "o_min": self.o_min}
+        return {"mode": "cutoff", "cutoff": self.cutoff}
+
+
+# ---- the glTF material rule -------------------------------------------------------------------
+
+@dataclass(frozen=True)
+class MaterialRules:
+    """How a scene's materials are alpha-tested, the same for ``omaps trace`` and ``omaps omm``.
+
+    ``cutoff`` replaces every MASK material's ``alphaCutoff``; ``filter`` and ``wrap`` replace the
+    samplers' (None keeps each material's own). BLEND materials follow ``blend``: ``levels`` (T
+    only where alpha x factor is 0, O only where it is 1; the shader decides the rest at
+    ``blend_cutoff``), ``cutoff`` (alpha-tested like MASK at ``blend_cutoff``) or ``skip``
+    (treated as opaque geometry: no alpha test, no map)."""
+
+    cutoff: float | None = None
+    filter: str | None = None
+    wrap: str | None = None
+    blend: str = "levels"
+    blend_cutoff: float = 0.5
+
+    def __post_init__(self):
+        if self.blend not in BLEND_RULES:
+            raise InputError(f"unknown blend rule {self.blend!r} (choose from {', '.join(BLEND_RULES)})")
+        for name in ("cutoff", "blend_cutoff"):
+            v = getattr(self, name)
+            if v is not None and not (np.isfinite(v) and 0.0 <= v <= 1.0):
+                raise InputError(f"{name.replace('_', '-')} must be in [0, 1], got {v}")
+        if self.filter is not None and self.filter not in FILTERS:
+            raise InputError(f"unknown filter {self.filter!r} (choose from {', '.join(FILTERS)})")
+        if self.wrap is not None:
+            wrap_code(self.wrap)
+
+    def alpha_tested(self, alpha_mode: str) -> bool:
+        return alpha_mode == "MASK" or (alpha_mode == "BLEND" and self.blend != "skip")
+
+    def settings(self) -> dict:
+        return {"cutoff": self.cutoff, "filter": self.filter, "wrap": self.wrap, "blend": self.blend,
+                "blend_cutoff": self.blend_cutoff}
+
+
+def material_test(name: str, alpha_mode: str, cutoff: float, factor: float, alpha: np.ndarray | None,
+                  maxval: int, filter: str, wrap_u: str, wrap_v: str, rules: MaterialRules = MaterialRules(),
+                  readable: bool = True) -> AlphaTest:
+    """The alpha test of a glTF material: opaque iff factor x alpha / maxval >= cutoff, evaluated
+    on the raw texture values as alpha >= cutoff x maxval / factor (so baker and shader compare
+    the same numbers). ``alpha`` None: no texture (one texel of value ``maxval``); ``readable``
+    False: the texture could not be read, the shader sees white and every texel is C."""
+    if not rules.alpha_tested(alpha_mode):
+        raise ValueError(f"{alpha_mode} materials are not alpha-tested under blend rule {rules.blend!r}")
+    value = np.full((1, 1), maxval, dtype=np.uint16) if alpha is None else alpha
+    filt = rules.filter or filter
+    wu = rules.wrap or wrap_u
+    wv = rules.wrap or wrap_v
+    scale = maxval / factor if factor > 0 else np.inf  # raw units per unit of factor x alpha
+
+    def raw(x):
+        return np.inf if factor <= 0 else x * scale
+
+    if alpha_mode == "BLEND":
+        thr = raw(rules.blend_cutoff)
+        if not readable:
+            return AlphaTest(name, value, thr, True, filt, wu, wv, "unknown")
+        if rules.blend == "levels":
+            low = 0.0 if factor > 0 else np.inf
+            return AlphaTest(name, value, thr, True, filt, wu, wv, "levels", low, raw(1.0))
+        c = rules.blend_cutoff
+    else:
+        c = cutoff if rules.cutoff is None else rules.cutoff
+    thr = raw(c)
+    if not readable:
+        return AlphaTest(name, value, thr, True, filt, wu, wv, "unknown")
+    tol = CUTOFF_TOLERANCE * scale if factor > 0 else 0.0
+    return AlphaTest(name, value, thr, True, filt, wu, wv, "test", tolerance=tol)

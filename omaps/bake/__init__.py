@@ -1,0 +1,16 @@
+"""The bakers: T/O/C maps of regions of a texture's footprint grid.
+
+* ``micromap``: per-triangle micromaps in the bird-curve order (eval's and the tracer's
+  ``triL``, standard OMMs), levels 0..12;
+* ``square``: an N x N map over a pair of triangles' square (eval's ``sqN``, the tracer's square
+  and codec maps, ``omm --from``);
+* ``pair_maps``: both on the corpus pair, and the savings metric.
+"""
+
+from .micromap import GROW_TEXEL, bake_micromap_rows, bake_micromaps, check_level, dynamic_levels, micro_starts
+from .pair_maps import bake_pair_triangles, bake_square, known_fraction, texel_limit
+from .square import bake_pair_flags, bake_pair_squares, check_square_size, or_downsample
+
+__all__ = ["GROW_TEXEL", "bake_micromaps", "bake_micromap_rows", "check_level", "dynamic_levels", "micro_starts",
+           "bake_pair_triangles", "bake_square", "known_fraction", "texel_limit", "bake_pair_flags",
+           "bake_pair_squares", "check_square_size", "or_downsample"]

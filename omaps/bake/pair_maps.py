@@ -1,0 +1,52 @@
+"""The corpus pair's maps (a texture covering the square of two triangles, ``omaps.pair``) and
+the savings metric, on top of the two bakers.
+
+``bake_square`` is the pair-square baker on the corpus pair, ``bake_pair_triangles`` the
+micromap baker on its two triangles; neither grows regions (the corpus pair's regions are exact
+and no ray is traced). ``known_fraction`` is the savings of a map with equal-area regions, and
+``texel_limit`` what an infinitely fine map could save.
+
+Example::
+
+    >>> import numpy as np
+    >>> from omaps.alpha_test import StateRule
+    >>> from omaps.bake import bake_square, known_fraction
+    >>> from omaps.texture import load_alpha
+    >>> grid = StateRule("cutoff").alpha_test(load_alpha(np.array([[0, 255]], np.uint8))).grid()
+    >>> known_fraction(bake_square(grid, 4))
+    1.0
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .. import pair, states
+from ..sampling import FootprintGrid
+from .micromap import bake_micromap_rows
+from .square import bake_pair_squares
+
+__all__ = ["bake_square", "bake_pair_triangles", "known_fraction", "texel_limit"]
+
+
+def bake_square(grid: FootprintGrid, n: int) -> np.ndarray:
+    """The N x N square map of the corpus pair: states (N, N), ``map[j, i]``."""
+    return bake_pair_squares(grid, pair.PAIR_CORNER_UV, np.ones(1, bool), n)[0]
+
+
+def bake_pair_triangles(grid: FootprintGrid, level: int) -> np.ndarray:
+    """The per-triangle micromaps of the corpus pair: states (2, 4**level), A then B."""
+    return bake_micromap_rows(grid, pair.PAIR, level)
+
+
+def known_fraction(map_states: np.ndarray) -> float:
+    """Fraction of equal-area regions that skip the any-hit shader."""
+    m = np.asarray(map_states)
+    return float(np.count_nonzero(m != states.C)) / m.size
+
+
+def texel_limit(grid: FootprintGrid) -> float:
+    """Area fraction of the texture whose footprint cell is known: what an infinitely fine map
+    could save (every region map is at most this)."""
+    f, w = grid.cells_within_texture()
+    return float((w * (f != states.FLAG_C)).sum() / w.sum())

@@ -1,0 +1,169 @@
+"""The pair-square baker: an N x N map over the square of a pair of triangles.
+
+One baker serves every square map: eval's ``sqN`` (the corpus pair, whose corner UVs are the
+square's corners), the tracer's square and codec maps (a mesh's pairs with their real UVs) and
+``omaps omm --from`` (square maps expanded into micromaps).
+
+A pair is given by its corner UVs (P, 6, 2): the UVs at A's corners (0,0), (1,0), (1,1), then at
+B's (0,0), (1,1), (0,1) (``omaps.pair``). Cell (i, j) covers s in [i/N, (i+1)/N], t in
+[j/N, (j+1)/N]; its part in A (t <= s) and its part in B (t >= s) are mapped to texture space by
+each triangle's own affine UV map (``pair.pair_weights``), grown by ``grow`` texels, and the
+cell's flag is the OR of the footprint flags either part overlaps (``raster.polygon_flags``).
+A lone triangle (``has_b`` False) leaves the cells wholly in B at flag 0: cells no hit reaches,
+stored as C (a "don't care" encoders never need to keep).
+
+Example::
+
+    >>> import numpy as np
+    >>> from omaps.alpha_test import StateRule
+    >>> from omaps.bake.square import bake_pair_squares
+    >>> from omaps.pair import PAIR_CORNER_UV
+    >>> from omaps.texture import load_alpha
+    >>> grid = StateRule("cutoff").alpha_test(load_alpha(np.array([[0, 255]], np.uint8))).grid()
+    >>> bake_pair_squares(grid, PAIR_CORNER_UV, np.array([True]), 2)[0].tolist()
+    [[0, 1], [0, 1]]
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit, prange
+
+from .. import raster, states
+from ..errors import InputError
+from ..pair import pair_weights
+from ..sampling import FootprintGrid
+
+__all__ = ["bake_pair_squares", "bake_pair_flags", "or_downsample", "flags_to_states", "MAX_SQUARE",
+           "check_square_size"]
+
+MAX_SQUARE = 128
+
+
+def check_square_size(n) -> int:
+    """A square map size: a power of two from 1 to MAX_SQUARE."""
+    if not isinstance(n, (int, np.integer)) or n < 1 or n > MAX_SQUARE or (n & (n - 1)):
+        raise InputError(f"square map size must be a power of two from 1 to {MAX_SQUARE}, got {n!r}")
+    return int(n)
+
+
+@njit(cache=True)
+def _clip(poly, k, a, b, c, out):
+    """Convex polygon poly[:k] clipped to a*x + b*y + c >= 0, written to ``out``; returns the
+    vertex count."""
+    m = 0
+    for i in range(k):
+        p0 = poly[i]
+        p1 = poly[(i + 1) % k]
+        d0 = a * p0[0] + b * p0[1] + c
+        d1 = a * p1[0] + b * p1[1] + c
+        if d0 >= 0:
+            out[m] = p0
+            m += 1
+        if (d0 >= 0) != (d1 >= 0):
+            f = d0 / (d0 - d1)
+            out[m, 0] = p0[0] + f * (p1[0] - p0[0])
+            out[m, 1] = p0[1] + f * (p1[1] - p0[1])
+            m += 1
+    return m
+
+
+@njit(cache=True)
+def _area2(poly, k):
+    a = 0.0
+    for i in range(k):
+        j = (i + 1) % k
+        a += poly[i, 0] * poly[j, 1] - poly[j, 0] * poly[i, 1]
+    return a
+
+
+@njit(cache=True)
+def _pair_flags(flags, px, py, off, w, h, uv, has_b, n, grow, out):
+    """Flags (n, n) of one pair's square map into ``out``."""
+    rect = np.empty((4, 2))
+    poly = np.empty((8, 2))
+    pts = np.empty((8, 2))
+    for j in range(n):
+        for i in range(n):
+            s0 = i / n
+            s1 = (i + 1) / n
+            t0 = j / n
+            t1 = (j + 1) / n
+            rect[0, 0] = s0
+            rect[0, 1] = t0
+            rect[1, 0] = s1
+            rect[1, 1] = t0
+            rect[2, 0] = s1
+            rect[2, 1] = t1
+            rect[3, 0] = s0
+            rect[3, 1] = t1
+            acc = 0
+            for tri in range(2):
+                if tri == 1 and not has_b:
+                    continue
+                if tri == 0:
+                    if i < j:
+                        continue  # wholly above the diagonal
+                    k = _clip(rect, 4, 1.0, -1.0, 0.0, poly)  # s - t >= 0
+                else:
+                    if i > j:
+                        continue
+                    k = _clip(rect, 4, -1.0, 1.0, 0.0, poly)  # t - s >= 0
+                if k < 3 or abs(_area2(poly, k)) <= 0.0:
+                    continue
+                b = 3 * tri
+                for v in range(k):
+                    w0, w1, w2 = pair_weights(tri, poly[v, 0], poly[v, 1])
+                    u = w0 * uv[b, 0] + w1 * uv[b + 1, 0] + w2 * uv[b + 2, 0]
+                    vv = w0 * uv[b, 1] + w1 * uv[b + 1, 1] + w2 * uv[b + 2, 1]
+                    pts[v, 0] = u * w + off
+                    pts[v, 1] = vv * h + off
+                acc |= raster.polygon_flags(flags, px, py, pts[:k], grow)
+            out[j, i] = acc
+
+
+@njit(cache=True, parallel=True)
+def _bake_pairs(flags, px, py, off, w, h, uv, has_b, n, grow, out):
+    for p in prange(uv.shape[0]):
+        _pair_flags(flags, px, py, off, w, h, uv[p], has_b[p], n, grow, out[p])
+
+
+def bake_pair_flags(grid: FootprintGrid, corner_uv, has_b, n: int, grow: float = 0.0) -> np.ndarray:
+    """Footprint flags (P, n, n) uint8 of the pairs' square maps (0: a cell no hit reaches)."""
+    n = check_square_size(n)
+    uv = np.ascontiguousarray(corner_uv, dtype=np.float64).reshape(-1, 6, 2)
+    hb = np.ascontiguousarray(np.broadcast_to(np.asarray(has_b, dtype=np.bool_), (len(uv),)))
+    if not np.isfinite(uv).all():
+        raise InputError("pair corner UVs must be finite")
+    out = np.zeros((len(uv), n, n), np.uint8)
+    if len(uv):
+        _bake_pairs(grid.flags, grid.period_x, grid.period_y, float(grid.offset), float(grid.width),
+                    float(grid.height), uv, hb, n, float(grow), out)
+    return out
+
+
+def bake_pair_squares(grid: FootprintGrid, corner_uv, has_b, n: int, grow: float = 0.0) -> np.ndarray:
+    """States (P, n, n) of the pairs' N x N square maps, ``map[j, i]`` (0 T, 1 O, 2 C).
+
+    Parameters: ``corner_uv`` (P, 6, 2) as in the module docstring; ``has_b`` (P,) bool;
+    ``grow`` the region growth in texels (``bake.micromap.GROW_TEXEL`` for real geometry)."""
+    return flags_to_states(bake_pair_flags(grid, corner_uv, has_b, n, grow))
+
+
+@njit(cache=True)
+def or_downsample(flags, factor):
+    """Flags of an n/factor square map from an n one: a coarse cell reads what its fine cells read
+    (exact: a coarse cell's parts are the union of its fine cells' parts)."""
+    p, n, _ = flags.shape
+    m = n // factor
+    out = np.zeros((p, m, m), np.uint8)
+    for q in range(p):
+        for j in range(n):
+            for i in range(n):
+                out[q, j // factor, i // factor] |= flags[q, j, i]
+    return out
+
+
+def flags_to_states(flags: np.ndarray) -> np.ndarray:
+    """Flag 0 (a cell no hit can reach) becomes C."""
+    return states.FLAG_TO_STATE[flags]

@@ -1,0 +1,74 @@
+"""Uncompressed stored maps: states packed 2 bits (or 1 bit) each, and the raw ``sqN`` codec.
+
+One layout for every uncompressed map omaps stores -- the raw square maps (``sqN``), the
+tracer's per-triangle micromaps (``triL``) and the standard OMM data (4-state 2 bits, 2-state
+1 bit): region k of a row at bits ``bits * (k mod (8 / bits))`` of byte ``k div (8 / bits)``,
+little-endian, every row starting on a byte. docs/FORMAT.md "Stored maps" states the same.
+
+A raw N x N square map is cell (i, j) = region k = j * N + i of one row of ``ceil(N*N / 4)``
+bytes.
+
+Example::
+
+    >>> import numpy as np
+    >>> from omaps.codecs.raw import pack_states, unpack_states
+    >>> packed = pack_states(np.array([[0, 1, 2, 2, 1]]))
+    >>> packed.tolist(), unpack_states(packed, 5).tolist()
+    ([[164, 1]], [[0, 1, 2, 2, 1]])
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+__all__ = ["pack_states", "unpack_states", "row_bytes", "read_state", "square_lookup"]
+
+
+def row_bytes(regions: int, bits: int = 2) -> int:
+    """Bytes of one packed row (at least one)."""
+    return max(1, (int(regions) * bits + 7) // 8)
+
+
+def pack_states(rows, bits: int = 2) -> np.ndarray:
+    """Rows of states (R, K) -> packed (R, row_bytes(K, bits)) uint8."""
+    s = np.asarray(rows, dtype=np.uint8)
+    if s.ndim == 1:
+        s = s[None]
+    r, k = s.shape
+    per_byte = 8 // bits
+    nbytes = row_bytes(k, bits)
+    padded = np.zeros((r, nbytes * per_byte), dtype=np.uint8)
+    padded[:, :k] = s
+    shifts = np.arange(per_byte, dtype=np.uint8) * bits
+    return np.bitwise_or.reduce(padded.reshape(r, nbytes, per_byte) << shifts, axis=2).astype(np.uint8)
+
+
+def unpack_states(packed, regions: int, bits: int = 2) -> np.ndarray:
+    """Inverse of ``pack_states``: (R, bytes) -> (R, regions) states."""
+    p = np.asarray(packed, dtype=np.uint8)
+    if p.ndim == 1:
+        p = p[None]
+    per_byte = 8 // bits
+    shifts = np.arange(per_byte, dtype=np.uint8) * bits
+    s = (p[:, :, None] >> shifts) & ((1 << bits) - 1)
+    return s.reshape(p.shape[0], -1)[:, :int(regions)].astype(np.uint8)
+
+
+@njit(cache=True, inline="always")
+def read_state(data, start, k):
+    """2-bit state of region k of the row at byte ``start`` of ``data``."""
+    return (data[start + (k >> 2)] >> (2 * (k & 3))) & 3
+
+
+_LOOKUPS: dict = {}
+
+
+def square_lookup(n: int):
+    """The random-access lookup ``(block, x, y) -> state`` of a raw N x N map (numba)."""
+    if n not in _LOOKUPS:
+        @njit
+        def lookup(block, x, y):
+            return read_state(block, 0, y * n + x)
+        _LOOKUPS[n] = lookup
+    return _LOOKUPS[n]

@@ -1,0 +1,123 @@
+"""The alpha-tested triangles of a scene's prototypes, paired, in the order a tracer sees them.
+
+Both the tracer and the OMM baker start here, so both see the same triangles, the same pairs
+and the same square corners. Pairs never cross primitives (a primitive is one geometry of a
+BLAS, and hardware pairs within a geometry); within a primitive they follow
+``scene.pairing`` (shared edge and material, maximal matching).
+"""
+
+from __future__ import annotations
+
+import hashlib
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..alpha_test import MaterialRules
+from .model import Scene
+from .pairing import pair_triangles
+
+__all__ = ["AlphaTriangles", "alpha_triangles", "pair_corner_uvs", "distinct_rows"]
+
+
+@dataclass
+class AlphaTriangles:
+    """Every alpha-tested triangle of the prototypes, in trace order: prototype p's alpha
+    triangles are rows base[p] .. base[p+1]-1, in the order of its alpha geometry (primID)."""
+
+    base: np.ndarray  # int64 (P + 1,)
+    mesh_tri: np.ndarray  # int64 (T,) index of the triangle in its mesh's merged list
+    primitive: np.ndarray  # int32 (T,) index of its primitive in the mesh
+    local: np.ndarray  # int64 (T,) index of the triangle in its primitive
+    material: np.ndarray  # int32 (T,)
+    uv: np.ndarray  # float64 (T, 3, 2) per vertex
+    unknown: np.ndarray  # bool (T,) maps must be all C (scene.gltf's policies)
+    vertex_alpha: np.ndarray  # float64 (T, 3): COLOR_0 alpha per vertex (1 without)
+    corners: np.ndarray  # int8 (T, 3) square corner codes of the vertices (omaps.pair)
+    pair: np.ndarray  # int64 (T,) global pair index
+    pair_first: np.ndarray  # int64 (Q,) row of the pair's A triangle
+    pair_second: np.ndarray  # int64 (Q,) row of its B triangle, -1 for a lone triangle
+    paired_fraction: float
+
+    @property
+    def count(self) -> int:
+        return len(self.mesh_tri)
+
+
+def alpha_triangles(scene: Scene, rules: MaterialRules = MaterialRules(), improve_pairing: bool = True) -> AlphaTriangles:
+    alpha = scene.alpha_tested(rules)
+    base = [0]
+    parts = {k: [] for k in ("mesh_tri", "primitive", "local", "material", "uv", "unknown", "valpha", "corners",
+                             "pair", "first", "second")}
+    row0 = 0
+    q0 = 0
+    for mesh in scene.meshes:
+        mg = mesh.merged
+        offset = 0
+        for k, p in enumerate(mesh.primitives):
+            nt = len(p.triangles)
+            if alpha[p.material] and nt:
+                pr = pair_triangles(p.triangles, p.positions, np.full(nt, p.material), None, improve_pairing)
+                rows = np.arange(nt) + row0
+                parts["mesh_tri"].append(np.arange(nt) + offset)
+                parts["primitive"].append(np.full(nt, k, np.int32))
+                parts["local"].append(np.arange(nt))
+                parts["material"].append(np.full(nt, p.material, np.int32))
+                parts["uv"].append(p.uvs[p.triangles])
+                parts["unknown"].append(p.unknown)
+                va = np.ones(len(p.positions)) if p.vertex_alpha is None else p.vertex_alpha
+                parts["valpha"].append(va[p.triangles])
+                parts["corners"].append(pr.corners)
+                parts["pair"].append(pr.pair_of + q0)
+                parts["first"].append(rows[pr.first])
+                parts["second"].append(np.where(pr.second >= 0, rows[np.maximum(pr.second, 0)], -1))
+                row0 += nt
+                q0 += len(pr.first)
+            offset += nt
+        assert offset == len(mg["triangles"])
+        base.append(row0)
+
+    def cat(key, dtype, shape=(0,)):
+        return np.concatenate(parts[key]).astype(dtype) if parts[key] else np.zeros(shape, dtype)
+
+    second = cat("second", np.int64)
+    frac = 2 * int(np.count_nonzero(second >= 0)) / row0 if row0 else 0.0
+    return AlphaTriangles(np.array(base, np.int64), cat("mesh_tri", np.int64), cat("primitive", np.int32),
+                          cat("local", np.int64), cat("material", np.int32), cat("uv", np.float64, (0, 3, 2)),
+                          cat("unknown", bool), cat("valpha", np.float64, (0, 3)), cat("corners", np.int8, (0, 3)),
+                          cat("pair", np.int64), cat("first", np.int64), second, frac)
+
+
+def pair_corner_uvs(at: AlphaTriangles) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per pair: UVs at A's corners (0,0), (1,0), (1,1) and B's (0,0), (1,1), (0,1) (zeros for a
+    lone triangle) -- ``bake.square``'s layout --, whether B exists, and the material."""
+    q = len(at.pair_first)
+    out = np.zeros((q, 6, 2))
+    a = at.pair_first
+    b = at.pair_second
+    order_a = np.argsort(at.corners[a], axis=1)  # corner codes 0,1,2 -> (0,0),(1,0),(1,1)
+    out[:, 0:3] = np.take_along_axis(at.uv[a], order_a[:, :, None], axis=1)
+    has_b = b >= 0
+    if has_b.any():
+        bb = b[has_b]
+        # B's corners are codes 0, 2, 3 -> (0,0), (1,1), (0,1): sort gives exactly that order
+        order_b = np.argsort(at.corners[bb], axis=1)
+        out[has_b, 3:6] = np.take_along_axis(at.uv[bb], order_b[:, :, None], axis=1)
+    return out, has_b, at.material[a]
+
+
+def distinct_rows(*arrays) -> tuple[np.ndarray, np.ndarray]:
+    """Indices of the first occurrence of each distinct row across the arrays, and for every row
+    the index of its distinct representative (0..D-1)."""
+    parts = [np.ascontiguousarray(a).reshape(len(a), -1) for a in arrays]
+    n = len(parts[0])
+    seen: dict[bytes, int] = {}
+    reps, inverse = [], np.empty(n, np.int64)
+    for i in range(n):
+        k = hashlib.blake2b(b"".join(p[i].tobytes() for p in parts), digest_size=16).digest()
+        j = seen.get(k)
+        if j is None:
+            j = seen[k] = len(reps)
+            reps.append(i)
+        inverse[i] = j
+    return np.array(reps, np.int64), inverse
