@@ -27,9 +27,11 @@ from .codecs.options import EFFORTS
 from .codecs.registry import Codec, check_choice, codec_names, get_codec
 from .errors import InputError
 
-__all__ = ["Scheme", "get_scheme", "parse_schemes", "DEFAULT_SCHEMES", "KINDS", "VARIANTS"]
+__all__ = ["Scheme", "get_scheme", "parse_schemes", "DEFAULT_SCHEMES", "KINDS", "EVAL_KINDS", "TRACE_KINDS", "VARIANTS"]
 
 KINDS = ("none", "texel", "micromap", "square")
+EVAL_KINDS = ("texel", "micromap", "square")  # omaps eval
+TRACE_KINDS = ("none", "micromap", "square")  # omaps trace
 VARIANTS = ("paper",) + tuple(EFFORTS)
 DEFAULT_SCHEMES = ("sq4", "sq8", "sq16", "sq32", "sq64", "tri2", "tri3", "tri4", "tri5", "texel")
 _TRI = re.compile(r"tri(\d+)")

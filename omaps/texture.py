@@ -89,13 +89,22 @@ def _mode_maxval(im: Image.Image) -> int:
     return 255
 
 
-def load_alpha(path, channel=None) -> AlphaTexture:
-    """Load the coverage of an image file.
+def load_alpha(path, channel=None, name: str = "array") -> AlphaTexture:
+    """Load the coverage of an image file, or wrap an array (``AlphaTexture.from_array``).
 
     ``channel=None``: the alpha of RGBA / LA / PA, of P with a tRNS transparency, or the single
     channel of a greyscale mask (L, I;16). An image with colour but no alpha is an error.
     ``channel``: a band name (R, G, B, A, L) or index, to read coverage from another channel.
+
+    Example::
+
+        >>> import numpy as np
+        >>> from omaps.texture import load_alpha
+        >>> load_alpha(np.array([[0, 255]], np.uint8)).alpha8.tolist()
+        [[0.0, 255.0]]
     """
+    if isinstance(path, np.ndarray):
+        return AlphaTexture.from_array(name, path)
     path = os.fspath(path)
     name = os.path.basename(path)
     if not os.path.exists(path):

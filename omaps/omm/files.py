@@ -47,6 +47,7 @@ def write(folder, result: OmmResult, extra_summary: dict | None = None) -> None:
         }
         if result.pair_blocks is not None:
             files[omm_format.PAIR_BLOCKS_FILE] = result.pair_blocks
+            files[omm_format.PAIRS_FILE] = result.pair_records.astype(omm_format.PAIR_RECORD).tobytes()
         for name, raw in files.items():
             with open(os.path.join(tmp, name), "wb") as f:
                 f.write(raw)
@@ -117,12 +118,21 @@ def read(folder) -> OmmResult:
         raise InputError("usage counts do not match the triangle records and the index buffer",
                          os.path.join(folder, omm_format.USAGE_FILE))
     summary = _json(folder, omm_format.SUMMARY_FILE)
-    blocks = None
+    blocks = records = None
     if os.path.exists(os.path.join(folder, omm_format.PAIR_BLOCKS_FILE)):
         blocks = _read(folder, omm_format.PAIR_BLOCKS_FILE)
+        raw = _read(folder, omm_format.PAIRS_FILE)
+        rec_path = os.path.join(folder, omm_format.PAIRS_FILE)
+        if len(raw) != omm_format.PAIR_RECORD.itemsize * len(index):
+            raise InputError(f"size {len(raw)} is not {omm_format.PAIR_RECORD.itemsize} bytes per triangle", rec_path)
+        records = np.frombuffer(raw, dtype=omm_format.PAIR_RECORD)
+        n_blocks = int((summary.get("pair_blocks") or {}).get("blocks", -1))
+        if np.any(records["pair"] < 0) or np.any(records["pair"] >= n_blocks) or np.any(records["corners"] > 3):
+            raise InputError("a pair index or corner code is out of range", rec_path)
     stats = summary.get("statistics", {})
     for key, got in (("triangles", len(index)), ("micromaps", len(tris)), ("data_bytes", len(data))):
         if stats.get(key) != got:
             raise InputError(f"statistics.{key} is {stats.get(key)!r}, the files hold {got}",
                              os.path.join(folder, omm_format.SUMMARY_FILE))
-    return OmmResult(data.copy(), tris.copy(), index.copy(), usage, summary, blocks)
+    return OmmResult(data.copy(), tris.copy(), index.copy(), usage, summary, blocks,
+                     None if records is None else records.copy())

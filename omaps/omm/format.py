@@ -16,11 +16,13 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..birdcurve import MAX_LEVEL  # noqa: F401 (the APIs' largest subdivision level)
+from ..codecs.raw import pack_states, row_bytes, unpack_states
+
 FORMAT_2_STATE = 1
 FORMAT_4_STATE = 2
 FORMAT_NAMES = {"2state": FORMAT_2_STATE, "4state": FORMAT_4_STATE}
 BITS = {FORMAT_2_STATE: 1, FORMAT_4_STATE: 2}
-MAX_LEVEL = 12  # the APIs' largest subdivision level
 
 TRANSPARENT = 0
 OPAQUE = 1
@@ -38,36 +40,25 @@ TRIANGLES_FILE = "omm_triangles.bin"
 INDEX_FILE = "omm_index.bin"
 USAGE_FILE = "omm_usage.json"
 SUMMARY_FILE = "omm.json"
-PAIR_BLOCKS_FILE = "pair_blocks.bin"  # --from CODEC: the compressed pair maps the OMMs expand from
+PAIR_BLOCKS_FILE = "pair_blocks.bin"  # --from SCHEME: the stored pair maps the OMMs expand from
+PAIRS_FILE = "omm_pairs.bin"  # --from SCHEME: per triangle its pair and the corner codes of its vertices
+PAIR_RECORD = np.dtype([("pair", "<i4"), ("corners", "u1", (3,)), ("pad", "u1")])
 
 
 def micromap_bytes(level: int, fmt: int) -> int:
     """Bytes one micromap of this level and format takes (at least one byte)."""
-    return max(1, (4 ** int(level) * BITS[int(fmt)] + 7) // 8)
+    return row_bytes(4 ** int(level), BITS[int(fmt)])
 
 
 def pack(omm_states: np.ndarray, fmt: int) -> np.ndarray:
     """Pack micromaps of one level, ``omm_states`` (M, 4**L) uint8 in 0..3 (0..1 for 2-state),
-    into (M, micromap_bytes) uint8 rows."""
-    s = np.asarray(omm_states, dtype=np.uint8)
-    m, n = s.shape
-    bits = BITS[fmt]
-    per_byte = 8 // bits
-    nbytes = max(1, (n * bits + 7) // 8)
-    padded = np.zeros((m, nbytes * per_byte), dtype=np.uint8)
-    padded[:, :n] = s
-    shifts = (np.arange(per_byte, dtype=np.uint8) * bits)
-    return np.bitwise_or.reduce(padded.reshape(m, nbytes, per_byte) << shifts, axis=2).astype(np.uint8)
+    into (M, micromap_bytes) uint8 rows (``codecs.raw``'s layout)."""
+    return pack_states(omm_states, BITS[fmt])
 
 
 def unpack(packed: np.ndarray, level: int, fmt: int) -> np.ndarray:
     """Inverse of ``pack``: (M, bytes) -> (M, 4**level) states."""
-    p = np.asarray(packed, dtype=np.uint8)
-    bits = BITS[fmt]
-    per_byte = 8 // bits
-    shifts = (np.arange(per_byte, dtype=np.uint8) * bits)
-    s = (p[:, :, None] >> shifts) & ((1 << bits) - 1)
-    return s.reshape(p.shape[0], -1)[:, :4 ** int(level)].astype(np.uint8)
+    return unpack_states(packed, 4 ** int(level), BITS[fmt])
 
 
 def usage_histograms(levels: np.ndarray, formats: np.ndarray, index: np.ndarray) -> dict:

@@ -1,38 +1,24 @@
 """What ``omaps omm`` reads: a texture plus a UV array, or a glTF scene, as ``Geometry`` lists.
 
 An input is described by a small JSON-able ``spec`` (kept in omm.json), so ``--verify`` can
-load the same geometry again and re-bake it.
-
-glTF materials: MASK is alpha-tested (opaque iff alpha * baseColorFactor.a >= alphaCutoff,
-default 0.5; texels within CUTOFF_TOLERANCE of the cut-off are unknown); BLEND follows ``blend``: ``levels`` (T only where alpha is 0, O only where it is 1,
-unknown between: exact for blending), ``cutoff`` (alpha-tested like MASK, at the cut-off) or
-``skip``. A base colour texture that cannot be read gives a warning naming the file, and its
-primitive's micro-triangles are all unknown (the any-hit shader decides every hit). Triangles
-with zero UV area (they read a line or a point of the texture) are all unknown too.
+load the same geometry again and re-bake it. glTF scenes go through the one scene reader
+(``omaps.scene``) and the one material rule (``alpha_test.MaterialRules``), with the tracer's
+pairs: every alpha-tested primitive is one geometry.
 """
 
 from __future__ import annotations
 
 import os
-import sys
 
 import numpy as np
 
+from ..alpha_test import MaterialRules, StateRule
+from ..bake.micromap import check_uv_triangles
 from ..errors import InputError
-from ..maps import check_uv_triangles
 from ..texture import load_alpha
-from .alpha_test import AlphaTest
 from .pipeline import Geometry
 
-BLEND_RULES = ("levels", "cutoff", "skip")
-# glTF texels whose alpha * baseColorFactor.a is this close to the cut-off are unknown: a shader's
-# float32 product may fall on either side (exact 8-bit alphas are 1/255 = 0.0039 apart)
-CUTOFF_TOLERANCE = 1e-6
-_DUMMY_UV = np.array([[0.0, 0.0], [1.0, 0.0], [0.0, 1.0]])
-
-
-def _warn(msg: str) -> None:
-    print(f"omaps: warning: {msg}", file=sys.stderr)
+__all__ = ["texture_spec", "gltf_spec", "load_uvs", "load_geometries"]
 
 
 def texture_spec(texture, uvs, cutoff=None, filter=None, wrap=None, channel=None) -> dict:
@@ -41,12 +27,8 @@ def texture_spec(texture, uvs, cutoff=None, filter=None, wrap=None, channel=None
             "wrap": wrap or "clamp", "channel": channel}
 
 
-def gltf_spec(path, cutoff=None, filter=None, wrap=None, blend="levels") -> dict:
-    """``cutoff``, ``filter``, ``wrap``: None keeps each material's and sampler's own."""
-    if blend not in BLEND_RULES:
-        raise InputError(f"unknown blend rule {blend!r} (choose from {', '.join(BLEND_RULES)})")
-    return {"kind": "gltf", "path": os.path.abspath(path), "cutoff": cutoff, "filter": filter, "wrap": wrap,
-            "blend": blend}
+def gltf_spec(path, rules: MaterialRules = MaterialRules()) -> dict:
+    return {"kind": "gltf", "path": os.path.abspath(path), **rules.settings()}
 
 
 def load_uvs(path) -> np.ndarray:
@@ -62,68 +44,51 @@ def load_uvs(path) -> np.ndarray:
         raise InputError(exc.problem, path) from None
 
 
-def load_geometries(spec: dict, warn=_warn) -> tuple[list[Geometry], list[dict]]:
-    """(geometries, skipped primitives) of an input spec."""
+def load_geometries(spec: dict) -> tuple[list[Geometry], list[dict], list[str]]:
+    """(geometries, skipped primitives, warnings) of an input spec."""
     if spec["kind"] == "texture":
         tex = load_alpha(spec["texture"], spec.get("channel"))
-        test = AlphaTest.from_cutoff(tex, spec["cutoff"], spec["filter"], spec["wrap"])
-        return [Geometry(os.path.basename(spec["texture"]), test, load_uvs(spec["uvs"]))], []
-    return _gltf_geometries(spec, warn)
+        test = StateRule("cutoff", cutoff=spec["cutoff"]).alpha_test(tex, spec["filter"], spec["wrap"])
+        return [Geometry(os.path.basename(spec["texture"]), test, load_uvs(spec["uvs"]))], [], []
+    return _gltf_geometries(spec)
 
 
-def _zero_uv_area(tris: np.ndarray, w: int, h: int) -> np.ndarray:
-    t = tris * np.array([w, h], dtype=np.float64)
-    e1 = t[:, 1] - t[:, 0]
-    e2 = t[:, 2] - t[:, 0]
-    area2 = np.abs(e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0])
-    scale = np.maximum(np.abs(tris).max(axis=(1, 2)), 1.0) if len(tris) else np.ones(0)
-    return ~np.isfinite(t).all(axis=(1, 2)) | (area2 <= 1e-12 * scale * scale * w * h)
+def _gltf_geometries(spec):
+    from ..scene import alpha_triangles, load_scene
 
-
-def _gltf_geometries(spec, warn):
-    from .. import gltf
-
-    scene = gltf.alpha_primitives(spec["path"])
-    geoms, skipped = [], list(scene.skipped)
-    for p in scene.primitives:
-        where = {"mesh": p.mesh, "primitive": p.primitive, "name": p.name}
-        rule = "test"
-        if p.alpha_mode == "BLEND":
-            if spec["blend"] == "skip":
-                skipped.append({**where, "reason": "BLEND material (--blend skip)"})
+    rules = MaterialRules(spec.get("cutoff"), spec.get("filter"), spec.get("wrap"), spec.get("blend", "levels"),
+                          spec.get("blend_cutoff", 0.5))
+    scene = load_scene(spec["path"])
+    at = alpha_triangles(scene, rules)
+    tested = scene.alpha_tested(rules)
+    skipped = list(scene.skipped)
+    geoms = []
+    tests = {}
+    for k, mesh in enumerate(scene.meshes):
+        rows_mesh = np.arange(at.base[k], at.base[k + 1])
+        for pi, p in enumerate(mesh.primitives):
+            where = {"mesh": p.mesh, "primitive": p.index, "name": mesh.name}
+            mat = scene.materials[p.material]
+            if not tested[p.material]:
+                reason = "BLEND material (--blend skip)" if mat.alpha_mode == "BLEND" else "opaque material (no alpha test)"
+                skipped.append({**where, "reason": reason})
                 continue
-            rule = "blend" if spec["blend"] == "levels" else "test"
-        cutoff = p.cutoff if spec["cutoff"] is None else float(spec["cutoff"])
-        filt = spec["filter"] or p.filter
-        wrap_u = spec["wrap"] or p.wrap_u
-        wrap_v = spec["wrap"] or p.wrap_v
-        tris = p.tris_uv
-        unknown = None
-        if p.alpha is not None:
-            value = p.alpha.values.astype(np.float64) / p.alpha.maxval * p.alpha_factor
-            name = p.texture_name
-        elif p.problem is not None:
-            warn(f"{spec['path']}: mesh {p.mesh} primitive {p.primitive}: base colour texture "
-                 f"{p.texture_name!r} cannot be read ({p.problem}); its micro-triangles are all unknown")
-            value, rule, name = np.ones((1, 1)), "unknown", p.texture_name
-        else:  # no texture: the factor alone decides, uniformly
-            value, name = np.full((1, 1), p.alpha_factor), None
-            tris = np.broadcast_to(_DUMMY_UV, tris.shape).copy()
-        test = AlphaTest(name or "(no texture)", value, cutoff, True, filt, wrap_u, wrap_v, rule, CUTOFF_TOLERANCE)
-        bad = _zero_uv_area(tris, test.width, test.height)
-        if bad.any():
-            unknown = bad
-            tris = tris.copy()
-            tris[bad] = _DUMMY_UV
-        info = {**where, "alpha_mode": p.alpha_mode, "alpha_factor": p.alpha_factor,
-                "zero_uv_area_triangles": int(bad.sum())}
-        if p.problem is not None:
-            info["problem"] = p.problem
-        geoms.append(Geometry(f"{p.name} (mesh {p.mesh}, primitive {p.primitive})", test, tris, area=p.areas, info=info,
-                              unknown=unknown))
+            rows = rows_mesh[at.primitive[rows_mesh] == pi]
+            if p.material not in tests:
+                tests[p.material] = scene.alpha_test(p.material, rules)
+            test = tests[p.material]
+            pair_rows = at.pair[rows]
+            _, pair_of = np.unique(pair_rows, return_inverse=True)
+            info = {**where, "material": mat.name, "alpha_mode": mat.alpha_mode, "alpha_factor": mat.base_colour[3],
+                    "unknown_triangles": int(at.unknown[rows].sum())}
+            tex = scene.textures[mat.texture] if mat.texture >= 0 else None
+            if tex is not None and tex.problem is not None:
+                info["problem"] = tex.problem
+            geoms.append(Geometry(f"{mesh.name} (mesh {p.mesh}, primitive {p.index})", test, at.uv[rows],
+                                  area=p.areas[at.local[rows]], unknown=at.unknown[rows], info=info,
+                                  pair_of=pair_of.ravel(), corners=at.corners[rows]))
     if not geoms:
         raise InputError("no alpha-tested primitive in the scene "
                          f"({len(skipped)} skipped: {', '.join(sorted({s['reason'] for s in skipped})) or 'none'})",
                          spec["path"])
-    return geoms, skipped
-
+    return geoms, skipped, list(scene.warnings)

@@ -2,25 +2,42 @@
 index buffer, usage histograms), with special indices and reuse of identical micromaps.
 
 A ``Geometry`` is a set of UV triangles with one alpha test (a glTF primitive, or a texture and
-a UV array). Each triangle's micromap comes either straight from the texture (``source``
-``texture``: the fast baker, at one level or a level per triangle from its texel area) or from
-the deck's square pair maps (``sqN``: uncompressed; a codec name such as ``vq2``: compressed,
-decoded, then expanded by ``pairs.expand``).
+a UV array) and its pairing. Each triangle's micromap comes either straight from the texture
+(``source`` ``texture``: the micromap baker, at one level or a level per triangle from its texel
+area) or from the deck's square pair maps (a square scheme of ``omaps.schemes``: ``sqN``, or a
+codec such as ``vq2`` or ``vq4-paper``: baked by the pair-square baker, stored by the codec,
+decoded, then expanded by ``pairs.expand``). Real geometry is baked with growth
+``bake.GROW_TEXEL``, as the tracer bakes it.
+
+Example::
+
+    >>> import numpy as np
+    >>> from omaps.alpha_test import StateRule
+    >>> from omaps.omm import Geometry, OmmSettings, build
+    >>> from omaps.texture import load_alpha
+    >>> test = StateRule("cutoff").alpha_test(load_alpha(np.array([[0, 255]], np.uint8)), "linear", "wrap")
+    >>> res = build([Geometry("leaf", test, np.array([[[0, 0], [1, 0], [0, 1]]]))], OmmSettings(level=2))
+    >>> res.index.tolist(), res.data.nbytes
+    ([0], 4)
 """
 
 from __future__ import annotations
 
-import re
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from .. import __version__, states
+from ..alpha_test import AlphaTest
+from ..bake import GROW_TEXEL, bake_micromaps, bake_pair_squares, check_level, dynamic_levels, micro_starts
+from ..bake.micromap import check_uv_triangles, flag_table
 from ..errors import InputError
-from ..maps import check_square_size, check_uv_triangles
-from . import bake, pairs, resolve
+from ..promotion import PROMOTIONS
+from ..schemes import get_scheme
 from . import format as omm_format
-from .alpha_test import AlphaTest
+from . import pairs, resolve
+
+__all__ = ["Geometry", "OmmSettings", "OmmResult", "build"]
 
 CHUNK_MICRO_TRIANGLES = 1 << 24  # bake this many micro-triangles at a time (bounded memory)
 
@@ -31,8 +48,26 @@ class Geometry:
     test: AlphaTest
     tris_uv: np.ndarray  # (T, 3, 2) UV triangles
     area: np.ndarray | None = None  # (T,) weights of the known-area fraction (default: texel area)
-    unknown: np.ndarray | None = None  # (T,) bool: triangles forced fully unknown (e.g. zero UV area)
+    unknown: np.ndarray | None = None  # (T,) bool: triangles forced fully unknown (scene.gltf's policies)
     info: dict = field(default_factory=dict)  # recorded in omm.json
+    # pairing for square sources: per triangle its pair (local index) and corner codes (T, 3);
+    # default: triangles 2k and 2k+1 in the corpus convention (``pairs.corpus_pairing``)
+    pair_of: np.ndarray | None = None
+    corners: np.ndarray | None = None
+
+    def pairing(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(pair_of (T,), corners (T, 3), pairs (P, 2): triangles A and B, -1 for none)."""
+        n = len(self.tris_uv)
+        if self.pair_of is None:
+            return pairs.corpus_pairing(n)
+        pair_of = np.asarray(self.pair_of, dtype=np.int64)
+        corners = np.asarray(self.corners, dtype=np.int8).reshape(n, 3)
+        p = int(pair_of.max()) + 1 if n else 0
+        out = np.full((p, 2), -1, np.int64)
+        is_b = np.isin(corners, [3]).any(axis=1)  # B holds corner (0, 1)
+        out[pair_of[~is_b], 0] = np.flatnonzero(~is_b)
+        out[pair_of[is_b], 1] = np.flatnonzero(is_b)
+        return pair_of, corners, out
 
 
 @dataclass(frozen=True)
@@ -44,20 +79,29 @@ class OmmSettings:
     promotion: str = "nearest"
     special: bool = True
     dedup: bool = True
-    source: str = "texture"  # texture | sqN | a codec name (vq2, vq4, vq4x64)
-    encoder: str | None = None  # codec encoder and effort (None: the codec's first / "medium")
+    source: str = "texture"  # texture, or a square scheme: sqN, vq2, vq4, vq4x64 (and their variants)
+    encoder: str | None = None  # codec encoder and effort (None: the codec's defaults)
     effort: str | None = None
     seed: int = 0  # of the hashed promotion
 
     def __post_init__(self):
         if self.format not in omm_format.FORMAT_NAMES:
             raise InputError(f"unknown OMM format {self.format!r} (choose from {', '.join(omm_format.FORMAT_NAMES)})")
-        if self.promotion not in resolve.PROMOTIONS:
-            raise InputError(f"unknown promotion {self.promotion!r} (choose from {', '.join(resolve.PROMOTIONS)})")
-        bake.check_level(self.level)
-        bake.check_level(self.max_level, "max level")
+        if self.promotion not in PROMOTIONS:
+            raise InputError(f"unknown promotion {self.promotion!r} (choose from {', '.join(PROMOTIONS)})")
+        check_level(self.level)
+        check_level(self.max_level, "max level")
         if self.dynamic_scale is not None and self.source != "texture":
             raise InputError("--dynamic needs the texture source: square pair maps fix the level to log2 N")
+        if self.source != "texture":
+            s = self.scheme
+            if s.kind != "square":
+                raise InputError(f"--from takes texture or a square scheme (sqN, vq2, vq4, vq4x64), not {self.source!r}")
+
+    @property
+    def scheme(self):
+        """The square scheme of a ``--from`` source (None for ``texture``)."""
+        return None if self.source == "texture" else get_scheme(self.source, self.encoder, self.effort)
 
     @property
     def format_code(self) -> int:
@@ -68,7 +112,7 @@ class OmmSettings:
 class OmmResult:
     """The buffers, as written to disk: ``data`` (uint8), ``triangles`` (TRIANGLE_RECORD),
     ``index`` (int32 per input triangle), ``usage`` and ``summary`` (the two JSON files) and,
-    for a codec source, the compressed pair maps ``pair_blocks``."""
+    for a square source, the stored pair maps ``pair_blocks`` and ``pair_records``."""
 
     data: np.ndarray
     triangles: np.ndarray
@@ -76,6 +120,7 @@ class OmmResult:
     usage: dict
     summary: dict
     pair_blocks: bytes | None = None
+    pair_records: np.ndarray | None = None  # PAIR_RECORD per triangle, with pair_blocks
 
     def micromap_states(self, i: int) -> np.ndarray:
         """States of micromap ``i`` (0..3), decoded from ``data``."""
@@ -90,22 +135,6 @@ class OmmResult:
         if i >= 0:
             return self.micromap_states(i)
         return np.array([-1 - i], dtype=np.uint8)
-
-
-_SQUARE = re.compile(r"sq(\d+)$")
-
-
-def source_map_size(source: str) -> tuple[int | None, object]:
-    """(N, codec) of a source: (None, None) for ``texture``, (N, None) for ``sqN``."""
-    if source == "texture":
-        return None, None
-    m = _SQUARE.match(source)
-    if m:
-        return check_square_size(int(m.group(1))), None
-    from ..codecs.registry import get_codec
-
-    codec = get_codec(source)
-    return codec.map_size, codec
 
 
 class _Packer:
@@ -159,17 +188,14 @@ class _Packer:
         return len(self.records) - 1
 
 
-def _chunks(levels: np.ndarray, even: bool):
-    """Triangle ranges [a, b) of at most CHUNK_MICRO_TRIANGLES micro-triangles (at least one
-    triangle, or pair when ``even``)."""
+def _chunks(levels: np.ndarray):
+    """Triangle ranges [a, b) of at most CHUNK_MICRO_TRIANGLES micro-triangles (at least one)."""
     sizes = np.left_shift(np.int64(1), 2 * levels)
     n = len(levels)
     a = 0
     while a < n:
         total = np.cumsum(sizes[a:])
         b = a + max(int(np.searchsorted(total, CHUNK_MICRO_TRIANGLES, side="right")), 1)
-        if even and b < n and (b - a) % 2:
-            b = b + 1 if b - a == 1 else b - 1
         b = min(b, n)
         yield a, b
         a = b
@@ -182,44 +208,45 @@ def _texel_area(test: AlphaTest, tris: np.ndarray) -> np.ndarray:
     return 0.5 * np.abs(e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0])
 
 
-def _pair_states(grid, tris, n, codec, settings, sat):
-    """T/O/C micromaps at level log2 N of triangles from their pairs' square maps (codec: after
-    a round trip through the codec), and the blocks."""
-    squares, has_b = pairs.bake_squares(grid, tris, n, sat)
-    blocks = []
-    if codec is not None:
-        encoder = settings.encoder or ("best" if "best" in codec.encoders else codec.encoders[0])
-        effort = settings.effort or ("medium" if "medium" in codec.efforts else codec.efforts[0])
-        if encoder not in codec.encoders:
-            raise InputError(f"unknown encoder {encoder!r} for {codec.name} (choose from {', '.join(codec.encoders)})")
-        if effort not in codec.efforts:
-            raise InputError(f"unknown effort {effort!r} for {codec.name} (choose from {', '.join(codec.efforts)})")
-        decoded = np.empty_like(squares)
-        for p, m in enumerate(squares):
-            blk = codec.encode(m, encoder, effort)
-            d = codec.decode(blk)
-            if len(blk) != codec.block_bytes or not states.is_conservative(m, d):
-                raise RuntimeError(f"internal error: {codec.name} produced a bad block")  # never expected
-            blocks.append(blk)
-            decoded[p] = d
-        squares = decoded
-    return pairs.unpair(pairs.expand(squares), len(tris)).ravel(), blocks
+def _pair_states(g: Geometry, grid, tris: np.ndarray, scheme) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """T/O/C micromaps (flat) at level log2 N of every triangle from its pair's square map, stored
+    and decoded by the scheme's codec; the blocks (P, bytes) and the pairing records."""
+    pair_of, corners, prs = g.pairing()
+    uv = np.zeros((len(prs), 6, 2))
+    order = np.argsort(corners, axis=1)
+    sorted_uv = np.take_along_axis(tris, order[:, :, None], axis=1)  # A: (0,0),(1,0),(1,1); B: (0,0),(1,1),(0,1)
+    has_a = prs[:, 0] >= 0
+    has_b = prs[:, 1] >= 0
+    uv[has_a, 0:3] = sorted_uv[prs[has_a, 0]]
+    uv[has_b, 3:6] = sorted_uv[prs[has_b, 1]]
+    squares = bake_pair_squares(grid, uv, has_b, scheme.codec.map_size, GROW_TEXEL)
+    if g.unknown is not None:  # a pair with an unknown triangle is all C
+        unknown = np.zeros(len(prs), bool)
+        np.logical_or.at(unknown, pair_of, np.asarray(g.unknown, bool))
+        squares[unknown] = states.C
+    blocks, decoded = scheme.codec.encode_many(squares, scheme.encoder, scheme.effort)
+    rec = np.zeros(len(tris), dtype=omm_format.PAIR_RECORD)
+    rec["pair"] = pair_of
+    rec["corners"] = corners
+    return pairs.expand(decoded, pair_of, corners).ravel(), blocks, rec
 
 
 def _triangle_levels(test: AlphaTest, tris: np.ndarray, settings: OmmSettings, n_map: int | None) -> np.ndarray:
     if n_map is not None:
         return np.full(len(tris), pairs.level_of_size(n_map), dtype=np.int64)
     if settings.dynamic_scale is not None:
-        return bake.dynamic_levels(tris, test.width, test.height, settings.dynamic_scale, settings.max_level)
+        return dynamic_levels(tris, test.width, test.height, settings.dynamic_scale, settings.max_level)
     return np.full(len(tris), settings.level, dtype=np.int64)
 
 
 def build(geometries: list[Geometry], settings: OmmSettings = OmmSettings()) -> OmmResult:
     """Bake every geometry's micromaps and pack them into the standard buffers."""
-    n_map, codec = source_map_size(settings.source)
+    scheme = settings.scheme
+    n_map = scheme.codec.map_size if scheme is not None else None
     fmt = settings.format_code
     packer = _Packer(settings)
-    index_parts, blocks_all, geo_info = [], [], []
+    index_parts, blocks_all, records_all, geo_info = [], [], [], []
+    n_blocks_total = 0
     counts3 = np.zeros(3, dtype=np.int64)
     promoted = np.zeros(4, dtype=np.int64)
     known_area = total_area = 0.0
@@ -229,20 +256,25 @@ def build(geometries: list[Geometry], settings: OmmSettings = OmmSettings()) -> 
     for g in geometries:
         tris = check_uv_triangles(g.tris_uv) if len(g.tris_uv) else np.zeros((0, 3, 2))
         grid = g.test.grid()
-        sat = bake.flag_table(grid)
+        sat = flag_table(grid)
         levels = _triangle_levels(g.test, tris, settings, n_map)
         area = _texel_area(g.test, tris) if g.area is None else np.asarray(g.area, dtype=np.float64)
         idx = np.empty(len(tris), dtype=np.int32)
         n_blocks = 0
-        for a, b in _chunks(levels, even=n_map is not None):
+        if n_map is not None:
+            s3_all, blk, rec = _pair_states(g, grid, tris, scheme)
+            starts_all = micro_starts(levels)
+            rec["pair"] += n_blocks_total
+            blocks_all.append(blk)
+            records_all.append(rec)
+            n_blocks = len(blk)
+        for a, b in _chunks(levels):
             lv = levels[a:b]
             if n_map is None:
-                s3, starts = bake.bake_levels(grid, tris[a:b], lv, sat)
+                s3, starts = bake_micromaps(grid, tris[a:b], lv, GROW_TEXEL, sat)
             else:
-                s3, blk = _pair_states(grid, tris[a:b], n_map, codec, settings, sat)
-                starts = bake.micro_starts(lv)
-                blocks_all += blk
-                n_blocks += len(blk)
+                s3 = s3_all[starts_all[a]:starts_all[b]]
+                starts = starts_all[a:b + 1] - starts_all[a]
             if g.unknown is not None:
                 for i in np.flatnonzero(g.unknown[a:b]):
                     s3[starts[i]:starts[i + 1]] = states.C
@@ -267,10 +299,10 @@ def build(geometries: list[Geometry], settings: OmmSettings = OmmSettings()) -> 
                 "wrap_u": g.test.wrap_u, "wrap_v": g.test.wrap_v, "threshold": g.test.threshold,
                 "inclusive": g.test.inclusive, "state_rule": g.test.rule, **g.info}
         if n_map is not None:
-            info["pairs"] = (len(tris) + 1) // 2
-        if codec is not None:
-            info["first_pair_block"] = len(blocks_all) - n_blocks
+            info["pairs"] = n_blocks
+            info["first_pair_block"] = n_blocks_total
         geo_info.append(info)
+        n_blocks_total += n_blocks
         first += len(tris)
     index = np.concatenate(index_parts) if index_parts else np.zeros(0, dtype=np.int32)
     triangles = np.array(packer.records, dtype=omm_format.TRIANGLE_RECORD)
@@ -303,7 +335,11 @@ def build(geometries: list[Geometry], settings: OmmSettings = OmmSettings()) -> 
             "bytes": int(len(data) + triangles.nbytes + index.nbytes),
         },
     }
-    if codec is not None:
-        summary["pair_blocks"] = {"codec": codec.name, "block_bytes": codec.block_bytes, "blocks": len(blocks_all),
-                                  "map_size": codec.map_size}
-    return OmmResult(data, triangles, index, usage, summary, b"".join(blocks_all) if codec is not None else None)
+    if scheme is not None:
+        codec = scheme.codec
+        summary["pair_blocks"] = {"scheme": scheme.name, "codec": codec.name, "block_bytes": codec.block_bytes,
+                                  "blocks": n_blocks_total, "map_size": codec.map_size, **scheme.settings()}
+        blocks = np.concatenate(blocks_all).tobytes() if blocks_all else b""
+        records = np.concatenate(records_all) if records_all else np.zeros(0, omm_format.PAIR_RECORD)
+        return OmmResult(data, triangles, index, usage, summary, blocks, records)
+    return OmmResult(data, triangles, index, usage, summary)

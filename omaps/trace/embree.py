@@ -37,7 +37,7 @@ from llvmlite import ir
 from numba import types
 from numba.core.extending import intrinsic
 
-from .errors import InputError
+from ..errors import InputError
 
 MIN_VERSION = 40300  # 4.3: RTCRayQueryContext and the argument-structure API we use
 MAX_VERSION = 50000
@@ -261,6 +261,7 @@ f32_ptr = _ptr_intrinsic(types.float32)
 f64_ptr = _ptr_intrinsic(types.float64)
 u8_ptr = _ptr_intrinsic(types.uint8)
 i8_ptr = _ptr_intrinsic(types.int8)
+u16_ptr = _ptr_intrinsic(types.uint16)
 
 
 @intrinsic

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .texture import AlphaTexture
+from ..texture import AlphaTexture
 
 SEED = 20230613  # fixed: the default corpus is the same on every machine
 

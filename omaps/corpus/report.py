@@ -10,12 +10,13 @@ import os
 import numpy as np
 from PIL import Image
 
-from . import atomic, render
+from .. import atomic, drawing
+from ..schemes import get_scheme
 from .evaluate import TextureResult, mean_results
 
 
-def to_json(results: list[TextureResult], scheme_names: list[str]) -> dict:
-    return {
+def to_json(results: list[TextureResult], scheme_names: list[str], settings: dict | None = None) -> dict:
+    return {"settings": settings or {},
         "textures": [
             {"name": r.name, "width": r.width, "height": r.height,
              "schemes": {s: {"savings": r.savings[s], "bits": r.bits[s]} for s in scheme_names}}
@@ -25,8 +26,8 @@ def to_json(results: list[TextureResult], scheme_names: list[str]) -> dict:
     }
 
 
-def write_json(path, results, scheme_names) -> None:
-    atomic.write_text(path, json.dumps(to_json(results, scheme_names), indent=1) + "\n")
+def write_json(path, results, scheme_names, settings: dict | None = None) -> None:
+    atomic.write_text(path, json.dumps(to_json(results, scheme_names, settings), indent=1) + "\n")
 
 
 def write_csv(path, results, scheme_names) -> None:
@@ -43,13 +44,8 @@ def write_csv(path, results, scheme_names) -> None:
 
 
 def family_of(name: str) -> str:
-    """Plot line of a scheme: sqN, triL; vq4 and vq4x64 (one codec at two sizes) share one."""
-    for prefix in ("sq", "tri"):
-        if name.startswith(prefix) and name[len(prefix):].isdigit():
-            return prefix
-    if name.startswith("vq4x64"):
-        return "vq4" + name[len("vq4x64"):]
-    return name
+    """Plot line of a scheme (``Scheme.family``): sqN, triL; vq4 and vq4x64 share one."""
+    return get_scheme(name).family
 
 
 FAMILY_LABELS = {"sq": "square map per pair (sqN, 2 bits/cell)",
@@ -116,7 +112,7 @@ def show_texture(path, result: TextureResult, panel: int = 192) -> None:
     axes[0].imshow(result.alpha, cmap="gray", interpolation="nearest")
     axes[0].set_title(f"alpha {result.width}x{result.height}", fontsize=8)
     for ax, name in zip(axes[1:], names):
-        ax.imshow(render.scheme_image(name, result.maps[name], panel), interpolation="nearest")
+        ax.imshow(drawing.scheme_image(get_scheme(name).kind, result.maps[name], panel), interpolation="nearest")
         ax.set_title(f"{name}: {result.savings[name]:.1%}", fontsize=8)
     for ax in axes:
         ax.set_xticks([])

@@ -39,7 +39,8 @@ def pair_triangle_image(tri_maps: np.ndarray, size: int) -> np.ndarray:
     return colourise(_pair_tri_lookup(np.ascontiguousarray(tri_maps), level, size))
 
 
-def scheme_image(scheme_name: str, map_states: np.ndarray, size: int) -> np.ndarray:
-    if scheme_name.startswith("tri"):
+def scheme_image(kind: str, map_states: np.ndarray, size: int) -> np.ndarray:
+    """A scheme's map of the corpus pair drawn over the square (``Scheme.kind``)."""
+    if kind == "micromap":
         return pair_triangle_image(map_states, size)
     return square_image(map_states, size)

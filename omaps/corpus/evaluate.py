@@ -1,7 +1,21 @@
-"""The corpus evaluation: every scheme's savings and bits on every texture, in parallel."""
+"""The corpus evaluation: every scheme's savings and bits on every texture, in parallel.
+
+Each texture covers the corpus pair (``omaps.pair``); a scheme's map is baked by the core bakers
+(``bake.pair_maps``), stored through its codec where it has one, and its savings is the fraction
+of hits, uniform over the pair's area, that land in a T or O region.
+
+Example::
+
+    >>> from omaps.corpus import EvalConfig, default_corpus, evaluate_texture
+    >>> from omaps.schemes import parse_schemes
+    >>> r = evaluate_texture(default_corpus()[0], parse_schemes("sq16,tri3"), EvalConfig())
+    >>> sorted(r.savings) == ["sq16", "tri3"] and 0 < r.savings["sq16"] < 1
+    True
+"""
 
 from __future__ import annotations
 
+import multiprocessing
 import os
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, field
@@ -9,10 +23,13 @@ from dataclasses import dataclass, field
 import numpy as np
 from tqdm import tqdm
 
-from .sampling import footprint_grid
-from .schemes import Scheme, parse_schemes
-from .texel_states import StateRule
-from .texture import AlphaTexture, load_alpha
+from .. import states
+from ..alpha_test import StateRule
+from ..bake import bake_pair_triangles, bake_square, known_fraction, texel_limit
+from ..schemes import EVAL_KINDS, Scheme, parse_schemes
+from ..texture import AlphaTexture, load_alpha
+
+__all__ = ["EvalConfig", "TextureResult", "evaluate_texture", "evaluate_many", "mean_results", "scheme_map"]
 
 
 @dataclass(frozen=True)
@@ -21,10 +38,39 @@ class EvalConfig:
     filter: str = "nearest"
     wrap: str = "clamp"
     channel: str | None = None
+    encoder: str | None = None  # for codec schemes named without a variant
+    effort: str | None = None
+
+    def test(self, texture: AlphaTexture):
+        """The alpha test of a texture under these rules, filter and addressing."""
+        return self.rule.alpha_test(texture, self.filter, self.wrap)
 
     def grid(self, texture: AlphaTexture):
         """The footprint grid of a texture under these states, filter and addressing."""
-        return footprint_grid(self.rule.classify(texture), self.filter, self.wrap)
+        return self.test(texture).grid()
+
+    def settings(self) -> dict:
+        return {**self.rule.settings(), "filter": self.filter, "wrap": self.wrap, "channel": self.channel,
+                "encoder": self.encoder, "effort": self.effort}
+
+
+def scheme_map(scheme: Scheme, grid) -> np.ndarray:
+    """The map a scheme stores for the corpus pair (decoded when compressed): (N, N) square,
+    (2, 4**L) micromaps, or the footprint cells' states for ``texel``."""
+    if scheme.kind == "texel":
+        return states.FLAG_TO_STATE[grid.cells_within_texture()[0]]
+    if scheme.kind == "micromap":
+        return bake_pair_triangles(grid, scheme.level)
+    m = bake_square(grid, scheme.codec.map_size)
+    if not scheme.codec.compressed:
+        return m
+    return scheme.codec.encode_many(m[None], scheme.encoder, scheme.effort)[1][0]
+
+
+def scheme_savings(scheme: Scheme, grid, m: np.ndarray) -> float:
+    """Savings of a map the scheme made (regions of equal area; border cells of a linear
+    footprint have half area, which ``texel_limit`` weighs)."""
+    return texel_limit(grid) if scheme.kind == "texel" else known_fraction(m)
 
 
 @dataclass
@@ -44,8 +90,8 @@ def evaluate_texture(texture: AlphaTexture, schemes: list[Scheme], config: EvalC
     grid = config.grid(texture)
     savings, bits, kept = {}, {}, {}
     for s in schemes:
-        m = s.bake(grid)
-        savings[s.name] = s.savings_of(grid, m)
+        m = scheme_map(s, grid)
+        savings[s.name] = scheme_savings(s, grid, m)
         bits[s.name] = int(s.bits_for(texture.width, texture.height))
         if keep_maps:
             kept[s.name] = m
@@ -56,7 +102,7 @@ def evaluate_texture(texture: AlphaTexture, schemes: list[Scheme], config: EvalC
 def _work(item, scheme_names, config, keep_maps, min_size):
     """Load (if a path) and evaluate one texture; None when it is below ``min_size``.
     Schemes travel by name: worker processes rebuild them from the registry."""
-    schemes = parse_schemes(scheme_names)
+    schemes = parse_schemes(scheme_names, EVAL_KINDS, config.encoder, config.effort)
     path = None
     if isinstance(item, AlphaTexture):
         tex = item
@@ -71,7 +117,8 @@ def _work(item, scheme_names, config, keep_maps, min_size):
 
 
 def warm_up(schemes: list[Scheme], config: EvalConfig) -> None:
-    """Compile the kernels once in this process, so forked workers start with them."""
+    """Compile the kernels once in this process, so the workers (spawned: numba's threads do not
+    survive a fork) load them from numba's cache instead of each compiling them."""
     tex = AlphaTexture("warm-up", np.array([[0, 128], [255, 0]], dtype=np.uint8), 255)
     evaluate_texture(tex, schemes, config)
 
@@ -93,7 +140,7 @@ def evaluate_many(items, schemes: list[Scheme], config: EvalConfig = EvalConfig(
                 bar.update()
         else:
             warm_up(schemes, config)
-            with ProcessPoolExecutor(max_workers=jobs) as pool:
+            with ProcessPoolExecutor(max_workers=jobs, mp_context=multiprocessing.get_context("spawn")) as pool:
                 futures = [pool.submit(_work, it, names, config, keep_maps, min_size) for it in items]
                 for f in futures:
                     out.append(f.result())

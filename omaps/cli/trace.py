@@ -1,26 +1,24 @@
 """``omaps trace SCENE``: alpha tests per ray on a glTF scene, per scheme, with pictures.
 
-A thin layer over ``omaps.trace``: parse options, prepare (pair, bake, encode, build the
+A thin layer over ``omaps.trace``: parse options, prepare (pair, bake, store, build the
 Embree scene), trace ``none`` (always: it is the reference every scheme must match) and each
 scheme, then print a table and write the JSON, heat map and render asked for.
 """
 
 from __future__ import annotations
 
-import argparse
 import json
-import math
 import sys
 import time
-import warnings
 
 import numpy as np
 
-from .errors import InputError
+from ..errors import InputError
+from ..schemes import TRACE_KINDS, parse_schemes
+from ..trace.camera import DEFAULT_LIGHT
+from .common import add_codec_options, add_material_options, check_jobs, material_rules, print_table
 
 DEFAULT_SCHEMES = "none,tri3,sq16,vq2,vq4,vq4x64"
-DEFAULT_LIGHT = (0.45, 0.8, 0.4)  # towards the sun: high enough to light the ground, low enough to cross crowns
-SHADOW_TNEAR = 1e-5  # shadow ray start, as a fraction of the scene's diagonal
 
 
 def add_parser(sub) -> None:
@@ -29,9 +27,9 @@ def add_parser(sub) -> None:
                                    "each scheme's maps are read in the any-hit filter, and every scheme's "
                                    "visible result is checked against 'none' (every candidate alpha-tested).")
     t.add_argument("scene", metavar="SCENE", help=".gltf or .glb file")
-    t.add_argument("--schemes", default=None,
-                   help="comma-separated: none, sqN, triL, or a codec (vq2, vq4, vq4x64) (default: "
-                        f"{DEFAULT_SCHEMES}, those of its codecs that this installation has)")
+    t.add_argument("--schemes", default=DEFAULT_SCHEMES,
+                   help="comma-separated: none, triL, sqN, or a codec (vq2, vq4, vq4x64, also with -paper, -fast, "
+                        "-medium or -thorough) (default: %(default)s)")
     t.add_argument("--camera", metavar="X,Y,Z:TX,TY,TZ:FOV",
                    help="eye, target and vertical field of view in degrees (default: a low grazing view "
                         "across the scene bounds)")
@@ -39,9 +37,6 @@ def add_parser(sub) -> None:
     t.add_argument("--shadows", action="store_true",
                    help="also trace shadow rays to a directional light, normally and with deferred C tests")
     t.add_argument("--light", metavar="X,Y,Z", help=f"direction towards the light (default: {DEFAULT_LIGHT})")
-    t.add_argument("--blend-cutoff", type=float, default=0.5, metavar="A",
-                   help="alpha cut-off for BLEND materials, treated as alpha-tested (default: %(default)s)")
-    t.add_argument("--effort", default="medium", help="codec encoder effort (default: %(default)s)")
     t.add_argument("--jobs", type=int, default=None, metavar="N", help="processes for baking and encoding "
                    "(default: all cores)")
     t.add_argument("--two-state", metavar="MODES", default=None,
@@ -52,14 +47,9 @@ def add_parser(sub) -> None:
     t.add_argument("--heatmap", metavar="FILE.png", help="alpha tests per pixel, 'none' beside each scheme")
     t.add_argument("--render", metavar="FILE.png", help="the alpha-tested albedo image")
     t.add_argument("--quiet", action="store_true", help="no progress bars")
+    add_material_options(t)
+    add_codec_options(t)
     t.set_defaults(func=cmd_trace)
-
-
-def default_schemes() -> str:
-    from .codecs.registry import codec_names
-
-    known = set(codec_names())
-    return ",".join(n for n in DEFAULT_SCHEMES.split(",") if not n.startswith("vq") or n in known)
 
 
 def parse_size(text: str) -> tuple[int, int]:
@@ -85,7 +75,7 @@ def _floats(text: str, n: int, what: str) -> np.ndarray:
 
 
 def parse_camera(text: str):
-    from .trace import Camera
+    from ..trace import Camera
 
     parts = text.split(":")
     if len(parts) != 3:
@@ -101,39 +91,43 @@ def parse_camera(text: str):
 
 
 def parse_light(text: str | None) -> np.ndarray:
-    v = np.asarray(DEFAULT_LIGHT, np.float64) if text is None else _floats(text, 3, "--light")
-    n = np.linalg.norm(v)
-    if n == 0:
-        raise InputError("--light must not be the zero vector")
-    return v / n
+    from ..trace import light_direction
+
+    try:
+        return light_direction(None if text is None else _floats(text, 3, "--light"))
+    except ValueError:
+        raise InputError("--light must not be the zero vector") from None
 
 
 def cmd_trace(a) -> int:
-    from . import scene_maps, trace
-    from .scene import SceneWarning, load_scene
+    from .. import trace
+    from ..scene import load_scene
+    from ..trace.maps import default_jobs
+    from ..trace.pictures import heatmap, render
 
-    names = scene_maps.parse_trace_schemes(a.schemes or default_schemes())
+    schemes = parse_schemes(a.schemes, TRACE_KINDS, a.encoder, a.effort, "omaps trace")
+    names = [s.name for s in schemes]
     modes = parse_two_state(a.two_state)
     w, h = parse_size(a.size)
-    if a.jobs is not None and a.jobs < 1:
-        raise InputError(f"--jobs must be >= 1, got {a.jobs}")
+    check_jobs(a.jobs)
+    rules = material_rules(a)
     light = parse_light(a.light) if a.shadows else None
     cam_given = parse_camera(a.camera) if a.camera else None
     progress = not a.quiet and sys.stderr.isatty()
     t_start = time.perf_counter()
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", SceneWarning)  # printed below, once each
-        scene = load_scene(a.scene, a.blend_cutoff)
-    for msg in scene.warnings:
-        print(f"omaps: warning: {a.scene}: {msg}", file=sys.stderr)
+    scene = load_scene(a.scene)
+    if not any(len(scene.meshes[mi].merged["triangles"]) for mi, _ in scene.instances):
+        raise InputError("the scene has no triangles", a.scene)
     t_load = time.perf_counter() - t_start
-    traced = ["none"] + [n for n in names if n != "none"]
-    prep = trace.prepare(scene, traced, scene_maps.default_jobs(a.jobs), a.effort, progress)
+    if "none" not in names:
+        schemes = parse_schemes("none", TRACE_KINDS) + schemes
+    traced = [s.name for s in schemes]
+    prep = trace.prepare(scene, schemes, rules, default_jobs(a.jobs), progress)
     bounds = scene.bounds()
     camera = cam_given or trace.default_camera(bounds)
     cam = camera.basis(w, h)
     diag = float(np.linalg.norm(bounds[1] - bounds[0]))
-    tnear = SHADOW_TNEAR * diag
+    tnear = trace.SHADOW_TNEAR * diag
     trace.trace_scheme(prep, None, cam, 2, 2, light, tnear, deferred=a.shadows)  # compile the ray loops
     from tqdm import tqdm
 
@@ -145,9 +139,11 @@ def cmd_trace(a) -> int:
     two_state = _trace_two_state(prep, names, modes, cam, w, h, ref) if modes else {}
     total = time.perf_counter() - t_start
     report = {
-        "scene": {"file": a.scene, **scene.counts(), "paired_fraction": prep.alpha.paired_fraction,
+        "scene": {"file": a.scene, **scene.counts(rules), "paired_fraction": prep.alpha.paired_fraction,
                   "pairs": int(len(prep.alpha.pair_first)), "bounds": bounds.tolist(),
-                  "warnings": list(scene.warnings)},
+                  "warnings": list(scene.warnings), "skipped_primitives": scene.skipped},
+        "settings": {"materials": rules.settings(), "schemes": {s.name: s.settings() for s in schemes},
+                     "two_state": modes, "shadows": bool(a.shadows)},
         "camera": {**camera.to_json(), "width": w, "height": h},
         "light": None if light is None else light.tolist(),
         "embree": prep.device.version_text,
@@ -156,8 +152,7 @@ def cmd_trace(a) -> int:
         "two_state": two_state,
         "timings": {"load_s": t_load, **prep.timings, "total_s": total},
     }
-    none_tests = report["schemes"]["none"]["alpha_tests_per_primary_ray"] if "none" in names else \
-        trace.summary(ref, ref, prep.maps["none"], w, h)["alpha_tests_per_primary_ray"]
+    none_tests = trace.summary(ref, ref, prep.maps["none"], w, h)["alpha_tests_per_primary_ray"]
     for n, r in report["schemes"].items():
         t = r["alpha_tests_per_primary_ray"]
         r["none_over_scheme_alpha_tests"] = none_tests / t if t else None
@@ -169,7 +164,7 @@ def cmd_trace(a) -> int:
     if two_state:
         _print_two_state(two_state)
     if a.json:
-        from .atomic import write_text
+        from ..atomic import write_text
         write_text(a.json, json.dumps(report, indent=1))
     if a.heatmap:
         heatmap(a.heatmap, runs, names, a.shadows)
@@ -183,7 +178,7 @@ def cmd_trace(a) -> int:
 
 
 def parse_two_state(text: str | None) -> list[str]:
-    from .two_state import MODES
+    from ..trace.two_state import MODES
 
     if not text:
         return []
@@ -197,21 +192,21 @@ def parse_two_state(text: str | None) -> list[str]:
 
 def _trace_two_state(prep, names, modes, cam, w, h, ref) -> dict:
     """Each square / codec scheme traced again with its C cells resolved by each rule."""
-    from . import trace
-    from .two_state import coverage_error, two_state_maps
+    from .. import trace
+    from ..trace.two_state import two_state_maps
 
     out: dict = {}
     cache: dict = {}
     for n in names:
         sm = prep.maps[n]
-        if sm.kind not in ("square", "codec"):
+        if sm.kind != "square":
             continue
         out[n] = {}
         for mode in modes:
-            sm2 = two_state_maps(prep.scene, prep.alpha, sm, mode, cache=cache)
+            sm2 = two_state_maps(prep, sm, mode, cache=cache)
             prep.maps[sm2.name] = sm2
             run = trace.trace_scheme(prep, sm2.name, cam, w, h)
-            out[n][mode] = coverage_error(run, ref)
+            out[n][mode] = trace.coverage_error(run, ref)
             del prep.maps[sm2.name]
     return out
 
@@ -246,112 +241,9 @@ def _print_report(report: dict, names: list[str], shadows: bool) -> None:
             row[5:5] = [f"{r['alpha_tests_per_shadow_ray']:.3f}", f"{r['deferred_alpha_tests_per_shadow_ray']:.3f}",
                         f"{r['deferred_tests_saved_fraction']:.1%}"]
         rows.append(row)
-    widths = [max(len(x[i]) for x in rows + [cols]) for i in range(len(cols))]
-    for r in [cols] + rows:
-        print("  ".join(v.rjust(wd) if i else v.ljust(wd) for i, (v, wd) in enumerate(zip(r, widths))))
+    print_table(cols, rows)
     o = report["opaque_only"]
     t = report["timings"]
     print(f"opaque-only traversal: {o['rays_per_second'] / 1e6:.2f} Mrays/s; total {t['total_s']:.1f} s "
           f"(load {t['load_s']:.1f}, pair {t['pair_s']:.1f}, bake+encode {t['bake_encode_s']:.1f}, "
           f"BVH {t['bvh_s']:.1f})")
-
-
-def _tests_image(run, shadows: bool) -> np.ndarray:
-    img = run.primary.tests.astype(np.float64)
-    if shadows and run.shadow is not None:
-        img = img + run.shadow.tests
-    return img
-
-
-def heatmap(path: str, runs: dict, names: list[str], shadows: bool) -> None:
-    """Alpha tests per pixel, 'none' first then each scheme, one colour scale and a colour bar."""
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    from .atomic import atomic_path
-
-    shown = ["none"] + [n for n in names if n != "none"]
-    imgs = [_tests_image(runs[n], shadows) for n in shown]
-    vmax = max(1.0, float(np.percentile(imgs[0], 99.5)))
-    cols = min(len(shown), 4)
-    rows = math.ceil(len(shown) / cols)
-    h, w = imgs[0].shape
-    fig, axes = plt.subplots(rows, cols, figsize=(3.2 * cols * w / h + 1.0, 3.4 * rows), squeeze=False,
-                             constrained_layout=True)
-    what = "primary + shadow" if shadows else "primary"
-    for ax, n, img in zip(axes.flat, shown, imgs):
-        im = ax.imshow(img, cmap="inferno", vmin=0, vmax=vmax, interpolation="nearest")
-        ax.set_title(f"{n}: {img.mean():.2f} tests/pixel", fontsize=9)
-        ax.set_xticks([])
-        ax.set_yticks([])
-    for ax in list(axes.flat)[len(shown):]:
-        ax.axis("off")
-    fig.colorbar(im, ax=axes, shrink=0.8, label=f"alpha tests per pixel ({what} rays)")
-    with atomic_path(path, suffix=".png") as tmp:
-        fig.savefig(tmp, dpi=110, format="png")
-    plt.close(fig)
-
-
-def render(path: str, prep, run, cam: np.ndarray, light) -> None:
-    """The alpha-tested albedo image (base colour, nearest texel), lit by |N.L| and the shadow
-    rays when traced, over a sky colour."""
-    from PIL import Image
-
-    from .atomic import atomic_path
-
-    scene = prep.scene
-    p = run.primary
-    h, w = p.inst.shape
-    img = np.empty((h, w, 3), np.float64)
-    img[:] = (0.62, 0.74, 0.90)
-    hit = p.inst >= 0
-    ys, xs = np.nonzero(hit)
-    mesh = prep.proto_of_instance[p.inst[hit]]
-    is_alpha = p.geom[hit] == 1
-    prim = p.prim[hit].astype(np.int64)
-    tri = np.empty(len(prim), np.int64)
-    at = prep.alpha
-    tri[is_alpha] = at.mesh_tri[at.base[mesh[is_alpha]] + prim[is_alpha]]
-    op = ~is_alpha
-    for k in np.unique(mesh[op]):
-        sel = op & (mesh == k)
-        tri[sel] = prep.opaque_tris[k][prim[sel]]
-    b1 = p.u[hit].astype(np.float64)
-    b2 = p.v[hit].astype(np.float64)
-    colour = np.empty((len(tri), 3))
-    shade = np.ones(len(tri))
-    for k in np.unique(mesh):
-        sel = mesh == k
-        m = scene.meshes[k]
-        vi = m.triangles[tri[sel]]
-        uv = ((1 - b1[sel] - b2[sel])[:, None] * m.uvs[vi[:, 0]] + b1[sel][:, None] * m.uvs[vi[:, 1]]
-              + b2[sel][:, None] * m.uvs[vi[:, 2]])
-        mats = m.material[tri[sel]]
-        col = np.empty((len(vi), 3))
-        for mi in np.unique(mats):
-            s2 = mats == mi
-            mat = scene.materials[mi]
-            c = np.asarray(mat.base_colour[:3], np.float64)
-            if mat.texture >= 0:
-                rgba = scene.textures[mat.texture].rgba
-                th, tw = rgba.shape[:2]
-                x = np.floor(uv[s2, 0] * tw).astype(np.int64) % tw
-                y = np.floor(uv[s2, 1] * th).astype(np.int64) % th
-                c = c * rgba[y, x, :3] / 255.0
-            col[s2] = c
-        colour[sel] = col
-        if light is not None:
-            pos = m.positions[vi].astype(np.float64)
-            inst_m = np.stack([scene.instances[i][1] for i in p.inst[hit][sel]])
-            n_obj = np.cross(pos[:, 1] - pos[:, 0], pos[:, 2] - pos[:, 0])
-            n_world = np.einsum("nij,nj->ni", np.linalg.inv(inst_m[:, :3, :3]).transpose(0, 2, 1), n_obj)
-            n_world /= np.maximum(np.linalg.norm(n_world, axis=1, keepdims=True), 1e-30)
-            shade[sel] = np.abs(n_world @ light)
-    if light is not None and run.shadow is not None:
-        lit = run.shadow.occluded[hit] == 0
-        shade = 0.3 + 0.7 * shade * lit
-    img[ys, xs] = colour * shade[:, None]
-    out = (np.clip(img, 0, 1) ** (1 / 1.6) * 255 + 0.5).astype(np.uint8)
-    with atomic_path(path, suffix=".png") as tmp:
-        Image.fromarray(out).save(tmp, format="PNG")

@@ -1,0 +1,5 @@
+"""The ``omaps`` command line (``main``); each command composes the core and re-implements none of it."""
+
+from .main import main
+
+__all__ = ["main"]

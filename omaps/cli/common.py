@@ -1,0 +1,79 @@
+"""Options and output shared by the commands: texel-state rules, scene material rules, codec
+choices, tables, and how library warnings are shown."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+from ..alpha_test import BLEND_RULES, MODES, MaterialRules, StateRule
+from ..codecs import EFFORTS, ENCODERS
+from ..corpus.evaluate import EvalConfig
+from ..errors import InputError
+from ..sampling import FILTERS, WRAP_MODES
+
+
+def add_state_options(p: argparse.ArgumentParser, default_mode: str) -> None:
+    """The corpus rules of a texture (``alpha_test.StateRule``), filter, wrap and channel."""
+    g = p.add_argument_group("texel states")
+    g.add_argument("--mode", choices=MODES, default=default_mode,
+                   help="levels: T if alpha <= t-max, O if alpha >= o-min (the deck's corpus rule); "
+                        "cutoff: opaque iff alpha > cutoff (default: %(default)s)")
+    g.add_argument("--t-max", type=float, default=30.0, help="levels: T at or below this 8-bit alpha (30)")
+    g.add_argument("--o-min", type=float, default=225.0, help="levels: O at or above this 8-bit alpha (225)")
+    g.add_argument("--cutoff", type=float, default=0.5, help="cutoff: opaque iff alpha > cutoff, in [0, 1] (0.5)")
+    g.add_argument("--filter", choices=FILTERS, default="nearest", help="texture filter of the alpha test")
+    g.add_argument("--wrap", choices=WRAP_MODES, default="clamp", help="texture addressing (clamp)")
+    g.add_argument("--channel", default=None,
+                   help="read coverage from this channel (R, G, B, A, L or an index) instead of alpha")
+
+
+def eval_config(a) -> EvalConfig:
+    rule = StateRule(a.mode, a.t_max, a.o_min, a.cutoff)
+    return EvalConfig(rule, a.filter, a.wrap, a.channel, getattr(a, "encoder", None), getattr(a, "effort", None))
+
+
+def add_codec_options(p: argparse.ArgumentParser, what: str = "codec schemes named without a variant") -> None:
+    g = p.add_argument_group("codecs")
+    g.add_argument("--encoder", choices=ENCODERS, default=None, help=f"encoder of {what} (default: best)")
+    g.add_argument("--effort", choices=list(EFFORTS), default=None,
+                   help=f"our encoder's search effort for {what} (default: the codec's, medium)")
+
+
+def add_material_options(p: argparse.ArgumentParser) -> None:
+    """A scene's material rules (``alpha_test.MaterialRules``), the same for trace and omm."""
+    g = p.add_argument_group("materials (the same rules in omaps trace and omaps omm)")
+    g.add_argument("--cutoff", type=float, default=None,
+                   help="replace every MASK material's alphaCutoff (opaque iff alpha x factor >= cutoff)")
+    g.add_argument("--filter", choices=FILTERS, default=None, help="replace every sampler's filter")
+    g.add_argument("--wrap", choices=WRAP_MODES, default=None, help="replace every sampler's wrap modes")
+    g.add_argument("--blend", choices=BLEND_RULES, default="levels",
+                   help="BLEND materials: levels (T only at alpha 0, O only at 1; the shader decides the rest at "
+                        "--blend-cutoff), cutoff (alpha-tested at --blend-cutoff), skip (opaque) (default levels)")
+    g.add_argument("--blend-cutoff", type=float, default=0.5, metavar="A",
+                   help="the any-hit shader's cut-off for BLEND materials (default: %(default)s)")
+
+
+def material_rules(a) -> MaterialRules:
+    return MaterialRules(a.cutoff, a.filter, a.wrap, a.blend, a.blend_cutoff)
+
+
+def check_jobs(jobs) -> None:
+    if jobs is not None and jobs < 1:
+        raise InputError(f"--jobs must be >= 1, got {jobs}")
+
+
+def fmt_row(cells, widths) -> str:
+    return "  ".join(str(c).rjust(w) if i else str(c).ljust(w) for i, (c, w) in enumerate(zip(cells, widths)))
+
+
+def print_table(header: list, rows: list) -> None:
+    widths = [max(len(str(r[i])) for r in rows + [header]) for i in range(len(header))]
+    print(fmt_row(header, widths))
+    for r in rows:
+        print(fmt_row(r, widths))
+
+
+def show_warning(message, category, filename, lineno, file=None, line=None) -> None:
+    """Library warnings as one line each: ``omaps: warning: ...``."""
+    print(f"omaps: warning: {message}", file=sys.stderr)

@@ -1,0 +1,46 @@
+"""The ``omaps`` command line: a thin layer over the Python API, one module per command family."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import warnings
+
+from .. import __version__
+from ..errors import InputError
+from .common import show_warning
+
+
+def parser() -> argparse.ArgumentParser:
+    from . import maps, omm, trace
+
+    p = argparse.ArgumentParser(prog="omaps", description="Bake, compress and evaluate opacity maps "
+                                "for ray tracing alpha-tested geometry.")
+    p.add_argument("--version", action="version", version=f"omaps {__version__}")
+    sub = p.add_subparsers(dest="command", required=True)
+    maps.add_parsers(sub)
+    trace.add_parser(sub)
+    omm.add_parser(sub)
+    return p
+
+
+def main(argv=None) -> int:
+    args = parser().parse_args(argv)
+    try:
+        with warnings.catch_warnings():
+            warnings.showwarning = show_warning
+            warnings.simplefilter("always", UserWarning)
+            return args.func(args)
+    except InputError as exc:
+        print(f"omaps: error: {exc}", file=sys.stderr)
+        return 2
+    except OSError as exc:
+        print(f"omaps: error: {exc.filename or ''}: {exc.strerror or exc}", file=sys.stderr)
+        return 1
+    except KeyboardInterrupt:
+        print("omaps: interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

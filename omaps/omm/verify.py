@@ -1,0 +1,95 @@
+"""``verify``: read an OMM folder back and check it -- layout, the decoded pair blocks, and every
+micro-triangle against a re-bake of its recorded input when that input is present."""
+
+from __future__ import annotations
+
+import os
+
+import numpy as np
+
+from ..codecs import get_codec
+from . import files, pairs
+from . import format as omm_format
+from .inputs import load_geometries
+from .pipeline import OmmResult, OmmSettings, build
+
+__all__ = ["verify", "settings_from_summary"]
+
+
+def settings_from_summary(summary: dict) -> OmmSettings:
+    s = summary["settings"]
+    return OmmSettings(format=summary["format"], level=s["level"] if s["level"] is not None else 4,
+                       dynamic_scale=s["dynamic_scale"], max_level=s["max_level"], promotion=s["promotion"],
+                       special=s["special"], dedup=s["dedup"], source=s["source"], encoder=s["encoder"],
+                       effort=s["effort"], seed=s["seed"])
+
+
+def verify(folder) -> tuple[OmmResult, list[str], list[str]]:
+    """(the folder's buffers, problems, checks done). Layout problems raise InputError.
+
+    Example::
+
+        >>> from omaps.omm import verify       # doctest: +SKIP
+        >>> res, problems, done = verify("omm/")  # doctest: +SKIP
+        >>> problems                           # doctest: +SKIP
+        []
+    """
+    res = files.read(folder)
+    problems, done = [], ["layout, records, offsets, index entries, usage counts"]
+    fmt_code = res.summary.get("format_code")
+    if len(res.triangles) and not np.all(res.triangles["format"] == fmt_code):
+        problems.append(f"micromap formats differ from omm.json's format {fmt_code}")
+    if res.pair_blocks is not None:
+        problems += _check_pair_blocks(res)
+        done.append("micromaps against the decoded pair blocks")
+    spec = res.summary.get("input")
+    if spec is not None:
+        src = spec.get("path") or spec.get("texture")
+        missing = [p for p in (spec.get("path"), spec.get("texture"), spec.get("uvs")) if p and not os.path.exists(p)]
+        if missing:
+            done.append(f"no re-bake: {missing[0]} is absent")
+        else:
+            import warnings
+
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                geoms, _, _ = load_geometries(spec)
+            again = build(geoms, settings_from_summary(res.summary))
+            problems += _compare(res, again)
+            done.append(f"every micro-triangle against a re-bake of {src}")
+    return res, problems, done
+
+
+def _compare(res: OmmResult, again: OmmResult) -> list[str]:
+    if len(res.index) != len(again.index):
+        return [f"{len(res.index)} triangles in the files, {len(again.index)} in the re-bake"]
+    if (np.array_equal(res.index, again.index) and np.array_equal(res.triangles, again.triangles)
+            and np.array_equal(res.data, again.data)):
+        return []
+    for t in range(len(res.index)):
+        a, b = res.triangle_states(t), again.triangle_states(t)
+        if not np.array_equal(np.broadcast_to(a, b.shape) if len(a) == 1 else a,
+                              np.broadcast_to(b, a.shape) if len(b) == 1 else b):
+            return [f"triangle {t}: its micro-triangle states differ from a re-bake"]
+    return ["buffers differ from a re-bake (same states, different packing)"]
+
+
+def _check_pair_blocks(res: OmmResult) -> list[str]:
+    info = res.summary["pair_blocks"]
+    codec = get_codec(info["codec"])
+    raw = res.pair_blocks
+    bb = codec.block_bytes
+    if len(raw) != info["blocks"] * bb:
+        return [f"{omm_format.PAIR_BLOCKS_FILE} has {len(raw)} bytes, {info['blocks']} blocks of {bb} expected"]
+    maps = codec.decode_many(np.frombuffer(raw, np.uint8).reshape(-1, bb)) if info["blocks"] else np.zeros(
+        (0, codec.map_size, codec.map_size), np.uint8)
+    rec = res.pair_records
+    expanded = pairs.expand(maps, rec["pair"].astype(np.int64), rec["corners"])
+    two_state = res.summary["format_code"] == omm_format.FORMAT_2_STATE
+    for t in range(len(res.index)):
+        s = np.broadcast_to(res.triangle_states(t), expanded[t].shape)
+        want = expanded[t]
+        known = want < 2
+        if not (np.array_equal(s[known], want[known]) and (two_state or np.all(s[~known] >= 2))):
+            return [f"triangle {t} disagrees with its decoded pair block"]
+    return []

@@ -1,0 +1,24 @@
+"""Ray-traced evaluation: alpha tests per ray on a glTF scene, with each scheme's maps read in
+Embree's any-hit path (``filter``), split as a codec is: address tables (``tables``), hit ->
+state lookups and the shader (``lookups``), the filter, the ray loops (``rays``), the scene's
+maps (``maps``), preparation (``prepare``), metrics, the 2-state mode and the pictures.
+
+Example::
+
+    >>> from omaps.scene import load_scene                                        # doctest: +SKIP
+    >>> from omaps.schemes import parse_schemes                                   # doctest: +SKIP
+    >>> from omaps.trace import default_camera, prepare, trace_scheme, summary    # doctest: +SKIP
+    >>> scene = load_scene("palm.glb")                                             # doctest: +SKIP
+    >>> prep = prepare(scene, parse_schemes("none,vq4"))                          # doctest: +SKIP
+    >>> cam = default_camera(scene.bounds()).basis(256, 256)                      # doctest: +SKIP
+    >>> ref, vq4 = (trace_scheme(prep, n, cam, 256, 256) for n in ("none", "vq4"))  # doctest: +SKIP
+    >>> summary(vq4, ref, prep.maps["vq4"], 256, 256)["differing_pixels"]         # doctest: +SKIP
+    0
+"""
+
+from .camera import DEFAULT_LIGHT, SHADOW_TNEAR, Camera, default_camera, light_direction
+from .metrics import coverage_error, differing_pixels, summary
+from .prepare import Prepared, SchemeRun, prepare, trace_scheme
+
+__all__ = ["Camera", "default_camera", "light_direction", "DEFAULT_LIGHT", "SHADOW_TNEAR", "prepare", "Prepared",
+           "trace_scheme", "SchemeRun", "summary", "differing_pixels", "coverage_error"]

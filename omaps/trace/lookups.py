@@ -1,0 +1,101 @@
+"""Hit -> region state, and the any-hit shader itself, as numba functions a filter calls.
+
+A state function ``(table, tri, b1, b2) -> T/O/C`` reads one scheme's *stored* data: nothing
+(``none``: always C), a per-triangle 2-bit micromap through the bird curve, or a pair's square
+map through its codec's random-access ``lookup`` (the raw ``sqN`` map included). The shader is
+``alpha_test.sample_passes`` on the material's texture values -- the same numbers and comparison
+the bakers classified -- times the interpolated COLOR_0 alpha.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import carray, njit
+
+from .. import birdcurve, pair, states
+from ..codecs.raw import read_state
+from ..sampling import sample_texture
+from .embree import f64_ptr, i8_ptr, i32_ptr, i64_ptr, u8_ptr, u16_ptr
+from .tables import (T_MAP_DATA, T_MAP_PARAM, T_MAP_ROW, T_MAP_ROW_BYTES, T_MAT_FILTER, T_MAT_H, T_MAT_INCL,
+                     T_MAT_TEX_START, T_MAT_THR, T_MAT_W, T_MAT_WRAP_U, T_MAT_WRAP_V, T_TEX, T_TRI_CORNER,
+                     T_TRI_MAT, T_TRI_UV, T_TRI_VALPHA)
+
+__all__ = ["clamp_bary", "shader_alpha_test", "no_map_state", "micro_map_state", "codec_map_state", "state_function"]
+
+
+@njit(cache=True, inline="always")
+def clamp_bary(b1, b2):
+    """Embree's barycentrics, clamped onto the triangle (every consumer uses the same point)."""
+    b1 = max(np.float64(b1), 0.0)
+    b2 = max(np.float64(b2), 0.0)
+    s = b1 + b2
+    if s > 1.0:
+        b1 /= s
+        b2 /= s
+    return b1, b2
+
+
+@njit(cache=True)
+def shader_alpha_test(table, tri, b1, b2):
+    """The any-hit shader: the material's texture value at the hit (mip level 0, its filter and
+    wrap, ``sampling.sample_texture``) times the interpolated vertex alpha, compared with the
+    material's threshold (``alpha_test.AlphaTest``)."""
+    m = i32_ptr(table[T_TRI_MAT])[tri]
+    uv = f64_ptr(table[T_TRI_UV])
+    w0 = 1.0 - b1 - b2
+    o = 6 * tri
+    u = w0 * uv[o] + b1 * uv[o + 2] + b2 * uv[o + 4]
+    v = w0 * uv[o + 1] + b1 * uv[o + 3] + b2 * uv[o + 5]
+    w = i64_ptr(table[T_MAT_W])[m]
+    h = i64_ptr(table[T_MAT_H])[m]
+    tex = carray(u16_ptr(table[T_TEX] + 2 * i64_ptr(table[T_MAT_TEX_START])[m]), (h, w))
+    a = sample_texture(tex, i64_ptr(table[T_MAT_FILTER])[m], i64_ptr(table[T_MAT_WRAP_U])[m],
+                       i64_ptr(table[T_MAT_WRAP_V])[m], u * w, v * h)
+    va = f64_ptr(table[T_TRI_VALPHA])
+    c = w0 * va[3 * tri] + b1 * va[3 * tri + 1] + b2 * va[3 * tri + 2]
+    if c != 1.0:
+        a = a * c
+    thr = f64_ptr(table[T_MAT_THR])[m]
+    return a >= thr if i64_ptr(table[T_MAT_INCL])[m] else a > thr
+
+
+@njit(cache=True)
+def no_map_state(table, tri, b1, b2):
+    return states.C
+
+
+@njit(cache=True)
+def micro_map_state(table, tri, b1, b2):
+    """Raw 2-bit micromap of the triangle, micro-triangle from the bird curve."""
+    k = birdcurve.bary_to_index(b1, b2, table[T_MAP_PARAM])
+    row = np.int64(i32_ptr(table[T_MAP_ROW])[tri])
+    return read_state(u8_ptr(table[T_MAP_DATA]), row * table[T_MAP_ROW_BYTES], k)
+
+
+_CODEC_STATES: dict = {}
+
+
+def codec_map_state(codec):
+    """A state function reading the pair's stored square map with the codec's random-access lookup."""
+    if codec.name not in _CODEC_STATES:
+        lookup = codec.lookup
+
+        @njit
+        def state(table, tri, b1, b2):
+            s, t = pair.hit_st(i8_ptr(table[T_TRI_CORNER]), tri, b1, b2)
+            n = table[T_MAP_PARAM]
+            i, j = pair.uv_to_cell(s, t, n)
+            rb = table[T_MAP_ROW_BYTES]
+            row = np.int64(i32_ptr(table[T_MAP_ROW])[tri])
+            return lookup(carray(u8_ptr(table[T_MAP_DATA] + row * rb), rb), i, j)
+        _CODEC_STATES[codec.name] = state
+    return _CODEC_STATES[codec.name]
+
+
+def state_function(sm):
+    """The state function of a scene's scheme maps (``trace.maps.SchemeMaps``)."""
+    if sm.kind == "none":
+        return no_map_state
+    if sm.kind == "micromap":
+        return micro_map_state
+    return codec_map_state(sm.codec)

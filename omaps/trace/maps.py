@@ -1,0 +1,155 @@
+"""Every scheme's maps for a scene, as the tracer reads them: baked once per distinct pair or
+triangle with the core bakers, deduplicated, and stored through the scheme's codec.
+
+Square schemes bake each distinct pair (corner UVs, B or not, material) at the finest size asked
+for, with growth ``bake.GROW_TEXEL``; coarser sizes are OR-downsampled, which is exact. Micromap
+schemes bake each distinct triangle with the micromap baker. Triangles the scene reader marks
+unknown get all-C maps (a pair with one such triangle is all C). Work is done per prototype and
+shared by its instances, as a BLAS shares it.
+"""
+
+from __future__ import annotations
+
+import multiprocessing
+import os
+from concurrent.futures import ProcessPoolExecutor
+from dataclasses import dataclass
+
+import numpy as np
+from tqdm import tqdm
+
+from .. import states
+from ..bake import GROW_TEXEL, bake_micromaps, bake_pair_flags, or_downsample
+from ..bake.square import flags_to_states
+from ..codecs.raw import pack_states
+from ..scene.alpha import AlphaTriangles, distinct_rows, pair_corner_uvs
+
+__all__ = ["SchemeMaps", "build_scheme_maps", "default_jobs", "dedupe_maps"]
+
+
+@dataclass
+class SchemeMaps:
+    """One scheme's maps as the tracer reads them: alpha triangle t uses row ``rows[t]`` of
+    ``data`` (``row_bytes`` each). kind: "none" (no maps), "micromap" (raw 2-bit micromap per
+    triangle, param L), "square" (a pair's stored square map through ``codec``, param N)."""
+
+    name: str
+    kind: str
+    param: int
+    rows: np.ndarray  # int32 (T,)
+    data: np.ndarray  # uint8 (R * row_bytes,)
+    row_bytes: int
+    map_bytes: int  # storage of every prototype pair's (or triangle's) map, as a BLAS holds them
+    distinct_maps: int
+    known_fraction: float  # mean over pairs (triangles for micromaps) of the fraction of known regions
+    codec: object = None
+    scheme: object = None
+
+
+def default_jobs(jobs: int | None) -> int:
+    return max(1, os.cpu_count() or 1) if jobs is None else max(1, int(jobs))
+
+
+def dedupe_maps(m: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    flat = np.ascontiguousarray(m).reshape(len(m), -1)
+    uniq, inverse = np.unique(flat, axis=0, return_inverse=True)
+    return uniq.reshape((len(uniq),) + m.shape[1:]), inverse.ravel()
+
+
+def _encode_chunk(args):
+    from ..codecs import get_codec
+
+    name, maps_, encoder, effort = args
+    blocks, decoded = get_codec(name).encode_many(maps_, encoder, effort)
+    return blocks, decoded
+
+
+def encode_maps(codec, maps_: np.ndarray, encoder, effort, jobs: int = 1, progress: bool = False):
+    """``codec.encode_many`` over worker processes: (blocks (P, bytes), decoded (P, N, N))."""
+    if len(maps_) == 0 or not codec.compressed or jobs <= 1 or len(maps_) < 16:
+        return codec.encode_many(maps_, encoder, effort)
+    first = codec.encode_many(maps_[:1], encoder, effort)  # compiled (and cached) before the workers start
+    edges = np.linspace(1, len(maps_), 8 * jobs + 1).astype(int)
+    args = [(codec.name, maps_[a:b], encoder, effort) for a, b in zip(edges[:-1], edges[1:]) if b > a]
+    bar = tqdm(total=len(args), desc=f"encode {codec.name}", unit="chunk", disable=not progress, leave=False)
+    out = [first]
+    try:
+        with ProcessPoolExecutor(max_workers=jobs, mp_context=multiprocessing.get_context("spawn")) as pool:
+            for r in pool.map(_encode_chunk, args):
+                out.append(r)
+                bar.update()
+    finally:
+        bar.close()
+    return np.concatenate([o[0] for o in out]), np.concatenate([o[1] for o in out])
+
+
+def _pair_flags(at: AlphaTriangles, tests: dict, n: int):
+    """Flags (D, n, n) of the distinct pairs, and every pair's distinct index."""
+    uv, has_b, mat = pair_corner_uvs(at)
+    unknown = at.unknown[at.pair_first] | ((at.pair_second >= 0) & at.unknown[np.maximum(at.pair_second, 0)])
+    reps, inverse = distinct_rows(uv, has_b, mat, unknown)
+    flags = np.empty((len(reps), n, n), np.uint8)
+    rmat = mat[reps]
+    for m in np.unique(rmat):
+        sel = np.flatnonzero(rmat == m)
+        flags[sel] = bake_pair_flags(tests[int(m)].grid(), uv[reps[sel]], has_b[reps[sel]], n, GROW_TEXEL)
+    flags[unknown[reps]] = states.FLAG_C
+    return flags, inverse
+
+
+def micromap_states(at: AlphaTriangles, tests: dict, level: int):
+    """States (D, 4**level) of the distinct alpha triangles, and every triangle's distinct index."""
+    reps, inverse = distinct_rows(at.uv, at.material, at.unknown)
+    out = np.empty((len(reps), 4 ** level), np.uint8)
+    rmat = at.material[reps]
+    for m in np.unique(rmat):
+        sel = np.flatnonzero(rmat == m)
+        s, _ = bake_micromaps(tests[int(m)].grid(), at.uv[reps[sel]], level, GROW_TEXEL)
+        out[sel] = s.reshape(len(sel), -1)
+    out[at.unknown[reps]] = states.C
+    return out, inverse
+
+
+def pair_square_states(at: AlphaTriangles, tests: dict, sizes) -> tuple[dict, np.ndarray]:
+    """States of the distinct pairs' square maps at each size, and every pair's distinct index."""
+    finest = max(sizes)
+    flags, inverse = _pair_flags(at, tests, finest)
+    return {n: flags_to_states(flags if n == finest else or_downsample(flags, finest // n)) for n in sizes}, inverse
+
+
+def build_scheme_maps(at: AlphaTriangles, tests: dict, schemes, jobs: int = 1,
+                      progress: bool = False) -> dict[str, SchemeMaps]:
+    """Bake and store every scheme's maps. ``tests``: material -> ``AlphaTest``; ``schemes``:
+    ``omaps.schemes.Scheme`` objects (kinds none, micromap, square)."""
+    out: dict[str, SchemeMaps] = {}
+    n_pairs = len(at.pair_first)
+    squares = [s for s in schemes if s.kind == "square"]
+    pair_states, pair_inverse = {}, None
+    if squares and at.count:
+        pair_states, pair_inverse = pair_square_states(at, tests, {s.codec.map_size for s in squares})
+    for s in schemes:
+        if s.kind == "none":
+            out[s.name] = SchemeMaps(s.name, "none", 0, np.zeros(at.count, np.int32), np.zeros(1, np.uint8), 1, 0, 0,
+                                     0.0, None, s)
+        elif s.kind == "micromap":
+            st, inv_t = micromap_states(at, tests, s.level) if at.count else (np.zeros((0, 4 ** s.level)), np.zeros(0))
+            uniq, inv_u = dedupe_maps(st)
+            data = pack_states(uniq) if len(uniq) else np.zeros((0, 1), np.uint8)
+            known = float(np.mean((st != states.C).mean(axis=1)[inv_t])) if at.count else 0.0
+            out[s.name] = SchemeMaps(s.name, "micromap", s.level, inv_u[inv_t].astype(np.int32) if at.count else
+                                     np.zeros(0, np.int32), data.ravel().copy() if data.size else np.zeros(1, np.uint8),
+                                     data.shape[1], at.count * data.shape[1], len(uniq), known, None, s)
+        else:
+            codec = s.codec
+            n = codec.map_size
+            if not at.count:
+                out[s.name] = SchemeMaps(s.name, "square", n, np.zeros(0, np.int32), np.zeros(1, np.uint8),
+                                         codec.block_bytes, 0, 0, 0.0, codec, s)
+                continue
+            uniq, inv_u = dedupe_maps(pair_states[n])
+            pair_rows = inv_u[pair_inverse]  # every pair -> its distinct map
+            blocks, decoded = encode_maps(codec, uniq, s.encoder, s.effort, jobs, progress)
+            known = float(np.mean((decoded != states.C).reshape(len(decoded), -1).mean(axis=1)[pair_rows]))
+            out[s.name] = SchemeMaps(s.name, "square", n, pair_rows[at.pair].astype(np.int32), blocks.ravel().copy(),
+                                     codec.block_bytes, n_pairs * codec.block_bytes, len(uniq), known, codec, s)
+    return out

@@ -1,0 +1,67 @@
+"""The tracer's 2-state mode: square maps with every C cell resolved to O or T, so no ray ever
+runs the any-hit shader (the deck's future work "hash/dither {O, C, T} -> {O, T}").
+
+This is not conservative: it trades exact visibility for zero alpha tests, as hardware that
+forces 2-state micromaps does. Each C cell of a pair's square map (a raw or a codec's decoded
+map) becomes O or T by ``omaps.promotion``'s rule on the cell's opaque fraction
+(``coverage.cell_fractions``: K x K sample points of the cell, mapped through the pair's
+triangles, tested by the material's alpha test), with ``hashed`` comparing it to a threshold
+hashed from the cell centre's texel position. T and O cells keep their states.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .. import states
+from ..codecs import get_codec
+from ..coverage import cell_fractions
+from ..promotion import PROMOTIONS, resolve_regions
+from ..scene.alpha import distinct_rows, pair_corner_uvs
+from .maps import SchemeMaps, dedupe_maps
+
+__all__ = ["MODES", "two_state_maps", "decoded_pair_maps"]
+
+MODES = PROMOTIONS  # nearest (majority), opaque, transparent, hashed
+
+
+def decoded_pair_maps(sm: SchemeMaps, at) -> np.ndarray:
+    """The (P, n, n) map every pair's hits read in a square scheme."""
+    if sm.kind != "square":
+        raise ValueError(f"2-state maps need a square scheme, not {sm.kind!r}")
+    uniq = sm.codec.decode_many(sm.data.reshape(-1, sm.row_bytes))
+    return uniq[sm.rows[at.pair_first]]
+
+
+def two_state_maps(prep, sm: SchemeMaps, mode: str, seed: int = 0, cache: dict | None = None) -> SchemeMaps:
+    """A raw square ``SchemeMaps`` (states 0 and 1 only) for square scheme ``sm``."""
+    if mode not in MODES:
+        raise ValueError(f"unknown 2-state mode {mode!r} (choose from {', '.join(MODES)})")
+    at = prep.alpha
+    n = sm.param
+    cache = {} if cache is None else cache
+    if "pairs" not in cache:  # the same for every scheme and rule
+        uv, has_b, mat = pair_corner_uvs(at)
+        cache["pairs"] = (uv, has_b, mat) + distinct_rows(uv, has_b, mat)
+    uv, has_b, mat, reps, inverse = cache["pairs"]
+    key = ("fractions", n)
+    if key not in cache:
+        frac = np.zeros((len(reps), n, n))
+        centre = np.zeros((len(reps), n, n, 2))
+        rmat = mat[reps]
+        for m in np.unique(rmat):
+            sel = np.flatnonzero(rmat == m)
+            frac[sel], centre[sel] = cell_fractions(prep.tests[int(m)], uv[reps[sel]], has_b[reps[sel]], n)
+        cache[key] = (frac, centre)
+    frac, centre = cache[key]
+    three = decoded_pair_maps(sm, at)[reps]
+    two = resolve_regions(three, frac, centre, mode, seed)
+    if np.any((three != states.C) & (two != three)):
+        raise RuntimeError("internal error: a 2-state resolution changed a known cell")
+    uniq, inv_u = dedupe_maps(two)
+    rows = inv_u[inverse[at.pair]].astype(np.int32)
+    raw = get_codec(f"sq{n}")
+    blocks, _ = raw.encode_many(uniq)
+    n_pairs = len(at.pair_first)
+    return SchemeMaps(f"{sm.name}/{mode}", "square", n, rows, blocks.ravel().copy(), raw.block_bytes,
+                      n_pairs * n * n // 8, len(uniq), 1.0, raw)
