@@ -21,13 +21,13 @@ sys.path.insert(0, str(ROOT / "tests"))
 
 import reference as ref  # noqa: E402
 
-from omaps import maps  # noqa: E402
-from omaps.evaluate import EvalConfig, evaluate_many  # noqa: E402
+from omaps import bake as maps  # noqa: E402 (the corpus pair bakers)
+from omaps.corpus import EvalConfig, evaluate_many  # noqa: E402
 from omaps.pair import PAIR  # noqa: E402
-from omaps.procedural import default_corpus  # noqa: E402
+from omaps.corpus import default_corpus  # noqa: E402
 from omaps.sampling import footprint_grid  # noqa: E402
 from omaps.schemes import DEFAULT_SCHEMES, parse_schemes  # noqa: E402
-from omaps.texel_states import StateRule  # noqa: E402
+from omaps.alpha_test import StateRule  # noqa: E402
 from omaps.texture import load_alpha  # noqa: E402
 
 TEXTURES = ROOT.parent / "shared" / "data" / "textures"

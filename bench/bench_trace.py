@@ -17,9 +17,12 @@ from pathlib import Path
 
 import numpy as np
 
-from omaps import scene_maps, trace
+from omaps import trace
 from omaps.scene import load_scene
-from omaps.trace_cli import DEFAULT_LIGHT, SHADOW_TNEAR, default_schemes
+from omaps.schemes import TRACE_KINDS, parse_schemes
+from omaps.trace.maps import default_jobs
+
+DEFAULT_SCHEMES = "none,tri3,sq16,vq2,vq4,vq4x64"
 
 SCENES = Path(__file__).resolve().parents[2] / "shared" / "data" / "scenes"
 
@@ -34,17 +37,17 @@ def main() -> None:
     if not Path(a.scene).is_file():
         print(f"bench_trace: {a.scene} not found (../shared is absent): nothing to measure")
         return
-    names = scene_maps.parse_trace_schemes(a.schemes or default_schemes())
-    names = ["none"] + [n for n in names if n != "none"]
+    schemes = parse_schemes("none," + (a.schemes or DEFAULT_SCHEMES), TRACE_KINDS)
+    names = [s.name for s in schemes]
     scene = load_scene(a.scene)
     t0 = time.perf_counter()
-    prep = trace.prepare(scene, names, scene_maps.default_jobs(None))
+    prep = trace.prepare(scene, schemes, jobs=default_jobs(None))
     t_prep = time.perf_counter() - t0
     w = h = a.size
     bounds = scene.bounds()
     cam = trace.default_camera(bounds).basis(w, h)
-    light = np.asarray(DEFAULT_LIGHT) / np.linalg.norm(DEFAULT_LIGHT)
-    tnear = SHADOW_TNEAR * float(np.linalg.norm(bounds[1] - bounds[0]))
+    light = trace.light_direction()
+    tnear = trace.SHADOW_TNEAR * float(np.linalg.norm(bounds[1] - bounds[0]))
     runs = {n: [] for n in ["opaque"] + names}
     for n in runs:  # warm-up: compile filters and loops
         trace.trace_scheme(prep, None if n == "opaque" else n, cam, 8, 8, light, tnear)

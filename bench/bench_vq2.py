@@ -13,14 +13,15 @@ import time
 import numpy as np
 from common import lookup_rates, pack_raw, raw_lookup_batch, tile_maps
 
-from omaps import maps, states
+from omaps import states
+from omaps.bake import known_fraction
 from omaps.codecs import vq2_block, vq2_encode
 
 
 def main():
     m = tile_maps(16)
     print(f"{len(m)} non-uniform 16x16 maps from 64x64 tiles; one core")
-    sq = np.mean([maps.known_fraction(a) for a in m])
+    sq = np.mean([known_fraction(a) for a in m])
     for enc, eff in [("paper", "medium"), ("best", "fast"), ("best", "medium"), ("best", "thorough")]:
         vq2_encode.encode_many(m[:4], enc, eff)  # compile / load cache
         t0 = time.perf_counter()
@@ -28,7 +29,7 @@ def main():
         dt = time.perf_counter() - t0
         dec = [b.decode() for b in blocks]
         assert all(states.is_conservative(a, d) for a, d in zip(m, dec))
-        sav = np.mean([maps.known_fraction(d) for d in dec])
+        sav = np.mean([known_fraction(d) for d in dec])
         print(f"  {enc:5} {eff:8} {len(m) / dt:9.0f} blocks/s   savings {sav:.4f} = {sav / sq:.4f} x sq16")
     blocks = np.stack([np.frombuffer(b.pack(), np.uint8) for b in vq2_encode.encode_many(m, "best", "fast")])
     rates = lookup_rates(16, [("raw 2-bit", raw_lookup_batch, pack_raw(m)), ("vq2", vq2_block.lookup_batch, blocks)])

@@ -15,7 +15,8 @@ import time
 import numpy as np
 from common import lookup_rates, pack_raw, raw_lookup_batch, tile_maps
 
-from omaps import maps, states
+from omaps import states
+from omaps.bake import known_fraction
 from omaps.codecs import vq4_block, vq4_encode
 
 SUBSET = 400
@@ -25,8 +26,8 @@ def main():
     m = tile_maps(32)
     sub = m[np.linspace(0, len(m) - 1, min(SUBSET, len(m))).astype(int)]
     print(f"{len(m)} non-uniform 32x32 maps from 64x64 tiles (subset of {len(sub)} for the slow encoders); one core")
-    sq_all = np.mean([maps.known_fraction(a) for a in m])
-    sq_sub = np.mean([maps.known_fraction(a) for a in sub])
+    sq_all = np.mean([known_fraction(a) for a in m])
+    sq_sub = np.mean([known_fraction(a) for a in sub])
     for enc, eff, all_maps in [("best", "fast", True), ("best", "medium", True), ("paper", "medium", False),
                                ("best", "thorough", False)]:
         data = m if all_maps else sub
@@ -36,7 +37,7 @@ def main():
         dt = time.perf_counter() - t0
         dec = [b.decode() for b in blocks]
         assert all(states.is_conservative(a, d) for a, d in zip(data, dec))
-        sav = np.array([maps.known_fraction(d) for d in dec])
+        sav = np.array([known_fraction(d) for d in dec])
         on_sub = sav[np.linspace(0, len(m) - 1, len(sub)).astype(int)] if all_maps else sav
         line = f"  {enc:5} {eff:8} {len(data) / dt:9.0f} blocks/s   subset savings {on_sub.mean() / sq_sub:.4f} of sq32"
         if all_maps:

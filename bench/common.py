@@ -8,10 +8,10 @@ from pathlib import Path
 import numpy as np
 from numba import njit
 
-from omaps import maps
-from omaps.procedural import default_corpus
+from omaps.alpha_test import StateRule
+from omaps.bake import bake_square
+from omaps.corpus import default_corpus
 from omaps.sampling import footprint_grid
-from omaps.texel_states import StateRule
 from omaps.texture import load_alpha
 
 TEXTURES = Path(__file__).resolve().parents[2] / "shared" / "data" / "textures"
@@ -28,7 +28,7 @@ def tile_maps(size, tile=64):
         s = rule.classify(t)
         for y in range(0, t.height - tile + 1, tile):
             for x in range(0, t.width - tile + 1, tile):
-                out.append(maps.bake_square(footprint_grid(s[y:y + tile, x:x + tile]), size))
+                out.append(bake_square(footprint_grid(s[y:y + tile, x:x + tile]), size))
     m = np.stack(out)
     keep = np.array([len(np.unique(a)) > 1 for a in m])
     return m[keep]

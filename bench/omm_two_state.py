@@ -8,7 +8,7 @@ opaque. Per pixel (a block of samples), coverage = the opaque share of its sampl
 |OMM coverage - reference coverage|. Pixel sizes are set against the micro-triangles: ``close``
 (each cell of 2 micro-triangles spans 4 x 4 pixels), ``matched`` (1 pixel per cell) and ``far``
 (4 x 4 cells per pixel), as a surface seen nearer or further away. Promotions: nearest (majority),
-opaque, transparent, hashed (omaps.omm.resolve). Means over textures, then over pixels.
+opaque, transparent, hashed (omaps.promotion). Means over textures, then over pixels.
 
     python bench/omm_two_state.py [--levels 3,5] [--filter linear]
 """
@@ -23,8 +23,11 @@ import numpy as np
 from numba import njit, prange
 
 from omaps import birdcurve, pair
-from omaps.omm import alpha_test, bake, resolve
+from omaps.alpha_test import StateRule, sample_passes
+from omaps.bake import bake_micromaps
 from omaps.omm import format as omm_format
+from omaps.omm import resolve
+from omaps.promotion import PROMOTIONS
 from omaps.texture import load_alpha
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -39,7 +42,7 @@ def _sample(value, thr, inclusive, filt, mu, mv, w, h, level, n, ref, micro):
         for i in range(n):
             u = (i + 0.5) / n
             v = (j + 0.5) / n
-            ref[j, i] = alpha_test.sample_passes(value, thr, inclusive, filt, mu, mv, u * w, v * h)
+            ref[j, i] = sample_passes(value, thr, inclusive, filt, mu, mv, u * w, v * h)
             t, b1, b2 = pair.uv_to_hit(u, v)
             micro[j, i] = t * (1 << (2 * level)) + birdcurve.bary_to_index(b1, b2, level)
 
@@ -59,7 +62,7 @@ def main():
         texs = [t for t in (load_alpha(p) for p in sorted(TEXTURES.glob("*.png"))) if min(t.width, t.height) >= 64]
         label = "shared corpus"
     else:
-        from omaps.procedural import default_corpus
+        from omaps.corpus import default_corpus
 
         texs, label = default_corpus(), "procedural corpus"
     levels = [int(x) for x in a.levels.split(",")]
@@ -67,13 +70,13 @@ def main():
     for level in levels:
         n_cells = 1 << level
         views = {"close": 4 * n_cells, "matched": n_cells, "far": max(n_cells // 4, 1)}
-        err = {m: {v: [] for v in views} for m in resolve.PROMOTIONS}
-        bias = {m: {v: [] for v in views} for m in resolve.PROMOTIONS}
-        sample_err = {m: [] for m in resolve.PROMOTIONS}
+        err = {m: {v: [] for v in views} for m in PROMOTIONS}
+        bias = {m: {v: [] for v in views} for m in PROMOTIONS}
+        sample_err = {m: [] for m in PROMOTIONS}
         c_frac = []
         for tex in texs:
-            test = alpha_test.AlphaTest.from_cutoff(tex, a.cutoff, a.filter, "clamp")
-            s3, starts = bake.bake_levels(test.grid(), pair.PAIR, level)
+            test = StateRule("cutoff", cutoff=a.cutoff).alpha_test(tex, a.filter, "clamp")
+            s3, starts = bake_micromaps(test.grid(), pair.PAIR, level)
             c_frac.append(np.mean(s3 == 2))
             ref = np.empty((GRID, GRID), dtype=np.bool_)
             micro = np.empty((GRID, GRID), dtype=np.int64)
@@ -81,7 +84,7 @@ def main():
             _sample(test.value, test.threshold, test.inclusive, filt, mu, mv, float(tex.width), float(tex.height),
                     level, GRID, ref, micro)
             ref_f = ref.astype(np.float64)
-            for m in resolve.PROMOTIONS:
+            for m in PROMOTIONS:
                 omm = resolve.resolve(s3, starts, level, test, pair.PAIR, omm_format.FORMAT_2_STATE, m)
                 got = omm[micro].astype(np.float64)
                 sample_err[m].append(np.mean(got != ref_f))
@@ -92,7 +95,7 @@ def main():
         print(f"\nlevel {level} ({2 * 4 ** level} micro-triangles per pair; {np.mean(c_frac):.1%} of them C on average)")
         print(f"{'promotion':12} {'wrong samples':>13}  " + "  ".join(f"{v + f' ({px}²)':>22}" for v, px in views.items()))
         print(f"{'':12} {'':>13}  " + "  ".join(f"{'|error|':>11}{'bias':>11}" for _ in views))
-        for m in resolve.PROMOTIONS:
+        for m in PROMOTIONS:
             cells = "  ".join(f"{np.mean(err[m][v]):11.4f}{np.mean(bias[m][v]):+11.4f}" for v in views)
             print(f"{m:12} {np.mean(sample_err[m]):13.4f}  {cells}")
     sys.stdout.flush()
