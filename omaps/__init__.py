@@ -15,7 +15,7 @@ Example::
     >>> tex = omaps.load_alpha(np.array([[0, 40, 250, 255]], np.uint8))
     >>> grid = omaps.StateRule("levels").alpha_test(tex).grid()
     >>> omaps.bake_square(grid, 4).tolist()[0]
-    [0, 2, 2, 1]
+    [0, 2, 1, 1]
 """
 
 __version__ = "0.1.0"

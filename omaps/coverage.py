@@ -18,7 +18,7 @@ Example::
     >>> from omaps.texture import load_alpha
     >>> test = StateRule("cutoff").alpha_test(load_alpha(np.array([[0, 255]], np.uint8)))
     >>> micro_fractions(test, np.array([[[0, 0], [1, 0], [0, 1]]]), 0).round(2).tolist()
-    [0.44]
+    [0.25]
 """
 
 from __future__ import annotations

@@ -26,7 +26,7 @@ Example::
     >>> grid = StateRule("cutoff").alpha_test(load_alpha(np.array([[0, 255]], np.uint8))).grid()
     >>> states, starts = bake_micromaps(grid, np.array([[[0, 0], [1, 0], [0, 1]]]), 1)
     >>> states.tolist()
-    [0, 2, 2, 0]
+    [0, 0, 1, 0]
 """
 
 from __future__ import annotations
