@@ -25,6 +25,26 @@ def _cell(c, size, period):
     return 0 if c < 0 else (size - 1 if c >= size else c)
 
 
+@njit(cache=True, inline="always")
+def edge_extent(ax, ay, bx, by, y0, y1, xmin, xmax):
+    """(xmin, xmax) widened by the x-extent of edge (a, b) within the row band [y0, y1]; exact
+    where the true intersection is representable (the band limits hit exactly at vertices)."""
+    if ay == by:
+        if y0 <= ay <= y1:
+            xmin = min(xmin, min(ax, bx))
+            xmax = max(xmax, max(ax, bx))
+        return xmin, xmax
+    if ay > by:
+        ax, ay, bx, by = bx, by, ax, ay
+    lo = max(ay, y0)
+    hi = min(by, y1)
+    if lo > hi:
+        return xmin, xmax
+    xl = ax if lo == ay else ax + ((lo - ay) * (bx - ax)) / (by - ay)
+    xh = bx if hi == by else ax + ((hi - ay) * (bx - ax)) / (by - ay)
+    return min(xmin, min(xl, xh)), max(xmax, max(xl, xh))
+
+
 @njit(cache=True)
 def polygon_flags(flags, period_x, period_y, poly, grow=0.0):
     """OR of the flags of every cell overlapped by convex polygon ``poly`` (K, 2) given in cell
@@ -49,25 +69,8 @@ def polygon_flags(flags, period_x, period_y, poly, grow=0.0):
         xmin = np.inf
         xmax = -np.inf
         for i in range(k):
-            ax = poly[i, 0]
-            ay = poly[i, 1]
-            bx = poly[(i + 1) % k, 0]
-            by = poly[(i + 1) % k, 1]
-            if ay == by:
-                if y0 <= ay <= y1:
-                    xmin = min(xmin, min(ax, bx))
-                    xmax = max(xmax, max(ax, bx))
-                continue
-            if ay > by:
-                ax, ay, bx, by = bx, by, ax, ay
-            lo = max(ay, y0)
-            hi = min(by, y1)
-            if lo > hi:
-                continue
-            xl = ax if lo == ay else ax + ((lo - ay) * (bx - ax)) / (by - ay)
-            xh = bx if hi == by else ax + ((hi - ay) * (bx - ax)) / (by - ay)
-            xmin = min(xmin, min(xl, xh))
-            xmax = max(xmax, max(xl, xh))
+            xmin, xmax = edge_extent(poly[i, 0], poly[i, 1], poly[(i + 1) % k, 0], poly[(i + 1) % k, 1], y0, y1,
+                                     xmin, xmax)
         xmin -= grow
         xmax += grow
         if not xmax > xmin:

@@ -39,6 +39,7 @@ from numba import njit, prange
 
 from ..birdcurve import MAX_LEVEL
 from ..errors import InputError
+from ..raster import edge_extent
 from ..sampling import FootprintGrid
 
 __all__ = ["bake_micromaps", "bake_micromap_rows", "dynamic_levels", "micro_starts", "check_level",
@@ -137,25 +138,6 @@ def _box(sat, r0, r1, c0, c1, period_y, period_x):
     return nt, no, n
 
 
-@njit(cache=True, inline="always")
-def _edge_extent(ax, ay, bx, by, y0, y1, xmin, xmax):
-    """One edge's x-extent within the row band [y0, y1]: ``raster.polygon_flags``' arithmetic."""
-    if ay == by:
-        if y0 <= ay <= y1:
-            xmin = min(xmin, min(ax, bx))
-            xmax = max(xmax, max(ax, bx))
-        return xmin, xmax
-    if ay > by:
-        ax, ay, bx, by = bx, by, ax, ay
-    lo = max(ay, y0)
-    hi = min(by, y1)
-    if lo > hi:
-        return xmin, xmax
-    xl = ax if lo == ay else ax + ((lo - ay) * (bx - ax)) / (by - ay)
-    xh = bx if hi == by else ax + ((hi - ay) * (bx - ax)) / (by - ay)
-    return min(xmin, min(xl, xh)), max(xmax, max(xl, xh))
-
-
 @njit(cache=True)
 def _leaf_flag(sat, period_y, period_x, x0, y0, x1, y1, x2, y2, grow):
     """OR of the flags of the cells a micro-triangle (grown by ``grow``) overlaps (0: no area):
@@ -170,9 +152,9 @@ def _leaf_flag(sat, period_y, period_x, x0, y0, x1, y1, x2, y2, grow):
             continue
         xmin = np.inf
         xmax = -np.inf
-        xmin, xmax = _edge_extent(x0, y0, x1, y1, b0, b1, xmin, xmax)
-        xmin, xmax = _edge_extent(x1, y1, x2, y2, b0, b1, xmin, xmax)
-        xmin, xmax = _edge_extent(x2, y2, x0, y0, b0, b1, xmin, xmax)
+        xmin, xmax = edge_extent(x0, y0, x1, y1, b0, b1, xmin, xmax)
+        xmin, xmax = edge_extent(x1, y1, x2, y2, b0, b1, xmin, xmax)
+        xmin, xmax = edge_extent(x2, y2, x0, y0, b0, b1, xmin, xmax)
         xmin -= grow
         xmax += grow
         if not xmax > xmin:
