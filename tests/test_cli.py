@@ -36,7 +36,9 @@ def test_outputs(tmp_path, textures, capsys):
     assert main(["eval", str(textures), "--json", str(j), "--csv", str(c), "--plot", str(p),
                  "--show", str(s), "--jobs", "1"]) == 0
     data = json.loads(j.read_text())
-    assert set(data) == {"textures", "mean"}
+    assert set(data) == {"settings", "textures", "mean"}
+    assert list(data["settings"]["schemes"]) == list(DEFAULT_SCHEMES)
+    assert data["settings"]["mode"] == "levels" and data["settings"]["filter"] == "nearest"
     assert [t["name"] for t in data["textures"]] == ["t0.png", "t1.png", "t2.png"]
     t0 = data["textures"][0]
     assert set(t0) == {"name", "width", "height", "schemes"} and (t0["width"], t0["height"]) == (40, 24)
@@ -73,7 +75,7 @@ def test_min_size_and_schemes(tmp_path, textures, capsys):
 @pytest.mark.parametrize("args, message", [
     (["--schemes", "sq12"], "power of two"),
     (["--schemes", "sq256"], "power of two"),
-    (["--schemes", "tri9"], "subdivision level"),
+    (["--schemes", "tri13"], "triL level must be an integer from 0 to 12"),
     (["--schemes", "vq9"], "unknown scheme"),
     (["--mode", "cutoff", "--cutoff", "2"], "cutoff must be in"),
     (["--jobs", "0"], "--jobs"),
@@ -113,14 +115,26 @@ def test_bake(tmp_path, textures, capsys):
     assert main(["bake", str(textures / "t1.png"), "--scheme", "tri3", "--uvs", str(tmp_path / "uv.npy"),
                  "--wrap", "wrap", "-o", str(out)]) == 0
     assert np.load(out).shape == (2, 64)
+    good = np.load(out)
+    # a triangle with no UV area is baked (grown regions read the texels it touches)
+    flat = uvs.copy()
+    flat[1, 2] = flat[1, 1]
+    np.save(tmp_path / "flat.npy", flat)
+    out_flat = tmp_path / "flat_out.npy"
+    assert main(["bake", str(textures / "t1.png"), "--scheme", "tri3", "--uvs", str(tmp_path / "flat.npy"),
+                 "--wrap", "wrap", "-o", str(out_flat)]) == 0
+    baked_flat = np.load(out_flat)
+    assert baked_flat.shape == (2, 64)
+    np.testing.assert_array_equal(baked_flat[0], good[0])
     bad = uvs.copy()
-    bad[1, 2] = bad[1, 1]
+    bad[1, 2, 0] = np.nan
     np.save(tmp_path / "bad.npy", bad)
     out2 = tmp_path / "m2.npy"
+    capsys.readouterr()
     assert main(["bake", str(textures / "t1.png"), "--scheme", "tri3", "--uvs", str(tmp_path / "bad.npy"),
                  "-o", str(out2)]) == 2
     err = capsys.readouterr().err
-    assert "bad.npy: UV triangle 1 is degenerate" in err and not out2.exists()
+    assert "bad.npy: UV triangle 1 has NaN or infinite coordinates" in err and not out2.exists()
 
 
 def test_console_script(tmp_path):

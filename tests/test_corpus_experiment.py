@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from conftest import needs_shared, real_textures
-from omaps.evaluate import evaluate_many, mean_results
+from omaps.corpus.evaluate import evaluate_many, mean_results
 from omaps.schemes import DEFAULT_SCHEMES, parse_schemes
 
 pytestmark = needs_shared

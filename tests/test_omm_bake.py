@@ -1,4 +1,5 @@
-"""The fast OMM baker gives exactly maps.bake_triangles' states, and the brute-force reference's."""
+"""The fast micromap baker gives exactly the states of rasterising every micro-triangle with
+``raster.polygon_flags`` (with and without growth), and the brute-force reference's."""
 
 import numpy as np
 import pytest
@@ -8,9 +9,10 @@ from hypothesis.extra.numpy import arrays
 
 import reference as ref
 from conftest import needs_shared, real_textures
-from omaps import birdcurve, maps, states
+from omaps import birdcurve, raster, states
+from omaps.bake import micromap
+from omaps.bake.micromap import GROW_TEXEL
 from omaps.errors import InputError
-from omaps.omm import bake
 from omaps.sampling import footprint_grid
 from omaps.texture import load_alpha
 
@@ -35,6 +37,23 @@ def _triangle(draw, coord):
     return t
 
 
+def raster_rows(grid, tris_uv, level, grow=0.0):
+    """Micromaps (T, 4**level) by rasterising each micro-triangle on its own with
+    ``raster.polygon_flags`` (no tree walk, no summed-area table): the slow baker the fast one
+    must equal. Vertices as the baker computes them: b0 * p0 + b1 * p1 + b2 * p2, times the
+    texture size, plus the grid offset."""
+    t = np.asarray(tris_uv, dtype=np.float64)
+    bary = birdcurve.micro_triangles(level)
+    w0 = 1.0 - bary[..., 0] - bary[..., 1]
+    uv = (w0[None, ..., None] * t[:, None, None, 0] + bary[None, ..., 0, None] * t[:, None, None, 1]
+          + bary[None, ..., 1, None] * t[:, None, None, 2])
+    polys = uv.reshape(-1, 3, 2) * np.array([grid.width, grid.height], dtype=np.float64) + grid.offset
+    flags = np.array([raster.polygon_flags(grid.flags, grid.period_x, grid.period_y, np.ascontiguousarray(p), grow)
+                      for p in polys], dtype=np.uint8)
+    assert np.all(flags > 0)  # every region reads something
+    return states.FLAG_TO_STATE[flags].reshape(len(t), -1)
+
+
 @st.composite
 def triangle_sets(draw, coord):
     return np.stack([_triangle(draw, coord) for _ in range(draw(st.integers(1, 3)))])
@@ -43,16 +62,19 @@ def triangle_sets(draw, coord):
 @settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(st.one_of(state_images, binary_images), st.one_of(triangle_sets(dyadic), triangle_sets(anyfloat)),
        st.integers(0, 5), st.sampled_from(FILTERS), st.sampled_from(WRAPS))
-def test_identical_to_bake_triangles(img, tris, level, filter, wrap):
-    """Arbitrary float coordinates too: the kernel repeats the reference raster's arithmetic."""
+def test_identical_to_the_raster(img, tris, level, filter, wrap):
+    """Arbitrary float coordinates too: the kernel repeats the reference raster's arithmetic,
+    without growth and with real geometry's growth."""
     g = footprint_grid(img, filter, wrap)
-    np.testing.assert_array_equal(bake.bake(g, tris, level), maps.bake_triangles(g, tris, level))
+    for grow in (0.0, GROW_TEXEL):
+        np.testing.assert_array_equal(micromap.bake_micromap_rows(g, tris, level, grow),
+                                      raster_rows(g, tris, level, grow))
 
 
 @settings(max_examples=30, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(state_images, triangle_sets(dyadic), st.integers(0, 3), st.sampled_from(FILTERS), st.sampled_from(WRAPS))
 def test_matches_brute_force_reference(img, tris, level, filter, wrap):
-    got = bake.bake(footprint_grid(img, filter, wrap), tris, level)
+    got = micromap.bake_micromap_rows(footprint_grid(img, filter, wrap), tris, level)
     for t_i, tri in enumerate(tris):
         want = ref.triangle_states(img, tri, level, filter, wrap)
         micro = birdcurve.uv_micro_triangles(tri, level)
@@ -65,36 +87,38 @@ def test_matches_brute_force_reference(img, tris, level, filter, wrap):
 def test_mixed_levels_in_one_call(img, tris, filter, wrap):
     g = footprint_grid(img, filter, wrap)
     levels = np.arange(len(tris)) % 4
-    s, starts = bake.bake_levels(g, tris, levels)
-    assert starts[-1] == len(s) == sum(4 ** int(x) for x in levels)
-    for t, lv in enumerate(levels):
-        np.testing.assert_array_equal(s[starts[t]:starts[t + 1]], maps.bake_triangles(g, tris[t:t + 1], int(lv))[0])
+    for grow in (0.0, GROW_TEXEL):
+        s, starts = micromap.bake_micromaps(g, tris, levels, grow)
+        assert starts[-1] == len(s) == sum(4 ** int(x) for x in levels)
+        for t, lv in enumerate(levels):
+            np.testing.assert_array_equal(s[starts[t]:starts[t + 1]], raster_rows(g, tris[t:t + 1], int(lv), grow)[0])
 
 
 def test_levels_beyond_the_reference_limit(rng):
-    """Levels 9..12 (maps.bake_triangles stops at 8): each micro-triangle's state refines its
-    level-8 ancestor's, and tiny triangles stay exact against the reference at level 9."""
+    """Levels 9..12 (too many micro-triangles for the raster): each micro-triangle's state
+    refines its level-8 ancestor's, and tiny triangles stay exact against the reference at
+    level 9."""
     img = rng.integers(0, 3, size=(6, 5)).astype(np.uint8)
     g = footprint_grid(img, "linear", "wrap")
     tri = np.array([[[0.1, 0.2], [0.9, 0.35], [0.3, 0.95]]])
-    coarse = bake.bake(g, tri, 8)[0]
+    coarse = micromap.bake_micromap_rows(g, tri, 8)[0]
     for level in (9, 10):
-        fine = bake.bake(g, tri, level)[0]
+        fine = micromap.bake_micromap_rows(g, tri, level)[0]
         parent = np.repeat(coarse, 4 ** (level - 8))
         assert np.all((parent == states.C) | (fine == parent))
     small = np.array([[[0.5, 0.5], [0.5 + 1 / 64, 0.5], [0.5, 0.5 + 1 / 64]]])
-    got = bake.bake(g, small, 9)[0]
+    got = micromap.bake_micromap_rows(g, small, 9)[0]
     micro = birdcurve.uv_micro_triangles(small[0], 9) * np.array([5.0, 6.0])  # texel coordinates
     texels = ref.Addressed(img, "wrap", 4)
     for k in rng.choice(4 ** 9, 300, replace=False):
         assert got[k] == ref.region_state(texels, micro[k], "linear")
-    assert bake.bake(g, tri, 12).shape == (1, 4 ** 12)
+    assert micromap.bake_micromap_rows(g, tri, 12).shape == (1, 4 ** 12)
 
 
 def test_summed_area_table_counts(rng):
     img = rng.integers(0, 3, size=(7, 9)).astype(np.uint8)
     g = footprint_grid(img, "nearest", "clamp")
-    sat = bake.flag_table(g)
+    sat = micromap.flag_table(g)
     f = g.flags
     assert sat[-1, -1, 0] == np.count_nonzero(f & 1) and sat[-1, -1, 1] == np.count_nonzero(f & 2)
     assert sat[3, 4, 0] == np.count_nonzero(f[:3, :4] & 1)
@@ -105,13 +129,13 @@ def test_dynamic_levels():
     s = 1 / 64
     tris = np.array([[[0, 0], [4 * s, 0], [0, 4 * s]], [[0, 0], [8 * s, 0], [0, 8 * s]],
                      [[0, 0], [1, 0], [0, 1]]])
-    lv = bake.dynamic_levels(tris, 64, 64, 2.0, 8)
+    lv = micromap.dynamic_levels(tris, 64, 64, 2.0, 8)
     # 8 / 4^1 = 2 <= 4 -> level 1; 32 / 4^2 = 2 -> 2; 2048 / 4^5 = 2 -> 5
     np.testing.assert_array_equal(lv, [1, 2, 5])
-    np.testing.assert_array_equal(bake.dynamic_levels(tris, 64, 64, 2.0, 3), [1, 2, 3])
-    np.testing.assert_array_equal(bake.dynamic_levels(tris, 64, 64, 100.0, 8), [0, 0, 0])
+    np.testing.assert_array_equal(micromap.dynamic_levels(tris, 64, 64, 2.0, 3), [1, 2, 3])
+    np.testing.assert_array_equal(micromap.dynamic_levels(tris, 64, 64, 100.0, 8), [0, 0, 0])
     with pytest.raises(InputError, match="positive"):
-        bake.dynamic_levels(tris, 64, 64, 0.0, 8)
+        micromap.dynamic_levels(tris, 64, 64, 0.0, 8)
 
 
 def test_bad_levels():
@@ -119,7 +143,7 @@ def test_bad_levels():
     tri = np.array([[[0, 0], [1, 0], [0, 1]]], dtype=float)
     for level in (-1, 13, 2.5):
         with pytest.raises(InputError, match="level must be an integer from 0 to 12"):
-            bake.bake(g, tri, level)
+            micromap.bake_micromap_rows(g, tri, level)
 
 
 @needs_shared
@@ -131,5 +155,6 @@ def test_real_textures_identical(path, rng):
     tris = c + rng.normal(0, 12 / tex.width, (40, 3, 2))
     for filter, wrap in (("nearest", "clamp"), ("linear", "wrap"), ("linear", "mirror")):
         g = footprint_grid(img, filter, wrap)
-        for level in (3, 5):
-            np.testing.assert_array_equal(bake.bake(g, tris, level), maps.bake_triangles(g, tris, level))
+        for level, grow in ((3, 0.0), (3, GROW_TEXEL), (5, GROW_TEXEL)):
+            np.testing.assert_array_equal(micromap.bake_micromap_rows(g, tris, level, grow),
+                                          raster_rows(g, tris, level, grow))

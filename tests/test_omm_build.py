@@ -11,9 +11,12 @@ from hypothesis import strategies as st
 
 import omm_decoder
 import reference as ref
-from omaps import birdcurve, maps, states
+from omaps import birdcurve, promotion, states
+from omaps.alpha_test import AlphaTest, StateRule
+from omaps.bake import GROW_TEXEL, bake_micromap_rows, bake_micromaps, bake_square, dynamic_levels
+from omaps.coverage import cell_fractions, micro_fractions, micro_vertices
 from omaps.errors import InputError
-from omaps.omm import alpha_test, bake, files, resolve
+from omaps.omm import files, resolve
 from omaps.omm import format as omm_format
 from omaps.omm.pipeline import Geometry, OmmSettings, build
 from omaps.texture import AlphaTexture
@@ -24,6 +27,11 @@ def _alpha(rng, h=16, w=16):
     a[:, : w // 3] = 0
     a[: h // 4, :] = 255
     return AlphaTexture("t", a, 255)
+
+
+def _cutoff(tex, cutoff, filter="nearest", wrap="clamp"):
+    """omaps' cutoff rule: opaque iff alpha8 > cutoff * 255."""
+    return StateRule("cutoff", cutoff=cutoff).alpha_test(tex, filter, wrap)
 
 
 def _tris(rng, n=24):
@@ -60,7 +68,7 @@ def test_special_indices_and_reuse(rng):
     a = np.zeros((8, 8), dtype=np.uint8)
     a[:, 4:] = 255
     tex = AlphaTexture("half", a, 255)
-    test = alpha_test.AlphaTest.from_cutoff(tex, 0.5)
+    test = _cutoff(tex, 0.5)
     left = np.array([[0.05, 0.05], [0.4, 0.05], [0.05, 0.4]])  # all T
     right = left + [0.55, 0]  # all O
     straddle = np.array([[0.3, 0.1], [0.7, 0.1], [0.5, 0.6]])
@@ -79,7 +87,7 @@ def test_special_indices_and_reuse(rng):
     assert res.usage == {"micromap_array": [{"count": 1, "subdivisionLevel": 3, "format": 2}],
                          "geometry": [{"count": 2, "subdivisionLevel": 3, "format": 2}]}
     # fully unknown triangle -> -3 / -4 by promotion
-    ones = alpha_test.AlphaTest("u", np.ones((2, 2)), 0.5, True, rule="unknown")
+    ones = AlphaTest("u", np.ones((2, 2)), 0.5, True, rule="unknown")
     r2 = build([Geometry("u", ones, tris[:1])], OmmSettings(level=2, promotion="opaque"))
     r3 = build([Geometry("u", ones, tris[:1])], OmmSettings(level=2, promotion="transparent"))
     assert (r2.index[0], r3.index[0]) == (-4, -3)
@@ -94,22 +102,23 @@ def test_fractions_agree_with_known_states(rng):
     tris = _tris(rng, 12) * 1.5 - 0.25
     for filter in ("nearest", "linear"):
         for wrap in ("clamp", "wrap", "mirror"):
-            test = alpha_test.AlphaTest.from_cutoff(tex, 0.5, filter, wrap)
-            s, starts = bake.bake_levels(test.grid(), tris, 3)
-            f = alpha_test.opaque_fractions(test, tris, 3, starts)
-            assert np.all(f[s == states.T] == 0) and np.all(f[s == states.O] == 1)
-            assert (s == states.C).any()
+            test = _cutoff(tex, 0.5, filter, wrap)
+            for grow in (0.0, GROW_TEXEL):
+                s, starts = bake_micromaps(test.grid(), tris, 3, grow)
+                f = micro_fractions(test, tris, 3, starts)
+                assert np.all(f[s == states.T] == 0) and np.all(f[s == states.O] == 1)
+                assert (s == states.C).any()
 
 
 def test_promotion_rules(rng):
     tex = _alpha(rng)
-    test = alpha_test.AlphaTest.from_cutoff(tex, 0.5, "linear", "wrap")
+    test = _cutoff(tex, 0.5, "linear", "wrap")
     tris = _tris(rng)
-    s, starts = bake.bake_levels(test.grid(), tris, 4)
-    f = alpha_test.opaque_fractions(test, tris, 4, starts)
+    s, starts = bake_micromaps(test.grid(), tris, 4, GROW_TEXEL)
+    f = micro_fractions(test, tris, 4, starts)
     c = s == states.C
     for fmt in (1, 2):
-        out = {m: resolve.resolve(s, starts, 4, test, tris, fmt, m) for m in resolve.PROMOTIONS}
+        out = {m: resolve.resolve(s, starts, 4, test, tris, fmt, m) for m in promotion.PROMOTIONS}
         base = 0 if fmt == 1 else 2
         for m, o in out.items():
             np.testing.assert_array_equal(o[~c], s[~c])  # T and O unchanged
@@ -123,29 +132,32 @@ def test_promotion_rules(rng):
 
 def test_hashed_threshold_is_uniform_and_spatial():
     xs = np.random.default_rng(5).uniform(-100, 100, size=(20000, 2))
-    h = np.array([resolve.hashed_threshold(x, y, 7) for x, y in xs])
+    h = np.array([promotion.hashed_threshold(x, y, 7) for x, y in xs])
     assert np.all((h > 0) & (h < 1))
     assert abs(h.mean() - 0.5) < 0.01 and abs((h < 0.25).mean() - 0.25) < 0.015
-    assert resolve.hashed_threshold(3.2, 1.7, 7) == resolve.hashed_threshold(3.2 + 1e-4, 1.7, 7)
-    assert resolve.hashed_threshold(3.2, 1.7, 7) != resolve.hashed_threshold(3.2, 1.7, 8)
+    assert promotion.hashed_threshold(3.2, 1.7, 7) == promotion.hashed_threshold(3.2 + 1e-4, 1.7, 7)
+    assert promotion.hashed_threshold(3.2, 1.7, 7) != promotion.hashed_threshold(3.2, 1.7, 8)
 
 
 def test_micro_vertices_follow_the_bird_curve():
     for level in range(0, 4):
         want = birdcurve.micro_triangles(level)
         for k in range(4 ** level):
-            np.testing.assert_array_equal(alpha_test.micro_vertices(k, level), want[k])
+            np.testing.assert_array_equal(micro_vertices(k, level), want[k])
 
 
 # ---- files: independent read-back ----------------------------------------------------------
 
 def _check_against_baker_and_texture(folder, tex, tris, level, filter, wrap, cutoff, fmt, rng):
-    """Read with the independent decoder; every micro-triangle must equal the baker's state
-    (4-state: T/O exactly, C as 2/3), and on a subset the brute-force reference from the
+    """Read with the independent decoder; every micro-triangle must equal the baker's state with
+    real geometry's growth (4-state: T/O exactly, C as 2/3); growth only ever turns the exact
+    states into C, and on a subset the exact states are the brute-force reference's from the
     texture itself (a known state only where every texel it can read agrees)."""
     per_tri = omm_decoder.triangle_states(folder)
-    grid = alpha_test.AlphaTest.from_cutoff(tex, cutoff, filter, wrap).grid()
-    baked = maps.bake_triangles(grid, tris, level)
+    grid = _cutoff(tex, cutoff, filter, wrap).grid()
+    baked = bake_micromap_rows(grid, tris, level, GROW_TEXEL)
+    exact = bake_micromap_rows(grid, tris, level)
+    assert states.is_conservative(exact, baked)
     img = ref.texel_states(tex.alpha8, "cutoff", cutoff=cutoff)
     for t, (lv, got) in enumerate(per_tri):
         got = np.array(got if lv is not None else got * 4 ** level)
@@ -159,7 +171,7 @@ def _check_against_baker_and_texture(folder, tex, tris, level, filter, wrap, cut
             micro = birdcurve.uv_micro_triangles(tris[t], level)
             for k in rng.choice(4 ** level, 40, replace=False):
                 r = truth[tuple(sorted(map(tuple, np.round(micro[k], 12))))]
-                assert r == want[k]
+                assert r == exact[t, k]
 
 
 @pytest.mark.parametrize("fmt,filter,wrap", [("4state", "nearest", "clamp"), ("4state", "linear", "wrap"),
@@ -168,7 +180,7 @@ def test_written_files_read_back_independently(tmp_path, rng, fmt, filter, wrap)
     tex = _alpha(rng, 12, 20)
     tris = _tris(rng)
     tris[1] = tris[0]  # a duplicate, to exercise reuse
-    test = alpha_test.AlphaTest.from_cutoff(tex, 0.4, filter, wrap)
+    test = _cutoff(tex, 0.4, filter, wrap)
     res = build([Geometry("g", test, tris)], OmmSettings(format=fmt, level=3))
     files.write(tmp_path / "omm", res)
     folder = tmp_path / "omm"
@@ -188,21 +200,21 @@ def test_written_files_read_back_independently(tmp_path, rng, fmt, filter, wrap)
 def test_dynamic_levels_in_files(tmp_path, rng):
     tex = _alpha(rng, 32, 32)
     tris = _tris(rng, 10) * np.linspace(0.2, 1, 10)[:, None, None]
-    test = alpha_test.AlphaTest.from_cutoff(tex, 0.5)
+    test = _cutoff(tex, 0.5)
     res = build([Geometry("g", test, tris)], OmmSettings(dynamic_scale=1.0, max_level=5, special=False,
                                                          dedup=False))
     files.write(tmp_path / "o", res)
     per = omm_decoder.triangle_states(tmp_path / "o")
-    want = bake.dynamic_levels(tris, 32, 32, 1.0, 5)
+    want = dynamic_levels(tris, 32, 32, 1.0, 5)
     assert [lv for lv, _ in per] == want.tolist() and len(set(want.tolist())) > 1
     for t, (lv, s) in enumerate(per):
-        baked = maps.bake_triangles(test.grid(), tris[t:t + 1], lv)[0]
+        baked = bake_micromap_rows(test.grid(), tris[t:t + 1], lv, GROW_TEXEL)[0]
         np.testing.assert_array_equal(np.array(s)[baked != 2], baked[baked != 2])
 
 
 def test_writer_is_all_or_nothing(tmp_path, rng, monkeypatch):
     tex = _alpha(rng)
-    res = build([Geometry("g", alpha_test.AlphaTest.from_cutoff(tex, 0.5), _tris(rng, 4))], OmmSettings(level=2))
+    res = build([Geometry("g", _cutoff(tex, 0.5), _tris(rng, 4))], OmmSettings(level=2))
     files.write(tmp_path / "o", res)
     before = sorted(os.listdir(tmp_path / "o"))
     calls = []
@@ -232,7 +244,7 @@ def test_writer_is_all_or_nothing(tmp_path, rng, monkeypatch):
 
 def test_reader_rejects_broken_folders(tmp_path, rng):
     tex = _alpha(rng)
-    res = build([Geometry("g", alpha_test.AlphaTest.from_cutoff(tex, 0.5), _tris(rng, 6))], OmmSettings(level=3))
+    res = build([Geometry("g", _cutoff(tex, 0.5), _tris(rng, 6))], OmmSettings(level=3))
     cases = {
         "omm_triangles.bin": (lambda b: b[:-3], "multiple of the 8-byte record"),
         "omm_data.bin": (lambda b: b[:-1], "reads bytes up to"),
@@ -261,9 +273,10 @@ def test_buffers_decode_to_the_baked_states(seed, filter, wrap, level, fmt):
     rng = np.random.default_rng(seed)
     tex = _alpha(rng, int(rng.integers(2, 12)), int(rng.integers(2, 12)))
     tris = _tris(rng, 6) * 2 - 0.5
-    test = alpha_test.AlphaTest.from_cutoff(tex, 0.5, filter, wrap)
+    test = _cutoff(tex, 0.5, filter, wrap)
     res = build([Geometry("g", test, tris)], OmmSettings(format=fmt, level=level, promotion="hashed"))
-    baked = maps.bake_triangles(test.grid(), tris, level)
+    baked = bake_micromap_rows(test.grid(), tris, level, GROW_TEXEL)
+    assert states.is_conservative(bake_micromap_rows(test.grid(), tris, level), baked)
     for t in range(len(tris)):
         got = np.broadcast_to(res.triangle_states(t), (4 ** level,))
         known = baked[t] != states.C
@@ -273,32 +286,46 @@ def test_buffers_decode_to_the_baked_states(seed, filter, wrap, level, fmt):
 def test_resolve_regions_matches_the_micromap_resolution(rng):
     """The tracer's 2-state mode over any regions gives what 2-state OMM output holds."""
     tex = _alpha(rng)
-    test = alpha_test.AlphaTest.from_cutoff(tex, 0.5, "linear", "wrap")
+    test = _cutoff(tex, 0.5, "linear", "wrap")
     tris = _tris(rng, 6)
-    s, starts = bake.bake_levels(test.grid(), tris, 3)
-    f = alpha_test.opaque_fractions(test, tris, 3, starts)
+    s, starts = bake_micromaps(test.grid(), tris, 3, GROW_TEXEL)
+    f = micro_fractions(test, tris, 3, starts)
     cen = np.concatenate([birdcurve.uv_micro_triangles(t, 3).mean(axis=1) for t in tris]) * [16, 16]
-    for m in resolve.PROMOTIONS:
+    for m in promotion.PROMOTIONS:
         want = resolve.resolve(s, starts, 3, test, tris, omm_format.FORMAT_2_STATE, m, seed=3)
-        np.testing.assert_array_equal(resolve.resolve_regions(s, f, cen, m, seed=3), want)
+        np.testing.assert_array_equal(promotion.resolve_regions(s, f, cen, m, seed=3), want)
 
 
 def test_square_fractions(rng):
-    """A cell's fraction is the mean of its two micro-triangles' (the corpus pair), and a known
-    cell's fraction agrees with its state."""
-    from omaps import pair
-    from omaps.omm import pairs
+    """The corpus pair's square cells: a known cell's fraction agrees with its state, the centre
+    is the cell's, and (nearest) the fraction is the share of the cell's K x K points whose texel
+    passes the test, counted here from the alpha values."""
+    from omaps.coverage import CELL_SAMPLES
+    from omaps.pair import PAIR_CORNER_UV
 
     tex = _alpha(rng)
-    test = alpha_test.AlphaTest.from_cutoff(tex, 0.5, "linear", "clamp")
-    f, c = pairs.square_fractions(test, pair.PAIR, 8)
-    sq = maps.bake_square(test.grid(), 8)
+    test = _cutoff(tex, 0.5, "linear", "clamp")
+    f, c = cell_fractions(test, PAIR_CORNER_UV, np.ones(1, bool), 8)
+    f, c = f[0], c[0]
+    sq = bake_square(test.grid(), 8)
     assert np.all(f[sq == states.T] == 0) and np.all(f[sq == states.O] == 1)
+    assert 0 < f[sq == states.C].mean() < 1
     j, i = np.mgrid[0:8, 0:8]
     np.testing.assert_allclose(c[..., 0], (i + 0.5) * 2, atol=1e-9)  # the cell centre
     np.testing.assert_allclose(c[..., 1], (j + 0.5) * 2, atol=1e-9)
-    two = resolve.resolve_regions(sq, f, c, "nearest")
+    two = promotion.resolve_regions(sq, f, c, "nearest")
     np.testing.assert_array_equal(two[sq != states.C], sq[sq != states.C])
+    np.testing.assert_array_equal(two[sq == states.C], f[sq == states.C] > 0.5)
+    # nearest: point (s, t) of the corpus pair reads texel (floor(16 s), floor(16 t)), never on an edge
+    f_near, _ = cell_fractions(_cutoff(tex, 0.5), PAIR_CORNER_UV, np.ones(1, bool), 8)
+    k = CELL_SAMPLES
+    offs = (np.arange(k) + 0.5) / k
+    for jj in range(8):
+        for ii in range(8):
+            xs = np.floor((ii + offs) / 8 * 16).astype(int)
+            ys = np.floor((jj + offs) / 8 * 16).astype(int)
+            want = np.mean(tex.alpha8[np.ix_(ys, xs)] > 0.5 * 255)
+            assert f_near[0, jj, ii] == pytest.approx(want), (ii, jj)
 
 
 @pytest.mark.parametrize("source,dynamic", [("texture", None), ("texture", 1.0), ("sq4", None), ("vq2", None)])
@@ -309,7 +336,7 @@ def test_chunked_baking_gives_the_same_buffers(rng, monkeypatch, source, dynamic
 
     tex = _alpha(rng, 32, 32)
     tris = _tris(rng, 13) * np.linspace(0.3, 1, 13)[:, None, None]
-    test = alpha_test.AlphaTest.from_cutoff(tex, 0.5, "linear", "wrap")
+    test = _cutoff(tex, 0.5, "linear", "wrap")
     s = OmmSettings(level=3, dynamic_scale=dynamic, max_level=4, source=source, effort="fast")
     whole = build([Geometry("g", test, tris)], s)
     monkeypatch.setattr(pipeline, "CHUNK_MICRO_TRIANGLES", 150)

@@ -12,9 +12,11 @@ from PIL import Image
 
 import omm_decoder
 from conftest import SHARED
-from omaps import maps, states
+from omaps import states
+from omaps.alpha_test import StateRule
+from omaps.bake import GROW_TEXEL, bake_micromap_rows, bake_pair_squares
 from omaps.cli import main
-from omaps.omm import alpha_test, pairs
+from omaps.omm import pairs
 from omaps.texture import AlphaTexture
 
 SCENES = SHARED / "data" / "scenes"
@@ -39,8 +41,9 @@ def test_texture_input_writes_and_verifies(tex_and_uvs, tmp_path, capsys):
                  "--wrap", "wrap", "--cutoff", "0.3"]) == 0
     assert sorted(os.listdir(out)) == ["omm.json", "omm_data.bin", "omm_index.bin", "omm_triangles.bin",
                                        "omm_usage.json"]
-    grid = alpha_test.AlphaTest.from_cutoff(AlphaTexture("m", a, 255), 0.3, "linear", "wrap").grid()
-    baked = maps.bake_triangles(grid, tris, 3)
+    grid = StateRule("cutoff", cutoff=0.3).alpha_test(AlphaTexture("m", a, 255), "linear", "wrap").grid()
+    baked = bake_micromap_rows(grid, tris, 3, GROW_TEXEL)  # real geometry is baked with growth
+    assert states.is_conservative(bake_micromap_rows(grid, tris, 3), baked)
     for t, (lv, s) in enumerate(omm_decoder.triangle_states(out)):
         s = np.array(s * (64 if lv is None else 1))
         known = baked[t] != states.C
@@ -65,9 +68,15 @@ def test_from_square_maps_and_codec(tex_and_uvs, tmp_path, capsys):
         assert main(["omm", str(png), str(uvs), "-o", str(out), "--from", source] + extra) == 0
         summary = json.loads((out / "omm.json").read_text())
         assert summary["statistics"]["levels"] == {str(n.bit_length() - 1): 9}
-        grid = alpha_test.AlphaTest.from_cutoff(AlphaTexture("m", a, 255), 0.5).grid()
-        sq, _ = pairs.bake_squares(grid, tris, n)
-        expanded = pairs.unpair(pairs.expand(sq), 9)
+        grid = StateRule("cutoff", cutoff=0.5).alpha_test(AlphaTexture("m", a, 255)).grid()
+        # a UV array's pairs: triangles 2k (A) and 2k+1 (B), corners in their own vertex order
+        corner_uv = np.zeros((5, 6, 2))
+        corner_uv[:, 0:3] = tris[0::2]
+        corner_uv[:4, 3:6] = tris[1::2]
+        sq = bake_pair_squares(grid, corner_uv, np.arange(5) < 4, n, GROW_TEXEL)
+        pair_of, corners, _ = pairs.corpus_pairing(9)
+        np.testing.assert_array_equal(pair_of, np.arange(9) // 2)
+        expanded = pairs.expand(sq, pair_of, corners)
         per = omm_decoder.triangle_states(out)
         for t, (lv, s) in enumerate(per):
             s = np.array(s * (4 ** (n.bit_length() - 1) if lv is None else 1))
@@ -91,7 +100,8 @@ def test_from_square_maps_and_codec(tex_and_uvs, tmp_path, capsys):
     (["--level", "13"], "level must be an integer from 0 to 12"),
     (["--level", "3", "--dynamic", "2"], "exclude each other"),
     (["--from", "sq12"], "power of two"),
-    (["--from", "vq9"], "unknown codec"),
+    (["--from", "vq9"], "unknown scheme 'vq9'"),
+    (["--from", "tri3"], "--from takes texture or a square scheme"),
     (["--from", "sq8", "--dynamic", "2"], "--dynamic needs the texture source"),
     (["--cutoff", "2"], "cutoff must be in"),
 ])
@@ -178,7 +188,9 @@ def test_gltf_mask_sampler_and_cutoff(tmp_path, rng):
     from omaps.pair import PAIR
     from omaps.sampling import footprint_grid
 
-    want = maps.bake_triangles(footprint_grid(img, "nearest", "clamp", "mirror"), PAIR, 4)
+    grid = footprint_grid(img, "nearest", "clamp", "mirror")
+    want = bake_micromap_rows(grid, PAIR, 4, GROW_TEXEL)  # real geometry is baked with growth
+    assert states.is_conservative(bake_micromap_rows(grid, PAIR, 4), want)
     per = omm_decoder.triangle_states(out)
     for t in (0, 1):
         s = np.array(per[t][1])
@@ -189,12 +201,14 @@ def test_gltf_mask_sampler_and_cutoff(tmp_path, rng):
 def test_gltf_texture_transform(tmp_path, rng):
     alpha = np.zeros((8, 8), np.uint8)
     alpha[:, 4:] = 255  # right half opaque
-    # scale 0.5 and offset 0.5 in u: the quad reads only the right half -> fully opaque
-    path = _gltf(tmp_path, alpha=alpha, tex_ext={"offset": [0.5, 0.0], "scale": [0.5, 1.0]},
+    # scale 3/8 and offset 5/8 in u: the quad reads only texels 5..7 (and, grown by a hair, the
+    # edge of texel 4) of the right half -> fully opaque
+    path = _gltf(tmp_path, alpha=alpha, tex_ext={"offset": [0.625, 0.0], "scale": [0.375, 1.0]},
                  sampler={"magFilter": 9728, "wrapS": 33071, "wrapT": 33071})
     assert main(["omm", str(path), "-o", str(tmp_path / "o"), "--level", "3"]) == 0
     assert omm_decoder.read_folder(tmp_path / "o")[2] == [-2, -2]
-    path = _gltf(tmp_path, alpha=alpha, tex_ext={"offset": [0.0, 0.0], "scale": [0.5, 1.0]},
+    # scale 3/8, no offset: texels 0..2 (and the edge of texel 3) of the left half -> fully transparent
+    path = _gltf(tmp_path, alpha=alpha, tex_ext={"offset": [0.0, 0.0], "scale": [0.375, 1.0]},
                  sampler={"magFilter": 9728, "wrapS": 33071, "wrapT": 33071})
     assert main(["omm", str(path), "-o", str(tmp_path / "o"), "--level", "3"]) == 0
     assert omm_decoder.read_folder(tmp_path / "o")[2] == [-1, -1]
@@ -204,7 +218,7 @@ def test_gltf_missing_texture_warns_and_falls_back(tmp_path, capsys):
     path = _gltf(tmp_path, image_uri="gone.png")
     assert main(["omm", str(path), "-o", str(tmp_path / "o"), "--level", "3", "--promote", "transparent"]) == 0
     err = capsys.readouterr().err
-    assert "'gone.png'" in err and "all unknown" in err
+    assert "'gone.png'" in err and "unknown (all C)" in err
     assert omm_decoder.read_folder(tmp_path / "o")[2] == [-3, -3]
 
 
@@ -223,16 +237,21 @@ def test_palm(tmp_path, capsys):
     assert main(["omm", str(SCENES / "palm.glb"), "-o", str(out), "--dynamic", "4", "--max-level", "5"]) == 0
     s = json.loads((out / "omm.json").read_text())
     assert s["statistics"]["triangles"] == 3840
-    assert s["geometries"][0]["alpha_mode"] == "MASK" and s["geometries"][0]["threshold"] == 0.25
+    # alphaCutoff 0.25, compared on the raw 8-bit values
+    assert s["geometries"][0]["alpha_mode"] == "MASK" and s["geometries"][0]["threshold"] == 0.25 * 255
     assert s["skipped_primitives"][0]["reason"].startswith("opaque")
     assert 0.2 < s["statistics"]["known_area_fraction"] < 1
     assert main(["omm", "--verify", str(out)]) == 0
     # the UV convention against the image: a micro-triangle stated opaque has only opaque texels
-    from omaps.gltf import alpha_primitives
+    from omaps.scene import alpha_triangles, load_scene
 
-    prim = alpha_primitives(SCENES / "palm.glb").primitives[0]
+    scene = load_scene(SCENES / "palm.glb")
+    at = alpha_triangles(scene)  # the alpha-tested triangles, in the order omm writes them
+    assert at.count == 3840 and len(set(at.material.tolist())) == 1
+    tex = scene.textures[scene.materials[at.material[0]].texture]
+    assert tex.maxval == 255
     per = omm_decoder.triangle_states(out)
-    a = prim.alpha.values
+    a = tex.alpha
     h, w = a.shape
     for t in range(0, 3840, 97):
         lv, st_ = per[t]
@@ -240,7 +259,7 @@ def test_palm(tmp_path, capsys):
             continue
         from omaps.birdcurve import uv_micro_triangles
 
-        micro = uv_micro_triangles(prim.tris_uv[t], lv)
+        micro = uv_micro_triangles(at.uv[t], lv)
         for k in np.flatnonzero(np.array(st_) < 2)[:20]:
             c = micro[k].mean(axis=0) * [w, h] - 0.5  # bilinear taps around the centroid
             x0, y0 = int(np.floor(c[0])), int(np.floor(c[1]))
@@ -254,8 +273,16 @@ def test_smallpine_blend_and_vq2(tmp_path, capsys):
     assert main(["omm", str(SCENES / "smallpine" / "scene.gltf"), "-o", str(out), "--from", "vq2",
                  "--effort", "fast", "--format", "2state", "--promote", "hashed"]) == 0
     s = json.loads((out / "omm.json").read_text())
-    assert s["statistics"]["triangles"] == 1442 and s["geometries"][0]["state_rule"] == "blend"
+    assert s["statistics"]["triangles"] == 1442 and s["geometries"][0]["state_rule"] == "levels"
     assert s["statistics"]["micromaps"] < s["statistics"]["micromaps_without_reuse"]
+    warnings = [x for x in capsys.readouterr().err.splitlines() if "warning" in x]
+    # the one reader names the missing normal map once, as not needed; the base colour is read
+    assert len(warnings) == 1 and "M_TreeAtlas_normal.png" in warnings[0] and "not needed" in warnings[0]
     assert main(["omm", "--verify", str(out)]) == 0
-    assert "warning" not in capsys.readouterr().err  # the missing normal map is not read
-    assert Path(out / "pair_blocks.bin").stat().st_size == 721 * 32
+    # the tracer's pairs (shared edges): at least 1442 / 2 pairs, every triangle in one
+    blocks = s["pair_blocks"]["blocks"]
+    assert 721 <= blocks < 1442 and s["pair_blocks"]["codec"] == "vq2"
+    assert Path(out / "pair_blocks.bin").stat().st_size == blocks * 32
+    rec = np.fromfile(out / "omm_pairs.bin", dtype=[("pair", "<i4"), ("corners", "u1", (3,)), ("pad", "u1")])
+    assert len(rec) == 1442 and set(np.unique(rec["pair"])) == set(range(blocks))
+    assert np.all(np.bincount(rec["pair"]) <= 2)

@@ -7,9 +7,9 @@ from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
 import reference as ref
-from omaps import maps, pair, states
+from omaps import bake, pair, states
 from omaps.codecs.registry import get_codec
-from omaps.omm import bake, pairs
+from omaps.omm import pairs
 from omaps.sampling import footprint_grid
 
 FILTERS = ["nearest", "linear"]
@@ -25,7 +25,7 @@ def test_every_micro_triangle_lies_in_its_cell(level, rng):
     ``micro_cells`` gives, through the pair's own hit -> cell mapping; and every cell holds
     exactly two micro-triangles: both of A below the diagonal, both of B above, one each on it."""
     n = 1 << level
-    cells = pairs.micro_cells(level)
+    cells = np.stack([pairs.micro_cells(level), pairs.micro_cells(level, tuple(pair.B_CORNERS))])
     from omaps.birdcurve import micro_triangles
 
     tri = micro_triangles(level)
@@ -50,8 +50,8 @@ def test_square_map_is_the_merge_of_the_direct_bake(img, level, filter, wrap):
     micromaps at level log2 N (each cell = the union of its two micro-triangles)."""
     g = footprint_grid(img, filter, wrap)
     n = 1 << level
-    direct = maps.bake_triangles(g, pair.PAIR, level)
-    np.testing.assert_array_equal(pairs.merge(direct[None])[0], maps.bake_square(g, n))
+    direct = bake.bake_micromap_rows(g, pair.PAIR, level)
+    np.testing.assert_array_equal(pairs.merge(direct[None])[0], bake.bake_square(g, n))
 
 
 @settings(max_examples=60, deadline=None)
@@ -62,8 +62,8 @@ def test_expansion_equals_per_micro_triangle_cell_lookup(img, level, filter, wra
     bake (the expansion is the square map, exactly, and the direct bake can only know more)."""
     g = footprint_grid(img, filter, wrap)
     n = 1 << level
-    sq = maps.bake_square(g, n)
-    ex = pairs.expand(sq[None])[0]
+    sq = bake.bake_square(g, n)
+    ex = pairs.expand(sq[None], *pairs.corpus_pairing(2)[:2])  # (2, 4**level): A, B
     from omaps.birdcurve import micro_triangles
 
     c = micro_triangles(level).mean(axis=1)
@@ -71,7 +71,7 @@ def test_expansion_equals_per_micro_triangle_cell_lookup(img, level, filter, wra
         for m, (b1, b2) in enumerate(c):
             i, j = pair.hit_to_cell(t, b1, b2, n)
             assert ex[t, m] == sq[j, i]
-    direct = maps.bake_triangles(g, pair.PAIR, level)
+    direct = bake.bake_micromap_rows(g, pair.PAIR, level)
     assert states.is_conservative(direct, ex)
 
 
@@ -85,6 +85,17 @@ def dyadic_meshes(draw):
         assume(abs(e1[0] * e2[1] - e1[1] * e2[0]) > 1e-3)
         tris.append(t)
     return np.stack(tris)
+
+
+def corpus_corner_uv(tris):
+    """Triangles 2k (A) and 2k+1 (B) of a mesh as pairs in the corpus convention: each
+    triangle's vertices (p0, p1, p2) are its square corners in ``pair.A_CORNERS`` /
+    ``pair.B_CORNERS`` order, so the corner UVs (P, 6, 2) are the two triangles' UVs as listed."""
+    p = (len(tris) + 1) // 2
+    uv = np.zeros((p, 6, 2))
+    uv[:, 0:3] = tris[0::2]
+    uv[:len(tris) // 2, 3:6] = tris[1::2]
+    return uv, np.arange(p) < len(tris) // 2
 
 
 def _cell_polygons(tri_a, tri_b, n):
@@ -118,7 +129,8 @@ def test_general_pairs_against_cell_polygons(img, tris, level, filter, wrap):
     through the pair's triangles (brute-force reference), lone last triangle included."""
     g = footprint_grid(img, filter, wrap)
     n = 1 << level
-    sq, has_b = pairs.bake_squares(g, tris, n)
+    uv, has_b = corpus_corner_uv(tris)
+    sq = bake.bake_pair_squares(g, uv, has_b, n)
     assert len(sq) == (len(tris) + 1) // 2
     h, w = img.shape
     texels = ref.Addressed(img, wrap, 4 + 4 * max(w, h))
@@ -139,23 +151,27 @@ def test_expand_merge_round_trip(rng):
     for level in range(0, 7):
         n = 1 << level
         sq = rng.integers(0, 3, size=(4, n, n)).astype(np.uint8)
-        np.testing.assert_array_equal(pairs.merge(pairs.expand(sq)), sq)
+        pair_of, corners, _ = pairs.corpus_pairing(8)
+        ex = pairs.expand(sq, pair_of, corners)
+        assert ex.shape == (8, 4 ** level)
+        np.testing.assert_array_equal(pairs.merge(ex.reshape(4, 2, -1)), sq)
 
 
 def test_codec_source_is_conservative_and_exact_after_decoding():
     """vq2 (16 x 16): the expanded micromaps are exactly the decoded map's cells and only ever
     lose knowledge against the uncompressed square map."""
-    from omaps.procedural import default_corpus
-    from omaps.texel_states import StateRule
+    from omaps.alpha_test import StateRule
+    from omaps.corpus.procedural import default_corpus
 
     codec = get_codec("vq2")
     for tex in default_corpus()[:3]:
         g = footprint_grid(StateRule("cutoff").classify(tex), "linear", "wrap")
-        sq = maps.bake_square(g, codec.map_size)
+        sq = bake.bake_square(g, codec.map_size)
         dec = codec.decode(codec.encode(sq, "best", "fast"))
-        ex = pairs.expand(dec[None])[0]
+        pair_of, corners, _ = pairs.corpus_pairing(2)
+        ex = pairs.expand(dec[None], pair_of, corners)
         np.testing.assert_array_equal(pairs.merge(ex[None])[0], dec)
-        assert states.is_conservative(pairs.expand(sq[None])[0], ex)
+        assert states.is_conservative(pairs.expand(sq[None], pair_of, corners), ex)
         lookups = [codec.lookup(np.frombuffer(codec.encode(sq, "best", "fast"), np.uint8), i, j)
                    for j in range(16) for i in range(16)]
         np.testing.assert_array_equal(np.array(lookups).reshape(16, 16), dec)
@@ -165,9 +181,13 @@ def test_raster_and_fast_baker_agree_on_pairs(rng):
     img = rng.integers(0, 3, size=(8, 8)).astype(np.uint8)
     g = footprint_grid(img, "linear", "mirror")
     tris = rng.uniform(-0.5, 1.5, size=(5, 3, 2))
-    sq, _ = pairs.bake_squares(g, tris, 8)
-    s, _ = bake.bake_levels(g, pairs.pair_triangles(tris)[0].reshape(-1, 3, 2), 3)
+    uv, has_b = corpus_corner_uv(tris)
+    assert has_b.tolist() == [True, True, False]
+    sq = bake.bake_pair_squares(g, uv, has_b, 8)
+    both = uv.copy()
+    both[-1, 3:6] = tris[-1]  # a stand-in B for the lone triangle, baked but left out of the merge
+    s, _ = bake.bake_micromaps(g, both.reshape(-1, 3, 2), 3)
     direct = s.reshape(3, 2, -1)
     direct[-1, 1] = states.C  # the lone triangle's stand-in B does not count
-    merged = pairs.merge(direct, np.array([True, True, False]))
+    merged = pairs.merge(direct, has_b)
     np.testing.assert_array_equal(sq, merged)

@@ -6,7 +6,7 @@ import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from omaps.pairing import CORNERS, adjacency, is_valid_matching, pair_triangles, weld
+from omaps.scene.pairing import CORNERS, adjacency, is_valid_matching, pair_triangles, weld
 
 
 def grid_mesh(nx, ny, keep=None, materials=None):
@@ -121,7 +121,7 @@ def test_random_meshes_valid_maximal_and_maximum(nx, ny, data):
 
 def test_augmenting_paths_fix_a_bad_greedy_start():
     # a strip of 6 triangles: a path graph 0-1-2-3-4-5; matching (1,2), (3,4) leaves 0 and 5 free
-    from omaps.pairing import augment_paths
+    from omaps.scene.pairing import augment_paths
 
     off = np.array([0, 1, 3, 5, 7, 9, 10])
     nb = np.array([1, 0, 2, 1, 3, 2, 4, 3, 5, 4])

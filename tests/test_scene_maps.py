@@ -3,37 +3,60 @@ conservative for the hits the tracer looks up (sampled, with the tracer's own lo
 alpha test, including points on cell and texel boundaries)."""
 
 import numpy as np
-import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import reference as ref
-from omaps import maps, scene_maps, states, trace
+from omaps import states
+from omaps.bake import GROW_TEXEL, bake_micromap_rows, bake_pair_flags, or_downsample
+from omaps.bake.square import flags_to_states
 from omaps.codecs.registry import codec_names
-from omaps.pairing import CORNERS
+from omaps.pair import CORNERS
 from omaps.sampling import footprint_grid
-from omaps.scene import Material, Mesh, Scene, Texture
+from omaps.scene import Material, Mesh, Primitive, Scene, Texture
+from omaps.scene.alpha import alpha_triangles, pair_corner_uvs
+from omaps.schemes import parse_schemes
+from omaps.trace.lookups import clamp_bary, shader_alpha_test, state_function
+from omaps.trace.maps import build_scheme_maps
+from omaps.trace.tables import base_tables, scheme_tables
+from omaps.trace.two_state import decoded_pair_maps
 
 T, O, C = states.T, states.O, states.C
 
 
-def pair_scene(alpha, uv_a, uv_b, filt, wrap_u, wrap_v, cutoff=0.5, b_order=(0, 1, 2), factor=1.0):
+def pair_scene(alpha, uv_a, uv_b, filt, wrap_u, wrap_v, cutoff=0.5, b_order=(0, 1, 2), factor=1.0,
+               b_material=0):
     """A scene with one pair: triangle A = (0,0,0), (1,0,0), (1,1,0) and B = (0,0,0), (1,1,0),
-    (0,1,0) (listed in ``b_order``), vertices not shared so each has its own UVs."""
-    pa = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0]], np.float32)
-    pb = np.array([[0, 0, 0], [1, 1, 0], [0, 1, 0]], np.float32)[list(b_order)]
-    pos = np.concatenate([pa, pb])
-    uvs = np.concatenate([np.asarray(uv_a, float), np.asarray(uv_b, float)[list(b_order)]])
-    mesh = Mesh("pair", pos, uvs, np.array([[0, 1, 2], [3, 4, 5]], np.int32), np.zeros(2, np.int32))
-    rgba = np.zeros(alpha.shape + (4,), np.uint8)
-    rgba[..., 3] = alpha
-    mat = Material("m", "MASK", cutoff, (1, 1, 1, factor), 0, filt, wrap_u, wrap_v, True)
-    return Scene("memory", [mesh], [(0, np.eye(4))], [mat], [Texture("t", rgba)])
+    (0,1,0) (listed in ``b_order``), vertices not shared so each has its own UVs. ``b_material``
+    1: B is a primitive of its own with another (equal) material, so it cannot pair with A."""
+    pa = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0]], float)
+    pb = np.array([[0, 0, 0], [1, 1, 0], [0, 1, 0]], float)[list(b_order)]
+    ua = np.asarray(uv_a, float)
+    ub = np.asarray(uv_b, float)[list(b_order)]
+    mat = Material(0, "m", "MASK", cutoff, (1, 1, 1, factor), 0, filt, wrap_u, wrap_v, 0, True)
+    if b_material:
+        prims = [Primitive(0, 0, pa, ua, np.array([[0, 1, 2]]), 0), Primitive(0, 1, pb, ub, np.array([[0, 1, 2]]), 1)]
+        mats = [mat, Material(1, "m2", "MASK", cutoff, (1, 1, 1, factor), 0, filt, wrap_u, wrap_v, 0, True)]
+    else:
+        prims = [Primitive(0, 0, np.concatenate([pa, pb]), np.concatenate([ua, ub]), np.array([[0, 1, 2], [3, 4, 5]]),
+                           0)]
+        mats = [mat]
+    return Scene("memory", [Mesh(0, "pair", prims)], [(0, np.eye(4))], mats,
+                 [Texture("t", np.ascontiguousarray(alpha, dtype=np.uint8))])
+
+
+def scene_tests(scene, at):
+    """The alpha test of every alpha-tested material the triangles use."""
+    return {int(m): scene.alpha_test(int(m)) for m in np.unique(at.material)}
 
 
 def texel_states_ref(alpha, cutoff, factor=1.0):
-    """glTF's rule, written out: opaque iff factor * alpha / 255 >= cutoff."""
-    return np.where(factor * alpha.astype(float) / 255 >= cutoff, O, T).astype(np.uint8)
+    """glTF's rule, written out: opaque iff factor * alpha / 255 >= cutoff; a texel within 1e-6
+    of the cut-off is unknown (a shader's float product may fall on either side)."""
+    d = factor * alpha.astype(float) / 255 - cutoff
+    out = np.where(d >= 0, O, T).astype(np.uint8)
+    out[np.abs(d) <= 1e-6] = C
+    return out
 
 
 def combine(values):
@@ -91,54 +114,83 @@ def test_pair_square_map_matches_reference(seed, ua, ub, n, filt, wrap):
     rng = np.random.default_rng(seed)
     alpha = (rng.random((8, 8)) < 0.5).astype(np.uint8) * 255
     scene = pair_scene(alpha, ua, ub, filt, wrap, wrap)
-    at = scene_maps.alpha_triangles(scene)
+    at = alpha_triangles(scene)
     assert at.pair_second[0] == 1 and list(at.corners[0]) == [0, 1, 2] and list(at.corners[1]) == [0, 2, 3]
-    gt = scene_maps.grid_table(scene)
-    uv, has_b, mat = scene_maps.pair_corner_uvs(at)
-    exact = scene_maps.flags_to_states(scene_maps.bake_square_flags(uv, has_b, mat, gt, n, eps=0.0))[0]
+    tests = scene_tests(scene, at)
+    uv, has_b, mat = pair_corner_uvs(at)
+    grid = tests[0].grid()
+    exact = flags_to_states(bake_pair_flags(grid, uv, has_b, n, 0.0))[0]
     expect = reference_square(texel_states_ref(alpha, 0.5), np.array(ua), np.array(ub), n, filt, wrap)
     np.testing.assert_array_equal(exact, expect)
-    grown = scene_maps.flags_to_states(scene_maps.bake_square_flags(uv, has_b, mat, gt, n))[0]
+    grown = flags_to_states(bake_pair_flags(grid, uv, has_b, n, GROW_TEXEL))[0]
     assert states.is_conservative(exact, grown)
+    # the tracer's stored map (grown like real geometry's) against the reference
+    sm = build_scheme_maps(at, tests, parse_schemes(f"sq{n}"))[f"sq{n}"]
+    traced = decoded_pair_maps(sm, at)[0]
+    np.testing.assert_array_equal(traced, grown)
+    assert states.is_conservative(expect, traced)
+
+
+def stored_micromaps(sm, level):
+    """The tracer's micromap of every alpha triangle, read from its stored rows as docs/FORMAT.md
+    lays them out: micro-triangle k at bits 2*(k mod 4) of byte k div 4 of the row."""
+    k = np.arange(4 ** level)
+    out = np.empty((len(sm.rows), 4 ** level), np.uint8)
+    for t, r in enumerate(sm.rows):
+        row = sm.data[int(r) * sm.row_bytes:(int(r) + 1) * sm.row_bytes]
+        out[t] = (row[k // 4] >> (2 * (k % 4))) & 3
+    return out
 
 
 @settings(max_examples=30)
 @given(st.integers(0, 2 ** 32 - 1), uv_tri, st.sampled_from([0, 1, 2, 3]), filters, wraps)
-def test_micromaps_without_growth_equal_the_corpus_baker(seed, ua, level, filt, wrap):
+def test_tracer_micromaps_are_the_corpus_baker_grown(seed, ua, level, filt, wrap):
+    """The tracer's triL maps of a scene are the micromap baker's on the texel states written out
+    here (with real geometry's growth), which only ever turn the exact states into C."""
     rng = np.random.default_rng(seed)
     alpha = rng.integers(0, 256, (8, 16)).astype(np.uint8)
+    alpha[0, 0] = 102  # exactly at the cut-off 0.4: unknown
     scene = pair_scene(alpha, ua, ua, filt, wrap, wrap, cutoff=0.4)
-    at = scene_maps.alpha_triangles(scene)
-    gt = scene_maps.grid_table(scene)
-    got = scene_maps.flags_to_states(scene_maps.bake_micro_flags(at.uv, at.material, gt, level, eps=0.0))
-    grid = footprint_grid(texel_states_ref(alpha, 0.4), filt, wrap)
-    np.testing.assert_array_equal(got, maps.bake_triangles(grid, at.uv, level))
+    at = alpha_triangles(scene)
+    tests = scene_tests(scene, at)
+    img = texel_states_ref(alpha, 0.4)
+    assert img[0, 0] == C
+    np.testing.assert_array_equal(tests[0].texel_states(), img)
+    sm = build_scheme_maps(at, tests, parse_schemes(f"tri{level}"))[f"tri{level}"]
+    got = stored_micromaps(sm, level)
+    grid = footprint_grid(img, filt, wrap)
+    np.testing.assert_array_equal(got, bake_micromap_rows(grid, at.uv, level, GROW_TEXEL))
+    assert states.is_conservative(bake_micromap_rows(grid, at.uv, level), got)
+    assert sm.distinct_maps == 1  # A and B have the same UVs: one map, shared
 
 
 def test_coarser_maps_are_or_of_finer(rng):
     alpha = rng.integers(0, 256, (16, 16)).astype(np.uint8)
     scene = pair_scene(alpha, [[0.1, 0.2], [0.9, 0.3], [0.7, 0.95]], [[0.1, 0.2], [0.7, 0.95], [0.05, 0.8]],
                        "linear", "wrap", "clamp")
-    at = scene_maps.alpha_triangles(scene)
-    gt = scene_maps.grid_table(scene)
-    uv, has_b, mat = scene_maps.pair_corner_uvs(at)
-    fine = scene_maps.bake_square_flags(uv, has_b, mat, gt, 16)
+    at = alpha_triangles(scene)
+    grid = scene_tests(scene, at)[0].grid()
+    uv, has_b, mat = pair_corner_uvs(at)
+    fine = bake_pair_flags(grid, uv, has_b, 16, GROW_TEXEL)
     for f in (2, 4, 8, 16):
-        direct = scene_maps.bake_square_flags(uv, has_b, mat, gt, 16 // f)
-        np.testing.assert_array_equal(scene_maps.or_downsample(fine, f), direct)
+        direct = bake_pair_flags(grid, uv, has_b, 16 // f, GROW_TEXEL)
+        np.testing.assert_array_equal(or_downsample(fine, f), direct)
 
 
 def test_lone_triangle_cells_beyond_it_are_dont_care():
     alpha = np.full((4, 4), 255, np.uint8)
-    scene = pair_scene(alpha, [[0, 0], [1, 0], [1, 1]], [[0, 0], [1, 1], [0, 1]], "nearest", "clamp", "clamp")
-    scene.meshes[0].material[1] = 1  # B gets another material: no pair
-    scene.materials.append(scene.materials[0])
-    at = scene_maps.alpha_triangles(scene)
+    scene = pair_scene(alpha, [[0, 0], [1, 0], [1, 1]], [[0, 0], [1, 1], [0, 1]], "nearest", "clamp", "clamp",
+                       b_material=1)  # B gets another material: no pair
+    at = alpha_triangles(scene)
     assert len(at.pair_first) == 2 and at.paired_fraction == 0.0
-    uv, has_b, mat = scene_maps.pair_corner_uvs(at)
-    s = scene_maps.flags_to_states(scene_maps.bake_square_flags(uv, has_b, mat, scene_maps.grid_table(scene), 4))
+    uv, has_b, mat = pair_corner_uvs(at)
+    assert has_b.tolist() == [False, False]
+    tests = scene_tests(scene, at)
+    s = flags_to_states(bake_pair_flags(tests[0].grid(), uv[:1], has_b[:1], 4, GROW_TEXEL))
     j, i = np.mgrid[0:4, 0:4]
     assert np.all(s[0][i >= j] == O) and np.all(s[0][i < j] == C)  # B's half unreachable
+    traced = decoded_pair_maps(build_scheme_maps(at, tests, parse_schemes("sq4"))["sq4"], at)
+    np.testing.assert_array_equal(traced[0], s[0])
 
 
 # ---- the tracer's lookups against its alpha test ---------------------------------------------
@@ -172,18 +224,18 @@ def test_tracer_lookups_agree_with_the_alpha_test(seed, b_order, filt, wu, wv, c
         ua = rng.uniform(-1, 2, (3, 2))
         ub = np.array([ua[0], ua[2], rng.uniform(-1, 2, 2)])
     scene = pair_scene(alpha, ua, ub, filt, wu, wv, cutoff, b_order)
-    at = scene_maps.alpha_triangles(scene)
-    gt = scene_maps.grid_table(scene)
-    built = scene_maps.build_scheme_maps(at, gt, ["none", "sq8", "sq2", "tri2"] + codec_names())
-    base = trace.base_tables(scene, at, np.zeros(1, np.int32))
+    at = alpha_triangles(scene)
+    tests = scene_tests(scene, at)
+    built = build_scheme_maps(at, tests, parse_schemes(["none", "sq8", "sq2", "tri2"] + codec_names()))
+    base = base_tables(tests, len(scene.materials), at, np.zeros(1, np.int32))
     for name, sm in built.items():
-        tables = trace.scheme_tables(base, sm)
-        fn = trace.state_function(sm)
+        tables = scheme_tables(base, sm)
+        fn = state_function(sm)
         for tri in range(2):
-            n = max(sm.param, 1) if sm.kind != "tri" else 8
+            n = max(sm.param, 1) if sm.kind != "micromap" else 8
             for b1, b2 in _points(n, at.corners[tri], rng, 150):
-                c1, c2 = trace.clamp_bary(b1, b2)
+                c1, c2 = clamp_bary(b1, b2)
                 s = fn(tables.table, tri, c1, c2)
                 if s == C:
                     continue
-                assert trace.alpha_test(tables.table, tri, c1, c2) == (s == O), (name, tri, b1, b2)
+                assert shader_alpha_test(tables.table, tri, c1, c2) == (s == O), (name, tri, b1, b2)

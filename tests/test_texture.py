@@ -6,7 +6,7 @@ from PIL import Image
 
 from omaps import states
 from omaps.errors import InputError
-from omaps.texel_states import StateRule
+from omaps.alpha_test import StateRule
 from omaps.texture import AlphaTexture, find_images, load_alpha
 
 

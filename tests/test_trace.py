@@ -9,10 +9,12 @@ from PIL import Image
 
 from conftest import SCENES, needs_scenes
 from gltf_files import write_quad_gltf
-from omaps import embree, trace
+from omaps import trace
 from omaps.cli import main
 from omaps.codecs.registry import codec_names
 from omaps.scene import load_scene
+from omaps.schemes import parse_schemes
+from omaps.trace import embree
 
 
 def test_device_checks_version_and_features():
@@ -29,7 +31,7 @@ def test_quad_hits_match_an_independent_alpha_test(tmp_path):
     f = write_quad_gltf(tmp_path / "q.gltf", alpha, sampler={"magFilter": 9728, "wrapS": 33071, "wrapT": 33071})
     scene = load_scene(f)
     names = ["none", "sq4", "sq16", "tri3", "vq2"]
-    prep = trace.prepare(scene, names)
+    prep = trace.prepare(scene, parse_schemes(names))
     w = h = 61
     cam = trace.Camera(np.array([0.5, 0.5, 2.0]), np.array([0.5, 0.5, 0.0]), 40.0).basis(w, h)
     runs = {n: trace.trace_scheme(prep, n, cam, w, h) for n in names}
@@ -64,7 +66,7 @@ def test_quad_hits_match_an_independent_alpha_test(tmp_path):
 def palm_runs():
     scene = load_scene(SCENES / "palm.glb")
     names = ["none", "sq16", "tri3"] + codec_names()  # vq2, vq4, vq4x64 where present
-    prep = trace.prepare(scene, names)
+    prep = trace.prepare(scene, parse_schemes(names))
     w, h = 64, 48
     # under the crown, looking up into it: many candidates per ray, shadow rays through leaves
     cam = trace.Camera(np.array([-70.0, 130.0, -70.0]), np.array([0.0, 175.0, 0.0]), 70.0).basis(w, h)

@@ -4,8 +4,10 @@ import numpy as np
 import pytest
 
 from conftest import SCENES, needs_scenes
-from omaps import states, trace, two_state
+from omaps import states, trace
 from omaps.cli import main
+from omaps.schemes import parse_schemes
+from omaps.trace import two_state
 
 
 @pytest.fixture(scope="module")
@@ -13,7 +15,7 @@ def palm():
     from omaps.scene import load_scene
 
     scene = load_scene(SCENES / "palm.glb")
-    prep = trace.prepare(scene, ["none", "sq16", "vq4"])
+    prep = trace.prepare(scene, parse_schemes("none,sq16,vq4"))
     w, h = 64, 48
     cam = trace.Camera(np.array([-70.0, 130.0, -70.0]), np.array([0.0, 175.0, 0.0]), 70.0).basis(w, h)
     return prep, cam, w, h, trace.trace_scheme(prep, "none", cam, w, h)
@@ -28,7 +30,7 @@ def test_two_state_rules(palm, name):
     cache = {}
     err = {}
     for mode in two_state.MODES:
-        sm2 = two_state.two_state_maps(prep.scene, prep.alpha, sm, mode, cache=cache)
+        sm2 = two_state.two_state_maps(prep, sm, mode, cache=cache)
         two = two_state.decoded_pair_maps(sm2, prep.alpha)
         assert set(np.unique(two)) <= {states.T, states.O}
         known = three != states.C
@@ -39,7 +41,7 @@ def test_two_state_rules(palm, name):
         run = trace.trace_scheme(prep, sm2.name, cam, w, h)
         del prep.maps[sm2.name]
         assert run.primary.tests.sum() == 0  # no ray runs the any-hit shader
-        err[mode] = two_state.coverage_error(run, ref)
+        err[mode] = trace.coverage_error(run, ref)
         if mode == "opaque":  # C taken as opaque can only stop a ray earlier
             assert np.all(run.primary.dist <= ref.primary.dist)
         if mode == "transparent":
@@ -55,10 +57,15 @@ def test_two_state_rules(palm, name):
 def test_cell_fractions_match_the_alpha_test(palm):
     """Cells whose map state is known have fractions 0 (T) or 1 (O): every sample agrees."""
     prep = palm[0]
-    from omaps import scene_maps
-    uv, has_b, mat = scene_maps.pair_corner_uvs(prep.alpha)
-    reps, _ = scene_maps.distinct_rows(uv, has_b, mat)
-    frac, centre = two_state.cell_fractions(prep.scene, uv[reps], has_b[reps], mat[reps], 16)
+    from omaps.coverage import cell_fractions
+    from omaps.scene.alpha import distinct_rows, pair_corner_uvs
+
+    uv, has_b, mat = pair_corner_uvs(prep.alpha)
+    reps, _ = distinct_rows(uv, has_b, mat)
+    frac = np.zeros((len(reps), 16, 16))
+    for m in np.unique(mat[reps]):
+        sel = np.flatnonzero(mat[reps] == m)
+        frac[sel], _ = cell_fractions(prep.tests[int(m)], uv[reps[sel]], has_b[reps[sel]], 16)
     three = two_state.decoded_pair_maps(prep.maps["sq16"], prep.alpha)[reps]
     assert np.all((frac >= 0) & (frac <= 1))
     assert np.all(frac[three == states.T] == 0) and np.all(frac[three == states.O] == 1)

@@ -10,12 +10,13 @@ from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
 from conftest import needs_shared, real_textures
-from omaps import maps, states
+from omaps import states
+from omaps.alpha_test import StateRule
+from omaps.bake import bake_square, known_fraction
 from omaps.cli import main
 from omaps.codecs import vec4, vq4_block, vq4_encode
 from omaps.codecs.vq4_block import VQ4Block
 from omaps.sampling import footprint_grid
-from omaps.texel_states import StateRule
 from omaps.texture import load_alpha
 
 T, O, C = states.T, states.O, states.C
@@ -212,7 +213,7 @@ def test_x64_encodes_quadrants():
     data = vq4_encode.encode_x64(m, "best", "fast")
     assert len(data) == 256
     dec = vq4_block.decode_x64(data)
-    assert states.is_conservative(m, dec) and maps.known_fraction(dec) > 0.9
+    assert states.is_conservative(m, dec) and known_fraction(dec) > 0.9
     for k, q in enumerate(vq4_encode.split_x64(m)):
         np.testing.assert_array_equal(vq4_block.decode(data[64 * k:64 * (k + 1)]),
                                       vq4_encode.encode(q, "best", "fast").decode())
@@ -229,13 +230,13 @@ def corpus_maps():
     out = []
     for p in REAL:
         g = footprint_grid(rule.classify(load_alpha(p)))
-        out.append({n: maps.bake_square(g, n) for n in (16, 32, 64)})
+        out.append({n: bake_square(g, n) for n in (16, 32, 64)})
     return out
 
 
 @needs_shared
 def test_corpus_acceptance(corpus_maps):
-    sq = {n: np.mean([maps.known_fraction(m[n]) for m in corpus_maps]) for n in (16, 32, 64)}
+    sq = {n: np.mean([known_fraction(m[n]) for m in corpus_maps]) for n in (16, 32, 64)}
     res = {}
     for enc, eff in [("paper", "medium"), ("best", "fast"), ("best", "thorough")]:
         s4, s64 = [], []
@@ -244,12 +245,12 @@ def test_corpus_acceptance(corpus_maps):
             assert len(data) == 64
             d = vq4_block.decode(data)
             assert states.is_conservative(m[32], d)
-            s4.append(maps.known_fraction(d))
+            s4.append(known_fraction(d))
             data = vq4_encode.encode_x64(m[64], enc, eff)
             assert len(data) == 256
             d = vq4_block.decode_x64(data)
             assert states.is_conservative(m[64], d)
-            s64.append(maps.known_fraction(d))
+            s64.append(known_fraction(d))
         res[enc, eff] = np.mean(s4), np.mean(s64)
         print(f"\nVQ4 {enc}/{eff}: vq4 {res[enc, eff][0]:.4f} = {res[enc, eff][0] / sq[16]:.4f} x sq16 "
               f"({res[enc, eff][0] / sq[32]:.3f} of sq32); vq4x64 {res[enc, eff][1]:.4f} = "

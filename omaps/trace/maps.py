@@ -51,7 +51,7 @@ def default_jobs(jobs: int | None) -> int:
 
 
 def dedupe_maps(m: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    flat = np.ascontiguousarray(m).reshape(len(m), -1)
+    flat = np.ascontiguousarray(m).reshape(len(m), int(np.prod(m.shape[1:])))  # -1 fails with no maps
     uniq, inverse = np.unique(flat, axis=0, return_inverse=True)
     return uniq.reshape((len(uniq),) + m.shape[1:]), inverse.ravel()
 

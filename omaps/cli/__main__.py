@@ -1,0 +1,7 @@
+"""``python -m omaps.cli``: the ``omaps`` command line."""
+
+import sys
+
+from .main import main
+
+sys.exit(main())
