@@ -37,7 +37,7 @@ from numba import njit
 
 from . import states
 from .errors import InputError
-from .sampling import FILTERS, FootprintGrid, footprint_grid, sample_texture, wrap_code
+from .sampling import FootprintGrid, filter_code, footprint_grid, sample_texture, wrap_code
 from .texture import AlphaTexture
 
 __all__ = ["AlphaTest", "StateRule", "MaterialRules", "material_test", "sample_passes", "MODES", "BLEND_RULES",
@@ -70,8 +70,7 @@ class AlphaTest:
     tolerance: float = 0.0
 
     def __post_init__(self):
-        if self.filter not in FILTERS:
-            raise InputError(f"unknown filter {self.filter!r} (choose from {', '.join(FILTERS)})", self.name)
+        filter_code(self.filter, self.name)
         wrap_code(self.wrap_u)
         wrap_code(self.wrap_v)
         if self.rule not in RULES:
@@ -109,12 +108,17 @@ class AlphaTest:
         return out
 
     def grid(self) -> FootprintGrid:
-        """The footprint grid the bakers rasterise over."""
-        return footprint_grid(self.texel_states(), self.filter, self.wrap_u, self.wrap_v)
+        """The footprint grid the bakers rasterise over (made once per test: the tracer's schemes
+        and an OMM's primitives of one material share it)."""
+        grid = self.__dict__.get("_grid")
+        if grid is None:
+            grid = footprint_grid(self.texel_states(), self.filter, self.wrap_u, self.wrap_v)
+            object.__setattr__(self, "_grid", grid)
+        return grid
 
     def codes(self) -> tuple[int, int, int]:
         """(filter 0 nearest / 1 linear, wrap code of u, of v) for the numba kernels."""
-        return FILTERS.index(self.filter), wrap_code(self.wrap_u), wrap_code(self.wrap_v)
+        return filter_code(self.filter), wrap_code(self.wrap_u), wrap_code(self.wrap_v)
 
     def settings(self) -> dict:
         """What decides this test, as JSON (outputs record it)."""
@@ -205,8 +209,8 @@ class MaterialRules:
             v = getattr(self, name)
             if v is not None and not (np.isfinite(v) and 0.0 <= v <= 1.0):
                 raise InputError(f"{name.replace('_', '-')} must be in [0, 1], got {v}")
-        if self.filter is not None and self.filter not in FILTERS:
-            raise InputError(f"unknown filter {self.filter!r} (choose from {', '.join(FILTERS)})")
+        if self.filter is not None:
+            filter_code(self.filter)
         if self.wrap is not None:
             wrap_code(self.wrap)
 

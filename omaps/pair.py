@@ -32,6 +32,23 @@ B_CORNERS = np.array([CORNER_00, CORNER_11, CORNER_01], dtype=np.int8)
 PAIR_CORNER_UV = np.concatenate([TRI_A, TRI_B])[None]
 
 
+def corner_uvs(tris_uv, corners, first, second) -> tuple[np.ndarray, np.ndarray]:
+    """Pairs' corner UVs (P, 6, 2) in ``bake.square``'s layout -- A's UVs at (0,0), (1,0), (1,1),
+    then B's at (0,0), (1,1), (0,1), zeros without B -- and whether B exists, from triangles'
+    UVs (T, 3, 2) and corner codes (T, 3), and each pair's A and B rows (``second`` -1: none)."""
+    tris_uv = np.asarray(tris_uv, dtype=np.float64)
+    corners = np.asarray(corners)
+    first = np.asarray(first, dtype=np.int64)
+    second = np.asarray(second, dtype=np.int64)
+    out = np.zeros((len(first), 6, 2))
+    # sorting the codes orders A's as 0, 1, 2 and B's as 0, 2, 3: exactly the layout's corners
+    out[:, 0:3] = np.take_along_axis(tris_uv[first], np.argsort(corners[first], axis=1)[:, :, None], axis=1)
+    has_b = second >= 0
+    b = second[has_b]
+    out[has_b, 3:6] = np.take_along_axis(tris_uv[b], np.argsort(corners[b], axis=1)[:, :, None], axis=1)
+    return out, has_b
+
+
 @njit(cache=True, inline="always")
 def pair_weights(tri, s, t):
     """Weights of a square point (s, t) on the corners of triangle A (tri 0: (0,0), (1,0), (1,1),

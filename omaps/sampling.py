@@ -76,6 +76,14 @@ def sample_texture(value, filt, mode_u, mode_v, x, y):
     return min(max(a, lo), hi)
 
 
+def filter_code(filter: str, path=None) -> int:
+    """0 nearest, 1 linear (the numba kernels' code); InputError naming ``path`` otherwise."""
+    try:
+        return FILTERS.index(filter)
+    except ValueError:
+        raise InputError(f"unknown filter {filter!r} (choose from {', '.join(FILTERS)})", path) from None
+
+
 def wrap_code(wrap: str) -> int:
     try:
         return WRAP_MODES.index(wrap)
@@ -132,8 +140,7 @@ def footprint_grid(texel_states: np.ndarray, filter: str = "nearest", wrap: str 
                    wrap_v: str | None = None) -> FootprintGrid:
     """Build the grid for texel states (H, W) under a filter and addressing (``wrap`` for u,
     ``wrap_v`` for v, default the same)."""
-    if filter not in FILTERS:
-        raise InputError(f"unknown filter {filter!r} (choose from {', '.join(FILTERS)})")
+    filter_code(filter)
     wrap_code(wrap)
     wrap_v = wrap if wrap_v is None else wrap_v
     wrap_code(wrap_v)

@@ -51,12 +51,12 @@ def expand(square_maps: np.ndarray, pair_of: np.ndarray, corners: np.ndarray) ->
         raise InputError(f"square maps must have shape (P, N, N), got {m.shape}")
     level = level_of_size(m.shape[1])
     flat = m.reshape(len(m), -1)
-    corners = np.asarray(corners, dtype=np.int8).reshape(-1, 3)
-    out = np.empty((len(corners), 4 ** level), dtype=m.dtype)
-    keys = [tuple(int(x) for x in c) for c in corners]
-    for key in set(keys):
-        rows = np.flatnonzero([k == key for k in keys])
-        out[rows] = flat[np.asarray(pair_of)[rows]][:, micro_cells(level, key)]
+    kinds, kind_of = np.unique(np.asarray(corners, dtype=np.int8).reshape(-1, 3), axis=0, return_inverse=True)
+    pair_of = np.asarray(pair_of)
+    out = np.empty((len(kind_of), 4 ** level), dtype=m.dtype)
+    for k, key in enumerate(kinds):
+        rows = np.flatnonzero(kind_of.ravel() == k)
+        out[rows] = flat[pair_of[rows]][:, micro_cells(level, tuple(int(x) for x in key))]
     return out
 
 
@@ -71,10 +71,10 @@ def merge(micromaps: np.ndarray, has_b: np.ndarray | None = None) -> np.ndarray:
     if has_b is not None:
         flags[~np.asarray(has_b, dtype=bool), 1] = 0
     acc = np.zeros((p, n * n), dtype=np.uint8)
+    rows = np.arange(p)[:, None]
     for tri, corners in ((0, tuple(pair.A_CORNERS)), (1, tuple(pair.B_CORNERS))):
-        cells = micro_cells(level, corners)
-        for k in range(m):  # cells repeat (two micro-triangles each): no fancy-indexed OR
-            acc[:, cells[k]] |= flags[:, tri, k]
+        # cells repeat (two micro-triangles each): ``at`` ORs every write, a fancy index would not
+        np.bitwise_or.at(acc, (rows, micro_cells(level, corners)[None, :]), flags[:, tri])
     return states.FLAG_TO_STATE[acc].reshape(p, n, n)
 
 

@@ -32,6 +32,7 @@ from ..alpha_test import AlphaTest
 from ..bake import GROW_TEXEL, bake_micromaps, bake_pair_squares, check_level, dynamic_levels, micro_starts
 from ..bake.micromap import check_uv_triangles, flag_table
 from ..errors import InputError
+from ..pair import corner_uvs
 from ..promotion import PROMOTIONS
 from ..schemes import get_scheme
 from . import format as omm_format
@@ -212,13 +213,7 @@ def _pair_states(g: Geometry, grid, tris: np.ndarray, scheme) -> tuple[np.ndarra
     """T/O/C micromaps (flat) at level log2 N of every triangle from its pair's square map, stored
     and decoded by the scheme's codec; the blocks (P, bytes) and the pairing records."""
     pair_of, corners, prs = g.pairing()
-    uv = np.zeros((len(prs), 6, 2))
-    order = np.argsort(corners, axis=1)
-    sorted_uv = np.take_along_axis(tris, order[:, :, None], axis=1)  # A: (0,0),(1,0),(1,1); B: (0,0),(1,1),(0,1)
-    has_a = prs[:, 0] >= 0
-    has_b = prs[:, 1] >= 0
-    uv[has_a, 0:3] = sorted_uv[prs[has_a, 0]]
-    uv[has_b, 3:6] = sorted_uv[prs[has_b, 1]]
+    uv, has_b = corner_uvs(tris, corners, prs[:, 0], prs[:, 1])  # every pair has an A
     squares = bake_pair_squares(grid, uv, has_b, scheme.codec.map_size, GROW_TEXEL)
     if g.unknown is not None:  # a pair with an unknown triangle is all C
         unknown = np.zeros(len(prs), bool)

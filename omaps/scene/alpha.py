@@ -14,6 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..alpha_test import MaterialRules
+from ..pair import corner_uvs
 from .model import Scene
 from .pairing import pair_triangles
 
@@ -52,7 +53,6 @@ def alpha_triangles(scene: Scene, rules: MaterialRules = MaterialRules(), improv
     row0 = 0
     q0 = 0
     for mesh in scene.meshes:
-        mg = mesh.merged
         offset = 0
         for k, p in enumerate(mesh.primitives):
             nt = len(p.triangles)
@@ -74,7 +74,6 @@ def alpha_triangles(scene: Scene, rules: MaterialRules = MaterialRules(), improv
                 row0 += nt
                 q0 += len(pr.first)
             offset += nt
-        assert offset == len(mg["triangles"])
         base.append(row0)
 
     def cat(key, dtype, shape=(0,)):
@@ -89,21 +88,9 @@ def alpha_triangles(scene: Scene, rules: MaterialRules = MaterialRules(), improv
 
 
 def pair_corner_uvs(at: AlphaTriangles) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Per pair: UVs at A's corners (0,0), (1,0), (1,1) and B's (0,0), (1,1), (0,1) (zeros for a
-    lone triangle) -- ``bake.square``'s layout --, whether B exists, and the material."""
-    q = len(at.pair_first)
-    out = np.zeros((q, 6, 2))
-    a = at.pair_first
-    b = at.pair_second
-    order_a = np.argsort(at.corners[a], axis=1)  # corner codes 0,1,2 -> (0,0),(1,0),(1,1)
-    out[:, 0:3] = np.take_along_axis(at.uv[a], order_a[:, :, None], axis=1)
-    has_b = b >= 0
-    if has_b.any():
-        bb = b[has_b]
-        # B's corners are codes 0, 2, 3 -> (0,0), (1,1), (0,1): sort gives exactly that order
-        order_b = np.argsort(at.corners[bb], axis=1)
-        out[has_b, 3:6] = np.take_along_axis(at.uv[bb], order_b[:, :, None], axis=1)
-    return out, has_b, at.material[a]
+    """Per pair: its corner UVs (``pair.corner_uvs``), whether B exists, and the material."""
+    uv, has_b = corner_uvs(at.uv, at.corners, at.pair_first, at.pair_second)
+    return uv, has_b, at.material[at.pair_first]
 
 
 def distinct_rows(*arrays) -> tuple[np.ndarray, np.ndarray]:
