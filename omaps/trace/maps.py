@@ -121,35 +121,33 @@ def build_scheme_maps(at: AlphaTriangles, tests: dict, schemes, jobs: int = 1,
                       progress: bool = False) -> dict[str, SchemeMaps]:
     """Bake and store every scheme's maps. ``tests``: material -> ``AlphaTest``; ``schemes``:
     ``omaps.schemes.Scheme`` objects (kinds none, micromap, square)."""
+    if not at.count:  # nothing alpha-tested: no maps, the filter is never called
+        return {s.name: SchemeMaps(s.name, s.kind, s.level if s.kind == "micromap" else (s.map_size or 0),
+                                   np.zeros(0, np.int32), np.zeros(1, np.uint8), s.codec.block_bytes if s.codec else 1,
+                                   0, 0, 0.0, s.codec, s) for s in schemes}
     out: dict[str, SchemeMaps] = {}
     n_pairs = len(at.pair_first)
     squares = [s for s in schemes if s.kind == "square"]
-    pair_states, pair_inverse = {}, None
-    if squares and at.count:
+    if squares:
         pair_states, pair_inverse = pair_square_states(at, tests, {s.codec.map_size for s in squares})
     for s in schemes:
         if s.kind == "none":
             out[s.name] = SchemeMaps(s.name, "none", 0, np.zeros(at.count, np.int32), np.zeros(1, np.uint8), 1, 0, 0,
                                      0.0, None, s)
         elif s.kind == "micromap":
-            st, inv_t = micromap_states(at, tests, s.level) if at.count else (np.zeros((0, 4 ** s.level)), np.zeros(0))
+            st, inv_t = micromap_states(at, tests, s.level)
             uniq, inv_u = dedupe_maps(st)
-            data = pack_states(uniq) if len(uniq) else np.zeros((0, 1), np.uint8)
-            known = float(np.mean((st != states.C).mean(axis=1)[inv_t])) if at.count else 0.0
-            out[s.name] = SchemeMaps(s.name, "micromap", s.level, inv_u[inv_t].astype(np.int32) if at.count else
-                                     np.zeros(0, np.int32), data.ravel().copy() if data.size else np.zeros(1, np.uint8),
+            data = pack_states(uniq)
+            known = float(np.mean((st != states.C).mean(axis=1)[inv_t]))
+            out[s.name] = SchemeMaps(s.name, "micromap", s.level, inv_u[inv_t].astype(np.int32), data.ravel().copy(),
                                      data.shape[1], at.count * data.shape[1], len(uniq), known, None, s)
         else:
             codec = s.codec
-            n = codec.map_size
-            if not at.count:
-                out[s.name] = SchemeMaps(s.name, "square", n, np.zeros(0, np.int32), np.zeros(1, np.uint8),
-                                         codec.block_bytes, 0, 0, 0.0, codec, s)
-                continue
-            uniq, inv_u = dedupe_maps(pair_states[n])
+            uniq, inv_u = dedupe_maps(pair_states[codec.map_size])
             pair_rows = inv_u[pair_inverse]  # every pair -> its distinct map
             blocks, decoded = encode_maps(codec, uniq, s.encoder, s.effort, jobs, progress)
             known = float(np.mean((decoded != states.C).reshape(len(decoded), -1).mean(axis=1)[pair_rows]))
-            out[s.name] = SchemeMaps(s.name, "square", n, pair_rows[at.pair].astype(np.int32), blocks.ravel().copy(),
-                                     codec.block_bytes, n_pairs * codec.block_bytes, len(uniq), known, codec, s)
+            out[s.name] = SchemeMaps(s.name, "square", codec.map_size, pair_rows[at.pair].astype(np.int32),
+                                     blocks.ravel().copy(), codec.block_bytes, n_pairs * codec.block_bytes, len(uniq),
+                                     known, codec, s)
     return out
