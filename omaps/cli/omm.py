@@ -6,7 +6,6 @@ from __future__ import annotations
 import sys
 import time
 
-
 from ..errors import InputError
 from ..omm import files, inputs
 from ..omm import format as omm_format
