@@ -1,67 +1,53 @@
 """The OMM output folder: written whole or not at all, read back with every layout check.
 
 ``write`` fills a temporary folder beside the target and renames it into place (an existing
-OMM folder is swapped out and removed only after that), so a failed run leaves no partial
-output. ``read`` checks sizes, record fields, offsets, index entries and the usage histograms
-against the files, and raises ``InputError`` naming the file and the problem.
+OMM folder is swapped out and removed only after that; ``omaps.atomic`` holds the rule), so a
+failed run leaves no partial output. ``read`` checks sizes, record fields, offsets, index
+entries and the usage histograms against the files, and raises ``InputError`` naming the file
+and the problem.
 """
 
 from __future__ import annotations
 
 import json
 import os
-import shutil
-import tempfile
 
 import numpy as np
 
+from .. import atomic
 from ..errors import InputError
 from . import format as omm_format
 from .pipeline import OmmResult
 
 
 def check_target(folder) -> str:
-    """The absolute output folder, when it may be written: absent, empty, or an earlier output."""
-    folder = os.path.abspath(os.fspath(folder))
-    if os.path.exists(folder):
-        if not os.path.isdir(folder):
-            raise InputError("exists and is not a folder", folder)
-        if os.listdir(folder) and not os.path.isfile(os.path.join(folder, omm_format.SUMMARY_FILE)):
-            raise InputError(f"folder is not empty and holds no {omm_format.SUMMARY_FILE}: not replacing it", folder)
-    return folder
+    """The absolute output folder, when it may be written: absent, empty, or an earlier output
+    (holding omm.json); the one rule of ``omaps.atomic``."""
+    return atomic.check_folder(folder, omm_format.SUMMARY_FILE)
 
 
 def write(folder, result: OmmResult, extra_summary: dict | None = None) -> None:
-    folder = check_target(folder)
-    parent = os.path.dirname(folder)
-    os.makedirs(parent, exist_ok=True)
-    tmp = tempfile.mkdtemp(prefix=".omaps-omm-", dir=parent)
-    try:
-        summary = dict(result.summary, **(extra_summary or {}))
-        files = {
-            omm_format.DATA_FILE: result.data.astype(np.uint8).tobytes(),
-            omm_format.TRIANGLES_FILE: result.triangles.astype(omm_format.TRIANGLE_RECORD).tobytes(),
-            omm_format.INDEX_FILE: result.index.astype(omm_format.INDEX_DTYPE).tobytes(),
-            omm_format.USAGE_FILE: (json.dumps(result.usage, indent=1) + "\n").encode(),
-            omm_format.SUMMARY_FILE: (json.dumps(summary, indent=1) + "\n").encode(),
-        }
-        if result.pair_blocks is not None:
-            files[omm_format.PAIR_BLOCKS_FILE] = result.pair_blocks
-            files[omm_format.PAIRS_FILE] = result.pair_records.astype(omm_format.PAIR_RECORD).tobytes()
-        for name, raw in files.items():
-            with open(os.path.join(tmp, name), "wb") as f:
-                f.write(raw)
-        if os.path.exists(folder):
-            old = tempfile.mkdtemp(prefix=".omaps-old-", dir=parent)
-            os.rmdir(old)
-            os.replace(folder, old)
-            os.replace(tmp, folder)
-            shutil.rmtree(old, ignore_errors=True)
-        else:
-            os.replace(tmp, folder)
-    except BaseException:
-        shutil.rmtree(tmp, ignore_errors=True)
-        raise
+    """Write the folder whole or not at all (an earlier OMM folder there is replaced)."""
+    with atomic.atomic_folder(folder, omm_format.SUMMARY_FILE) as tmp:
+        write_into(tmp, result, extra_summary)
+
+
+def write_into(folder, result: OmmResult, extra_summary: dict | None = None) -> None:
+    """Write the OMM files into an existing (empty) folder."""
+    summary = dict(result.summary, **(extra_summary or {}))
+    files = {
+        omm_format.DATA_FILE: result.data.astype(np.uint8).tobytes(),
+        omm_format.TRIANGLES_FILE: result.triangles.astype(omm_format.TRIANGLE_RECORD).tobytes(),
+        omm_format.INDEX_FILE: result.index.astype(omm_format.INDEX_DTYPE).tobytes(),
+        omm_format.USAGE_FILE: (json.dumps(result.usage, indent=1) + "\n").encode(),
+        omm_format.SUMMARY_FILE: (json.dumps(summary, indent=1) + "\n").encode(),
+    }
+    if result.pair_blocks is not None:
+        files[omm_format.PAIR_BLOCKS_FILE] = result.pair_blocks
+        files[omm_format.PAIRS_FILE] = result.pair_records.astype(omm_format.PAIR_RECORD).tobytes()
+    for name, raw in files.items():
+        with open(os.path.join(folder, name), "wb") as f:
+            f.write(raw)
 
 
 def _read(folder, name) -> bytes:
