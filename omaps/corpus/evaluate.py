@@ -15,9 +15,7 @@ Example::
 
 from __future__ import annotations
 
-import multiprocessing
 import os
-from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -26,8 +24,10 @@ from tqdm import tqdm
 from .. import states
 from ..alpha_test import StateRule
 from ..bake import bake_pair_triangles, bake_square, known_fraction, texel_limit
+from ..errors import InputError
 from ..schemes import EVAL_KINDS, Scheme, parse_schemes
 from ..texture import AlphaTexture, load_alpha
+from ..workers import process_pool
 
 __all__ = ["EvalConfig", "TextureResult", "evaluate_texture", "evaluate_many", "mean_results", "scheme_map"]
 
@@ -124,31 +124,44 @@ def warm_up(schemes: list[Scheme], config: EvalConfig) -> None:
 
 
 def evaluate_many(items, schemes: list[Scheme], config: EvalConfig = EvalConfig(), jobs: int | None = None,
-                  keep_maps: bool = False, min_size: int = 0, progress: bool = True):
+                  keep_maps: bool = False, min_size: int = 0, progress: bool = True, unreadable: list | None = None):
     """Evaluate textures (AlphaTexture objects or paths). Returns (results, skipped_small):
-    results in input order; paths of textures below ``min_size`` in ``skipped_small``."""
+    results in input order; paths of textures below ``min_size`` in ``skipped_small``.
+
+    A texture that cannot be read raises its ``InputError``, unless ``unreadable`` is a list:
+    then it gets ``(path, problem)`` and the others go on."""
     items = list(items)
     names = [s.name for s in schemes]
     jobs = os.cpu_count() or 1 if jobs is None else max(1, int(jobs))
     jobs = min(jobs, max(1, len(items)))
     bar = tqdm(total=len(items), desc="textures", unit="tex", disable=not progress, leave=False)
     out = []
+
+    def take(get):
+        try:
+            out.append(get())
+        except InputError as exc:
+            if unreadable is None:
+                raise
+            out.append(exc)
+        bar.update()
+
     try:
         if jobs == 1:
             for it in items:
-                out.append(_work(it, names, config, keep_maps, min_size))
-                bar.update()
+                take(lambda: _work(it, names, config, keep_maps, min_size))
         else:
             warm_up(schemes, config)
-            with ProcessPoolExecutor(max_workers=jobs, mp_context=multiprocessing.get_context("spawn")) as pool:
+            with process_pool(jobs) as pool:
                 futures = [pool.submit(_work, it, names, config, keep_maps, min_size) for it in items]
                 for f in futures:
-                    out.append(f.result())
-                    bar.update()
+                    take(f.result)
     finally:
         bar.close()
-    results = [r for r in out if r is not None]
+    results = [r for r in out if isinstance(r, TextureResult)]
     skipped = [_label(it) for it, r in zip(items, out) if r is None]
+    if unreadable is not None:
+        unreadable += [(_label(it), r.problem) for it, r in zip(items, out) if isinstance(r, InputError)]
     return results, skipped
 
 

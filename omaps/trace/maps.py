@@ -10,9 +10,7 @@ shared by its instances, as a BLAS shares it.
 
 from __future__ import annotations
 
-import multiprocessing
 import os
-from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
 
 import numpy as np
@@ -23,6 +21,7 @@ from ..bake import GROW_TEXEL, bake_micromaps, bake_pair_flags, or_downsample
 from ..bake.square import flags_to_states
 from ..codecs.raw import pack_states
 from ..scene.alpha import AlphaTriangles, distinct_rows, pair_corner_uvs
+from ..workers import process_pool
 
 __all__ = ["SchemeMaps", "build_scheme_maps", "default_jobs", "dedupe_maps"]
 
@@ -74,7 +73,7 @@ def encode_maps(codec, maps_: np.ndarray, encoder, effort, jobs: int = 1, progre
     bar = tqdm(total=len(args), desc=f"encode {codec.name}", unit="chunk", disable=not progress, leave=False)
     out = [first]
     try:
-        with ProcessPoolExecutor(max_workers=jobs, mp_context=multiprocessing.get_context("spawn")) as pool:
+        with process_pool(jobs) as pool:
             for r in pool.map(_encode_chunk, args):
                 out.append(r)
                 bar.update()
