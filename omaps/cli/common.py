@@ -4,6 +4,7 @@ choices, tables, and how library warnings are shown."""
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 
 from ..alpha_test import BLEND_RULES, MODES, MaterialRules, StateRule
@@ -56,6 +57,17 @@ def add_material_options(p: argparse.ArgumentParser) -> None:
 
 def material_rules(a) -> MaterialRules:
     return MaterialRules(a.cutoff, a.filter, a.wrap, a.blend, a.blend_cutoff)
+
+
+def show_progress(quiet: bool = False) -> bool:
+    """Progress bars (on stderr): off with --quiet; else on when stderr is a terminal, or as the
+    environment variable OMAPS_PROGRESS says (1 on, 0 off), so logs and pipes stay clean."""
+    if quiet:
+        return False
+    forced = os.environ.get("OMAPS_PROGRESS", "").strip()
+    if forced in ("0", "1"):
+        return forced == "1"
+    return sys.stderr.isatty()
 
 
 def check_jobs(jobs) -> None:

@@ -25,8 +25,12 @@ def parser() -> argparse.ArgumentParser:
 
 
 def main(argv=None) -> int:
-    args = parser().parse_args(argv)
+    """Exit codes: 0 done; 1 done, but with problems it lists (eval: unreadable files skipped;
+    trace: a scheme changed the visible result; omm --verify: a check failed) or a system error
+    while writing (nothing written); 2 bad input or options (nothing written); 130 interrupted
+    (nothing written)."""
     try:
+        args = parser().parse_args(argv)
         with warnings.catch_warnings():
             warnings.showwarning = show_warning
             warnings.simplefilter("always", UserWarning)
