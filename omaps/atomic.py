@@ -81,7 +81,7 @@ def _named(exc: OSError, tmp: str, path: str) -> OSError:
 # ---------------------------------------------------------------------------------------------
 # checks (before any work)
 
-def _check_parent(path: str, option: str | None) -> None:
+def _check_parent(path: str, shown) -> None:
     """The nearest existing ancestor of ``path`` is a folder we can create files in (tried: a
     hidden file is made and removed, so read-only mounts and permissions are both caught)."""
     folder = os.path.dirname(path)
@@ -91,11 +91,11 @@ def _check_parent(path: str, option: str | None) -> None:
             break
         folder = up
     if not os.path.isdir(folder):
-        raise InputError(f"{folder} is not a folder", path)
+        raise InputError(f"{folder} is not a folder", shown)
     try:
         _remove(make_temp_file(folder))
     except OSError as exc:
-        raise InputError(f"cannot write in {folder} ({exc.strerror or exc})", path) from None
+        raise InputError(f"cannot create files in {folder} ({exc.strerror or exc})", shown) from None
 
 
 def _target(path) -> str:
@@ -129,7 +129,7 @@ def check_file(path, option: str | None = None, suffixes=None, inputs=()) -> str
         if ext not in suffixes:
             raise InputError(f"{option or 'this output'} must end in {', '.join(suffixes)}"
                              + (f", not {ext}" if ext else ""), shown)
-    _check_parent(p, option)
+    _check_parent(p, shown)
     return p
 
 
@@ -154,7 +154,7 @@ def check_folder(path, manifest: str, option: str | None = None, inputs=()) -> s
             ai = os.path.abspath(os.fspath(i))
             if ai == p or ai.startswith(p + os.sep):
                 raise InputError(f"holds an input of this command; {option or 'the output'} would replace it", shown)
-    _check_parent(p, option)
+    _check_parent(p, shown)
     return p
 
 

@@ -1,5 +1,6 @@
 import csv
 import json
+import os
 import subprocess
 import sys
 
@@ -36,7 +37,7 @@ def test_outputs(tmp_path, textures, capsys):
     assert main(["eval", str(textures), "--json", str(j), "--csv", str(c), "--plot", str(p),
                  "--show", str(s), "--jobs", "1"]) == 0
     data = json.loads(j.read_text())
-    assert set(data) == {"settings", "textures", "mean"}
+    assert set(data) == {"settings", "textures", "mean", "unreadable"} and data["unreadable"] == []
     assert list(data["settings"]["schemes"]) == list(DEFAULT_SCHEMES)
     assert data["settings"]["mode"] == "levels" and data["settings"]["filter"] == "nearest"
     assert [t["name"] for t in data["textures"]] == ["t0.png", "t1.png", "t2.png"]
@@ -53,7 +54,11 @@ def test_outputs(tmp_path, textures, capsys):
     assert len(rows) == 3 * len(DEFAULT_SCHEMES) + len(DEFAULT_SCHEMES)
     assert Image.open(p).size[0] > 300
     shown = sorted(x.name for x in s.iterdir())
-    assert shown == ["000_t0.png", "001_t1.png", "002_t2.png"]
+    assert shown == ["000_t0.png", "001_t1.png", "002_t2.png", "show.json"]
+    manifest = json.loads((s / "show.json").read_text())
+    assert [p["file"] for p in manifest["pictures"]] == shown[:3]
+    assert [p["texture"] for p in manifest["pictures"]] == ["t0.png", "t1.png", "t2.png"]
+    assert manifest["settings"] == data["settings"]
 
 
 def test_jobs_give_same_results(tmp_path, textures):
@@ -87,14 +92,38 @@ def test_bad_options(tmp_path, textures, capsys, args, message):
     assert not j.exists()
 
 
-def test_bad_file_in_folder_stops_everything(tmp_path, textures, capsys):
-    (textures / "zz_broken.png").write_bytes(b"not a png")
+@pytest.mark.parametrize("jobs", ["1", "2"])
+def test_bad_file_in_folder_goes_on(tmp_path, textures, capsys, jobs):
+    """A file in a folder that cannot be read is skipped, listed at the end and in the JSON, and
+    the run exits 1 with its outputs written; a bad file named on the command line is exit 2."""
+    (textures / "b_broken.png").write_bytes(b"not a png")
+    (textures / "zz_broken.png").write_bytes(b"")
     j, s = tmp_path / "r.json", tmp_path / "show"
-    assert main(["eval", str(textures), "--json", str(j), "--show", str(s), "--jobs", "2"]) == 2
+    assert main(["eval", str(textures), "--json", str(j), "--show", str(s), "--jobs", jobs]) == 1
+    out, err = capsys.readouterr()
+    assert "MEAN savings (3)" in out
+    assert "2 files could not be read" in err
+    assert "b_broken.png: not an image" in err and "zz_broken.png" in err
+    data = json.loads(j.read_text())
+    assert [t["name"] for t in data["textures"]] == ["t0.png", "t1.png", "t2.png"]
+    assert [os.path.basename(u["path"]) for u in data["unreadable"]] == ["b_broken.png", "zz_broken.png"]
+    assert all(u["problem"] for u in data["unreadable"])
+    assert len(list(s.glob("*.png"))) == 3
+    # named explicitly, the same file is bad input: exit 2, nothing written
+    j2 = tmp_path / "r2.json"
+    assert main(["eval", str(textures / "t0.png"), str(textures / "b_broken.png"), "--json", str(j2),
+                 "--jobs", jobs]) == 2
     err = capsys.readouterr().err
-    assert "zz_broken.png" in err and "not an image" in err
-    assert not j.exists() and not s.exists()
-    assert list(tmp_path.glob(".omaps-*")) == []
+    assert "b_broken.png: not an image" in err and not j2.exists()
+    assert [p for p in os.listdir(tmp_path) if p.startswith(".omaps")] == []
+
+
+def test_folder_of_only_unreadable_files(tmp_path, capsys):
+    (tmp_path / "a.png").write_bytes(b"junk")
+    j = tmp_path / "r.json"
+    assert main(["eval", str(tmp_path), "--json", str(j)]) == 2
+    err = capsys.readouterr().err
+    assert "a.png: not an image" in err and "no texture could be read" in err and not j.exists()
 
 
 def test_missing_and_no_alpha(tmp_path, capsys):

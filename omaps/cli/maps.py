@@ -9,7 +9,7 @@ import time
 
 import numpy as np
 
-from ..atomic import atomic_path, write_bytes
+from ..atomic import Outputs
 from ..bake import GROW_TEXEL, bake_micromap_rows, bake_square, known_fraction
 from ..codecs import get_codec
 from ..corpus import default_corpus, evaluate_many, mean_results, report
@@ -18,7 +18,7 @@ from ..errors import InputError
 from ..omm.inputs import load_uvs
 from ..schemes import DEFAULT_SCHEMES, EVAL_KINDS, get_scheme, parse_schemes
 from ..texture import find_images, load_alpha
-from .common import add_codec_options, add_state_options, eval_config, print_table
+from .common import add_codec_options, add_state_options, eval_config, print_table, show_progress
 
 
 def add_parsers(sub) -> None:
@@ -32,11 +32,17 @@ def add_parsers(sub) -> None:
                         "vq4x64, each codec also with -paper, -fast, -medium or -thorough (default: %(default)s)")
     e.add_argument("--min-size", type=int, default=0, metavar="PX",
                    help="skip textures whose smaller side is below PX")
-    e.add_argument("--json", metavar="FILE", help="write per-texture and mean results as JSON")
+    e.add_argument("--json", metavar="FILE", help="write settings, per-texture and mean results, and unreadable "
+                                                  "files as JSON")
     e.add_argument("--csv", metavar="FILE", help="write results as CSV (one row per texture and scheme)")
-    e.add_argument("--plot", metavar="FILE.png", help="chart of mean savings against bits per pair")
-    e.add_argument("--show", metavar="DIR", help="write one PNG per texture with its maps")
+    e.add_argument("--plot", metavar="FILE.png", help="chart of mean savings against bits per pair (the suffix "
+                                                      "picks the format: .png, .svg, .pdf, ...)")
+    e.add_argument("--show", metavar="DIR", help="write one PNG per texture with its maps, and show.json (the folder "
+                                                 "is replaced whole if it is empty or an earlier --show folder)")
     e.add_argument("--jobs", type=int, default=None, metavar="N", help="worker processes (default: all cores)")
+    e.add_argument("--per-texture", action="store_true",
+                   help="print every texture's row (by default only up to 20 textures; --json and --csv always "
+                        "hold them all)")
     e.add_argument("--quiet", action="store_true", help="no progress bar, only the mean table")
     add_state_options(e, "levels")
     add_codec_options(e)
@@ -48,7 +54,8 @@ def add_parsers(sub) -> None:
     b.add_argument("texture")
     b.add_argument("--scheme", required=True, help="sqN or triL")
     b.add_argument("--uvs", metavar="UVS.npy", help="UV triangles, array of shape (T, 3, 2), for triL")
-    b.add_argument("-o", "--output", required=True, metavar="OUT.npy", help="states (0 T, 1 O, 2 C), uint8")
+    b.add_argument("-o", "--output", required=True, metavar="OUT.npy", help="states (0 T, 1 O, 2 C), uint8 "
+                                                                           "(replaced if it exists)")
     add_state_options(b, "levels")
     b.set_defaults(func=cmd_bake)
 
@@ -57,7 +64,7 @@ def add_parsers(sub) -> None:
                                     "write the block.")
     en.add_argument("texture")
     en.add_argument("--codec", required=True, help="sqN, vq2, vq4 or vq4x64")
-    en.add_argument("-o", "--output", required=True, metavar="FILE", help="block bytes")
+    en.add_argument("-o", "--output", required=True, metavar="FILE", help="block bytes (replaced if it exists)")
     add_state_options(en, "levels")
     add_codec_options(en, "the codec")
     en.set_defaults(func=cmd_encode)
@@ -66,15 +73,19 @@ def add_parsers(sub) -> None:
     de.add_argument("block", metavar="FILE")
     de.add_argument("--codec", required=True, help="sqN, vq2, vq4 or vq4x64")
     de.add_argument("--show", metavar="OUT.png", help="draw the map in the deck's colours")
-    de.add_argument("--json", action="store_true", help="print the map as JSON")
+    de.add_argument("--json", action="store_true", help="print the map (and its settings) as JSON")
     de.set_defaults(func=cmd_decode)
+
+
+PER_TEXTURE_ROWS = 20  # per-texture rows printed without --per-texture
 
 
 def _print_table(results, names, per_texture: bool) -> None:
     means = mean_results(results, names)
     rows = []
     if per_texture:
-        rows += [[r.name[:40]] + [f"{r.savings[n]:.3f}" for n in names] for r in results]
+        rows += [[r.name if len(r.name) <= 40 else "..." + r.name[-37:]] + [f"{r.savings[n]:.3f}" for n in names]
+                 for r in results]
     rows.append([f"MEAN savings ({len(results)})"] + [f"{means[n]['savings']:.3f}" for n in names])
     rows.append(["mean bits/pair"] + [f"{means[n]['bits']:.0f}" for n in names])
     print_table(["texture"] + names, rows)
@@ -88,6 +99,12 @@ def cmd_eval(a) -> int:
         raise InputError(f"--min-size must be >= 0, got {a.min_size}")
     if a.jobs is not None and a.jobs < 1:
         raise InputError(f"--jobs must be >= 1, got {a.jobs}")
+    outputs = Outputs(inputs=a.paths)
+    outputs.file(a.json, "--json")
+    outputs.file(a.csv, "--csv")
+    outputs.file(a.plot, "--plot", report.plot_suffixes() if a.plot else None)
+    outputs.folder(a.show, "--show", report.SHOW_MANIFEST)
+    named = set()
     if a.paths:
         items, skipped_other = find_images(a.paths)
         if skipped_other:
@@ -95,34 +112,55 @@ def cmd_eval(a) -> int:
                   f"(e.g. {skipped_other[0]})", file=sys.stderr)
         if not items:
             raise InputError("no image files found", ", ".join(a.paths))
+        named = {p for p in a.paths if not os.path.isdir(p)}
         source = f"{len(items)} files"
     else:
         items = default_corpus()
         source = "the embedded procedural corpus"
+    progress = show_progress(a.quiet)
     t0 = time.perf_counter()
-    results, small = evaluate_many(items, schemes, config, a.jobs, keep_maps=bool(a.show),
-                                   min_size=a.min_size, progress=not a.quiet and sys.stderr.isatty())
+    unreadable: list = []
+    results, small = evaluate_many(items, schemes, config, a.jobs, keep_maps=bool(a.show), min_size=a.min_size,
+                                   progress=progress, unreadable=unreadable)
     dt = time.perf_counter() - t0
+    for path, problem in unreadable:
+        if path in named:  # a file named on the command line is bad input
+            raise InputError(problem, path)
     if small:
         print(f"omaps: skipped {len(small)} textures smaller than {a.min_size} px", file=sys.stderr)
     if not results:
+        if unreadable:
+            _print_unreadable(unreadable)
+            raise InputError("no texture could be read", ", ".join(a.paths))
         raise InputError(f"no texture is at least {a.min_size} px")
     print(f"omaps eval: {len(results)} textures from {source}, mode {config.rule.mode}, "
-          f"filter {config.filter}, {dt:.2f} s")
-    _print_table(results, names, per_texture=not a.quiet and len(results) <= 20)
-    # everything is computed; now write, each file atomically
-    if a.json:
-        report.write_json(a.json, results, names, {"source": source, **config.settings(), "min_size": a.min_size,
-                                                    "schemes": {s.name: s.settings() for s in schemes}})
-    if a.csv:
-        report.write_csv(a.csv, results, names)
-    if a.plot:
-        report.plot_savings(a.plot, results, names)
-    if a.show:
-        os.makedirs(a.show, exist_ok=True)
-        for i, r in enumerate(results):
-            report.show_texture(os.path.join(a.show, report.show_file_name(r, i)), r)
+          f"filter {config.filter}, wrap {config.wrap}, {dt:.2f} s")
+    per_texture = a.per_texture or (not a.quiet and len(results) <= PER_TEXTURE_ROWS)
+    _print_table(results, names, per_texture)
+    if not per_texture and not a.quiet:
+        print(f"({len(results)} per-texture rows not shown: --per-texture prints them)")
+    settings = {"source": source, **config.settings(), "min_size": a.min_size,
+                "schemes": {s.name: s.settings() for s in schemes}}
+    # everything is computed; now write: all outputs are renamed into place together at the end
+    with outputs.writing():
+        if a.json:
+            report.write_json(outputs.path(a.json), results, names, settings, unreadable)
+        if a.csv:
+            report.write_csv(outputs.path(a.csv), results, names)
+        if a.plot:
+            report.plot_savings(outputs.path(a.plot), results, names)
+        if a.show:
+            report.write_show(outputs.path(a.show), results, settings, progress)
+    if unreadable:
+        _print_unreadable(unreadable)
+        return 1
     return 0
+
+
+def _print_unreadable(unreadable) -> None:
+    print(f"omaps: {len(unreadable)} files could not be read (skipped):", file=sys.stderr)
+    for path, problem in unreadable:
+        print(f"  {path}: {problem}", file=sys.stderr)
 
 
 def cmd_bake(a) -> int:
@@ -130,6 +168,8 @@ def cmd_bake(a) -> int:
     scheme = get_scheme(a.scheme)
     if scheme.kind not in ("micromap", "square") or (scheme.codec is not None and scheme.codec.compressed):
         raise InputError(f"bake makes sqN or triL maps, not {scheme.name}")
+    outputs = Outputs(inputs=[a.texture, a.uvs])
+    outputs.file(a.output, "-o")
     test = config.test(load_alpha(a.texture, config.channel))
     grid = test.grid()
     if a.uvs:
@@ -139,8 +179,8 @@ def cmd_bake(a) -> int:
         out = bake_micromap_rows(grid, uvs, scheme.level, GROW_TEXEL)
     else:
         out = scheme_map(scheme, grid)
-    with atomic_path(a.output, suffix=".npy") as tmp:
-        np.save(tmp, out)
+    with outputs.writing(), open(outputs.path(a.output), "wb") as f:
+        np.save(f, out)
     print(f"{a.output}: {scheme.name} map {out.shape}, {known_fraction(out):.1%} of regions known")
     return 0
 
@@ -148,11 +188,14 @@ def cmd_bake(a) -> int:
 def cmd_encode(a) -> int:
     codec = get_codec(a.codec)
     config = eval_config(a)
+    outputs = Outputs(inputs=[a.texture])
+    outputs.file(a.output, "-o")
     grid = config.grid(load_alpha(a.texture, config.channel))
     original = bake_square(grid, codec.map_size)
     block = codec.encode(original, a.encoder, a.effort)  # checked: only O->C and T->C
     decoded = codec.decode(block)
-    write_bytes(a.output, block)
+    with outputs.writing(), open(outputs.path(a.output), "wb") as f:
+        f.write(block)
     print(f"{a.output}: {codec.name} block, {len(block)} bytes; savings {known_fraction(decoded):.3f} "
           f"(uncompressed sq{codec.map_size}: {known_fraction(original):.3f})")
     return 0
@@ -164,6 +207,8 @@ def cmd_decode(a) -> int:
     from ..states import NAMES
 
     codec = get_codec(a.codec)
+    outputs = Outputs(inputs=[a.block])
+    outputs.file(a.show, "--show", (".png",))
     try:
         with open(a.block, "rb") as f:
             data = f.read()
@@ -173,8 +218,8 @@ def cmd_decode(a) -> int:
         raise InputError(f"a {codec.name} block is {codec.block_bytes} bytes, this file has {len(data)}", a.block)
     m = codec.decode(data)
     if a.json:
-        print(json.dumps({"codec": codec.name, "size": int(m.shape[0]), "savings": known_fraction(m),
-                          "states": m.tolist()}))
+        print(json.dumps({"settings": {"codec": codec.name, "block": a.block}, "codec": codec.name,
+                          "size": int(m.shape[0]), "savings": known_fraction(m), "states": m.tolist()}))
     else:
         print(f"{a.block}: {codec.name} {m.shape[1]}x{m.shape[0]} map, savings {known_fraction(m):.3f} "
               f"(rows are v, T transparent, O opaque, C check)")
@@ -184,8 +229,8 @@ def cmd_decode(a) -> int:
         from PIL import Image
 
         from ..drawing import square_image
-        with atomic_path(a.show, suffix=".png") as tmp:
-            Image.fromarray(square_image(m, 16 * m.shape[0])).save(tmp, format="PNG")
+        with outputs.writing():
+            Image.fromarray(square_image(m, 16 * m.shape[0])).save(outputs.path(a.show), format="PNG")
     return 0
 
 

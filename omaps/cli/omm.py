@@ -6,13 +6,16 @@ from __future__ import annotations
 import sys
 import time
 
+from tqdm import tqdm
+
+from ..atomic import Outputs
 from ..errors import InputError
 from ..omm import files, inputs
 from ..omm import format as omm_format
 from ..omm.pipeline import OmmSettings, build
 from ..omm.verify import verify
 from ..promotion import PROMOTIONS
-from .common import add_codec_options, add_material_options, material_rules
+from .common import add_codec_options, add_material_options, material_rules, show_progress
 
 GLTF_EXTENSIONS = (".gltf", ".glb")
 
@@ -25,7 +28,8 @@ def add_parser(sub) -> None:
                     "Writes omm_data.bin, omm_triangles.bin, omm_index.bin, omm_usage.json and omm.json "
                     "into DIR (all or nothing). With --verify DIR: check a written folder.")
     o.add_argument("inputs", nargs="*", metavar="INPUT", help="SCENE.gltf|.glb, or TEXTURE UVS.npy")
-    o.add_argument("-o", "--output", metavar="DIR", help="output folder (replaced if it holds an earlier omm.json)")
+    o.add_argument("-o", "--output", metavar="DIR", help="output folder (replaced whole if it is empty or holds an "
+                                                          "earlier omm.json; any other folder is left alone: error)")
     o.add_argument("--verify", metavar="DIR", help="check an OMM folder: layout, usage counts, pair blocks, "
                                                    "and a re-bake from its recorded inputs when they are present")
     lv = o.add_argument_group("subdivision")
@@ -51,6 +55,7 @@ def add_parser(sub) -> None:
                         "stored, decoded, expanded. Pairs: the tracer's (shared edges) in a glTF scene, triangles "
                         "2k and 2k+1 with a UV array")
     o.add_argument("--threads", type=int, default=None, help="baking threads (default: all cores)")
+    o.add_argument("--quiet", action="store_true", help="no progress bar")
     add_material_options(o)
     add_codec_options(o, "--from codecs named without a variant")
     o.set_defaults(func=cmd_omm)
@@ -93,13 +98,17 @@ def cmd_omm(a) -> int:
     spec = _spec(a)
     if not a.output:
         raise InputError("give the output folder with -o DIR")
-    files.check_target(a.output)  # before the work, not after
+    outputs = Outputs(inputs=a.inputs)
+    outputs.folder(a.output, "-o", omm_format.SUMMARY_FILE)  # before the work, not after
     settings = _settings(a)
     t0 = time.perf_counter()
     geoms, skipped, warned = inputs.load_geometries(spec)
-    result = build(geoms, settings)
+    with tqdm(total=len(geoms), desc="omm", unit="geometry", disable=not show_progress(a.quiet), leave=False) as bar:
+        result = build(_counted(geoms, bar), settings)
     dt = time.perf_counter() - t0
-    files.write(a.output, result, {"input": spec, "skipped_primitives": skipped, "warnings": warned})
+    with outputs.writing():
+        files.write_into(outputs.path(a.output), result,
+                         {"input": spec, "skipped_primitives": skipped, "warnings": warned})
     st = result.summary["statistics"]
     print(f"{a.output}: {st['triangles']} triangles, {st['micro_triangles']} micro-triangles "
           f"({st['transparent']} T, {st['opaque']} O, {st['unknown']} unknown; known area "
@@ -109,6 +118,19 @@ def cmd_omm(a) -> int:
         print(f"omaps: skipped mesh {s['mesh']} primitive {s['primitive']} ({s['name']}): {s['reason']}",
               file=sys.stderr)
     return 0
+
+
+class _counted(list):
+    """A list whose iteration advances a progress bar (``build`` walks its geometries once)."""
+
+    def __init__(self, items, bar):
+        super().__init__(items)
+        self.bar = bar
+
+    def __iter__(self):
+        for g in super().__iter__():
+            yield g
+            self.bar.update()
 
 
 def _cmd_verify(folder) -> int:

@@ -15,7 +15,9 @@ from ..schemes import get_scheme
 from .evaluate import TextureResult, mean_results
 
 
-def to_json(results: list[TextureResult], scheme_names: list[str], settings: dict | None = None) -> dict:
+def to_json(results: list[TextureResult], scheme_names: list[str], settings: dict | None = None,
+            unreadable=None) -> dict:
+    """Settings, every texture's results, the means, and the files that could not be read."""
     return {"settings": settings or {},
         "textures": [
             {"name": r.name, "width": r.width, "height": r.height,
@@ -23,11 +25,12 @@ def to_json(results: list[TextureResult], scheme_names: list[str], settings: dic
             for r in results
         ],
         "mean": mean_results(results, scheme_names),
+        "unreadable": [{"path": p, "problem": why} for p, why in (unreadable or [])],
     }
 
 
-def write_json(path, results, scheme_names, settings: dict | None = None) -> None:
-    atomic.write_text(path, json.dumps(to_json(results, scheme_names, settings), indent=1) + "\n")
+def write_json(path, results, scheme_names, settings: dict | None = None, unreadable=None) -> None:
+    atomic.write_text(path, json.dumps(to_json(results, scheme_names, settings, unreadable), indent=1) + "\n")
 
 
 def write_csv(path, results, scheme_names) -> None:
@@ -94,9 +97,17 @@ def plot_savings(path, results, scheme_names, title="Shader invocation savings")
     ax.set_title(f"{title} ({len(results)} textures)")
     ax.legend(loc="lower right", fontsize=8)
     fig.tight_layout()
-    with atomic.atomic_path(path, suffix=".png") as tmp:
-        fig.savefig(tmp, format="png")
+    fmt = os.path.splitext(os.fspath(path))[1][1:].lower() or "png"
+    with atomic.atomic_path(path, suffix="." + fmt) as tmp:
+        fig.savefig(tmp, format=fmt)
     plt.close(fig)
+
+
+def plot_suffixes() -> tuple[str, ...]:
+    """The file suffixes ``plot_savings`` can write (matplotlib's formats: .png, .svg, .pdf, ...)."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+    return tuple(sorted("." + k for k in FigureCanvasAgg.get_supported_filetypes()))
 
 
 def show_texture(path, result: TextureResult, panel: int = 192) -> None:
@@ -127,3 +138,22 @@ def show_texture(path, result: TextureResult, panel: int = 192) -> None:
 def show_file_name(result: TextureResult, index: int) -> str:
     stem = os.path.splitext(os.path.basename(result.name))[0]
     return f"{index:03d}_{stem}.png"
+
+
+SHOW_MANIFEST = "show.json"
+
+
+def write_show(folder, results: list[TextureResult], settings: dict | None = None, progress: bool = False) -> None:
+    """``omaps eval --show``: one PNG per texture into an existing, empty ``folder``, and its
+    manifest ``show.json`` (settings, and which picture shows which texture)."""
+    from tqdm import tqdm
+
+    from .. import __version__
+
+    pictures = []
+    for i, r in enumerate(tqdm(results, desc="pictures", unit="png", disable=not progress, leave=False)):
+        name = show_file_name(r, i)
+        show_texture(os.path.join(folder, name), r)
+        pictures.append({"file": name, "texture": r.name, "path": r.path})
+    doc = {"omaps": __version__, "settings": settings or {}, "pictures": pictures}
+    atomic.write_text(os.path.join(folder, SHOW_MANIFEST), json.dumps(doc, indent=1) + "\n")
