@@ -29,8 +29,10 @@ def main(argv=None) -> int:
     trace: a scheme changed the visible result; omm --verify: a check failed) or a system error
     while writing (nothing written); 2 bad input or options (nothing written); 130 interrupted
     (nothing written)."""
+    from .trace import bind_camera_value
+
     try:
-        args = parser().parse_args(argv)
+        args = parser().parse_args(bind_camera_value(sys.argv[1:] if argv is None else argv))
         with warnings.catch_warnings():
             warnings.showwarning = show_warning
             warnings.simplefilter("always", UserWarning)

@@ -30,9 +30,11 @@ def add_parser(sub) -> None:
     t.add_argument("--schemes", default=DEFAULT_SCHEMES,
                    help="comma-separated: none, triL, sqN, or a codec (vq2, vq4, vq4x64, also with -paper, -fast, "
                         "-medium or -thorough) (default: %(default)s)")
-    t.add_argument("--camera", metavar="X,Y,Z:TX,TY,TZ:FOV",
-                   help="eye, target and vertical field of view in degrees (default: a low grazing view "
-                        "across the scene bounds)")
+    t.add_argument("--camera", metavar="X,Y,Z:TX,TY,TZ:FOV[:UX,UY,UZ] | gltf[:N]",
+                   help="eye, target, vertical field of view in degrees and optionally the up direction "
+                        "(default +Y); or 'gltf:N', the file's camera N (default 0) placed by its node, with "
+                        "this image's aspect ratio. Default: a view that frames the alpha-tested geometry "
+                        "(a low grazing view across a wide scene), checked to show it")
     t.add_argument("--size", default="512", metavar="W[xH]", help="image size (default: %(default)s)")
     t.add_argument("--shadows", action="store_true",
                    help="also trace shadow rays to a directional light, normally and with deferred C tests")
@@ -50,6 +52,33 @@ def add_parser(sub) -> None:
     add_material_options(t)
     add_codec_options(t)
     t.set_defaults(func=cmd_trace)
+
+
+def bind_camera_value(argv: list[str]) -> list[str]:
+    """``--camera -70,130,-70:0,175,0:70`` as the README writes it: argparse takes a value that
+    starts with '-' (and is no plain negative number) for an option, so the token after
+    ``--camera`` (or an abbreviation of it) in an ``omaps trace`` command line is bound to it
+    (``--camera=VALUE``) before parsing. Nothing after ``--`` is touched."""
+    argv = list(argv)
+    words = [k for k, a in enumerate(argv) if not a.startswith("-")]  # omaps' own options take no values
+    if not words or argv[words[0]] != "trace":
+        return argv
+    start = words[0] + 1
+    out = argv[:start]
+    i = start
+    while i < len(argv):
+        a = argv[i]
+        if a == "--":
+            out.extend(argv[i:])
+            break
+        if (len(a) > 4 and "--camera".startswith(a) and i + 1 < len(argv) and argv[i + 1].startswith("-")
+                and argv[i + 1][1:2] in tuple("0123456789.")):
+            out.append(f"{a}={argv[i + 1]}")
+            i += 2
+            continue
+        out.append(a)
+        i += 1
+    return out
 
 
 def parse_size(text: str) -> tuple[int, int]:
@@ -75,19 +104,32 @@ def _floats(text: str, n: int, what: str) -> np.ndarray:
 
 
 def parse_camera(text: str):
+    """A ``Camera``, or the index N of ``gltf[:N]`` (the file's camera, resolved once it is read)."""
     from ..trace import Camera
 
     parts = text.split(":")
-    if len(parts) != 3:
-        raise InputError(f"--camera must be X,Y,Z:TX,TY,TZ:FOV, got {text!r}")
+    if parts[0].strip().lower() == "gltf":
+        if len(parts) == 1:
+            return 0
+        if len(parts) == 2 and parts[1].strip().isdigit():
+            return int(parts[1])
+        raise InputError(f"--camera gltf[:N] takes a camera index N >= 0, got {text!r}")
+    if len(parts) not in (3, 4):
+        raise InputError(f"--camera must be X,Y,Z:TX,TY,TZ:FOV[:UX,UY,UZ] or gltf[:N], got {text!r}")
     eye = _floats(parts[0], 3, "--camera eye")
     target = _floats(parts[1], 3, "--camera target")
     fov = _floats(parts[2], 1, "--camera fov")[0]
+    up = _floats(parts[3], 3, "--camera up") if len(parts) == 4 else None
     if not 0 < fov < 180:
         raise InputError(f"--camera field of view must be in (0, 180) degrees, got {fov}")
     if np.allclose(eye, target):
         raise InputError("--camera eye and target must differ")
-    return Camera(eye, target, float(fov))
+    cam = Camera(eye, target, float(fov), up)
+    try:
+        cam.basis(1, 1)
+    except ValueError:
+        raise InputError("--camera up must not be zero or parallel to the view direction") from None
+    return cam
 
 
 def parse_light(text: str | None) -> np.ndarray:
@@ -112,19 +154,27 @@ def cmd_trace(a) -> int:
     check_jobs(a.jobs)
     rules = material_rules(a)
     light = parse_light(a.light) if a.shadows else None
-    cam_given = parse_camera(a.camera) if a.camera else None
+    cam_given = parse_camera(a.camera) if a.camera else None  # a Camera, or a glTF camera's index
     progress = not a.quiet and sys.stderr.isatty()
     t_start = time.perf_counter()
     scene = load_scene(a.scene)
     if not any(len(scene.meshes[mi].merged["triangles"]) for mi, _ in scene.instances):
         raise InputError("the scene has no triangles", a.scene)
+    if isinstance(cam_given, int):
+        cam_info = {"chosen": f"gltf:{cam_given}"}
+        cam_given = trace.gltf_camera(scene, cam_given)  # before any work: a bad index is an input error
+    else:
+        cam_info = {"chosen": "--camera"} if cam_given is not None else None
     t_load = time.perf_counter() - t_start
     if "none" not in names:
         schemes = parse_schemes("none", TRACE_KINDS) + schemes
     traced = [s.name for s in schemes]
     prep = trace.prepare(scene, schemes, rules, default_jobs(a.jobs), progress)
     bounds = scene.bounds()
-    camera = cam_given or trace.default_camera(bounds)
+    if cam_given is None:
+        camera, cam_info = trace.choose_default_camera(prep, w, h)
+    else:
+        camera = cam_given
     cam = camera.basis(w, h)
     diag = float(np.linalg.norm(bounds[1] - bounds[0]))
     tnear = trace.SHADOW_TNEAR * diag
@@ -144,7 +194,7 @@ def cmd_trace(a) -> int:
                   "warnings": list(scene.warnings), "skipped_primitives": scene.skipped},
         "settings": {"materials": rules.settings(), "schemes": {s.name: s.settings() for s in schemes},
                      "two_state": modes, "shadows": bool(a.shadows)},
-        "camera": {**camera.to_json(), "width": w, "height": h},
+        "camera": {**camera.to_json(), "width": w, "height": h, "view": cam_info},
         "light": None if light is None else light.tolist(),
         "embree": prep.device.version_text,
         "schemes": {n: trace.summary(runs[n], ref, prep.maps[n], w, h) for n in names},

@@ -4,8 +4,8 @@ with their pairs and alpha tests (``alpha``), shared by the tracer and the OMM b
 
 from .alpha import AlphaTriangles, alpha_triangles
 from .gltf import load_scene
-from .model import Material, Mesh, Primitive, Scene, SceneWarning, Texture
+from .model import Material, Mesh, Primitive, Scene, SceneCamera, SceneWarning, Texture
 from .pairing import Pairing, pair_triangles
 
-__all__ = ["load_scene", "Scene", "Mesh", "Primitive", "Material", "Texture", "SceneWarning", "Pairing",
+__all__ = ["load_scene", "Scene", "Mesh", "Primitive", "Material", "Texture", "SceneCamera", "SceneWarning", "Pairing",
            "pair_triangles", "AlphaTriangles", "alpha_triangles"]

@@ -35,7 +35,7 @@ from urllib.parse import unquote
 import numpy as np
 
 from ..errors import InputError
-from .model import ALPHA_MODES, Material, Mesh, Primitive, Scene, SceneWarning, Texture
+from .model import ALPHA_MODES, Material, Mesh, Primitive, Scene, SceneCamera, SceneWarning, Texture
 
 __all__ = ["load_scene", "SUPPORTED_EXTENSIONS", "node_matrix", "texture_transform_matrix"]
 
@@ -353,6 +353,7 @@ class _Reader:
         else:  # meshes without nodes: each once, untransformed
             return [(mi, np.eye(4)) for mi in range(len(g.meshes or []))]
         out = []
+        cams = self._camera_nodes = {}
         stack = [(r, np.eye(4), ()) for r in reversed(roots)]
         while stack:
             ni, parent, path = stack.pop()
@@ -366,6 +367,10 @@ class _Reader:
                 if not 0 <= n.mesh < len(g.meshes or []):
                     raise InputError(f"node {ni}: mesh {n.mesh} does not exist", self.path)
                 out.append((n.mesh, world))
+            if n.camera is not None:
+                if not isinstance(n.camera, int) or not 0 <= n.camera < len(g.cameras or []):
+                    raise InputError(f"node {ni}: camera {n.camera} does not exist", self.path)
+                cams.setdefault(n.camera, (ni, world))
             for c in reversed(n.children or []):
                 stack.append((c, world, path + (ni,)))
         return out
@@ -382,13 +387,50 @@ class _Reader:
         mats.append(Material(default_material, "default", "OPAQUE", 0.5, (1, 1, 1, 1), -1, "linear", "wrap", "wrap",
                              0, False))
         transforms.append(np.eye(2, 3))
+        self._camera_nodes: dict = {}
         inst = self.node_instances()
+        cameras = [self.camera(ci) for ci in range(len(g.cameras or []))]
         used = list(dict.fromkeys(mi for mi, _ in inst))
         remap = {mi: k for k, mi in enumerate(used)}
         skipped: list[dict] = []
         meshes = [self.mesh(mi, mats, transforms, default_material, skipped) for mi in used]
         inst = [(remap[mi], m) for mi, m in inst]
-        return Scene(self.path, meshes, inst, mats, textures, self.warnings, skipped)
+        return Scene(self.path, meshes, inst, mats, textures, self.warnings, skipped, cameras)
+
+    def camera(self, ci: int) -> SceneCamera:
+        """Camera ``ci`` placed by its first node in the default scene (glTF: it looks down the
+        node's -Z with +Y up). Problems are recorded, not raised: a camera is only read when asked
+        for (``omaps trace --camera gltf:N``)."""
+        c = self.g.cameras[ci]
+        kind = str(getattr(c, "type", None) or "perspective")
+        name = getattr(c, "name", None) or f"camera {ci}"
+        persp = getattr(c, "perspective", None)
+        yfov = getattr(persp, "yfov", None) if persp is not None else None
+        aspect = getattr(persp, "aspectRatio", None) if persp is not None else None
+        yfov = float(yfov) if isinstance(yfov, (int, float)) else None
+        aspect = float(aspect) if isinstance(aspect, (int, float)) else None
+        node, world = self._camera_nodes.get(ci, (None, None))
+        problem = None
+        eye = forward = up = None
+        if kind != "perspective":
+            problem = f"camera {ci} ({name}) is {kind}; omaps trace renders perspective views only"
+        elif yfov is None or not 0 < yfov < np.pi:
+            problem = f"camera {ci} ({name}) has no valid perspective yfov (got {yfov})"
+        if world is None:
+            problem = problem or f"camera {ci} ({name}) is not placed by any node of the default scene"
+        else:
+            eye = world[:3, 3].copy()
+            f = world[:3, :3] @ np.array([0.0, 0.0, -1.0])
+            u = world[:3, :3] @ np.array([0.0, 1.0, 0.0])
+            fn = float(np.linalg.norm(f))
+            if np.all(np.isfinite(world)) and fn > 0:
+                forward = f / fn
+                u = u - (u @ forward) * forward
+                un = float(np.linalg.norm(u))
+                up = u / un if un > 0 else None
+            if forward is None or up is None or not np.all(np.isfinite(eye)):
+                problem = problem or f"camera {ci} ({name}): node {node}'s transform is degenerate"
+        return SceneCamera(ci, name, kind, yfov, aspect, node, eye, forward, up, problem)
 
 
 def _texture(label: str, pil) -> Texture:

@@ -17,7 +17,7 @@ import numpy as np
 
 from ..alpha_test import AlphaTest, MaterialRules, material_test
 
-__all__ = ["Material", "Texture", "Primitive", "Mesh", "Scene", "SceneWarning"]
+__all__ = ["Material", "Texture", "Primitive", "Mesh", "Scene", "SceneCamera", "SceneWarning"]
 
 ALPHA_MODES = ("OPAQUE", "MASK", "BLEND")
 
@@ -118,6 +118,26 @@ class Mesh:
                 "unknown": np.concatenate(unk), "vertex_alpha": np.concatenate(va)}
 
 
+@dataclass(frozen=True)
+class SceneCamera:
+    """A camera stored in the file (``cameras[index]``), placed by the first node of the default
+    scene that references it (depth-first, in the scene's node order): world-space ``eye``,
+    unit ``forward`` (the node's -Z) and ``up`` (its +Y, made orthogonal to ``forward``). ``node``
+    is None when no node of the default scene places it; ``problem`` says why it cannot be used
+    (then eye, forward and up may be None)."""
+
+    index: int
+    name: str
+    type: str  # "perspective" or "orthographic" (as declared)
+    yfov: float | None  # perspective: vertical field of view, radians as stored
+    aspect: float | None  # the stored aspectRatio (the tracer uses its image's instead)
+    node: int | None
+    eye: np.ndarray | None
+    forward: np.ndarray | None
+    up: np.ndarray | None
+    problem: str | None = None
+
+
 @dataclass
 class Scene:
     path: str
@@ -127,6 +147,7 @@ class Scene:
     textures: list[Texture]
     warnings: list[str] = field(default_factory=list)
     skipped: list[dict] = field(default_factory=list)  # primitives left out: mesh, primitive, name, reason
+    cameras: list[SceneCamera] = field(default_factory=list)  # every camera of the file, in order
 
     def alpha_tested(self, rules: MaterialRules = MaterialRules()) -> np.ndarray:
         """Boolean per material: does the any-hit shader run on it?"""
@@ -156,6 +177,26 @@ class Scene:
             lo = np.minimum(lo, w[:, :3].min(axis=0))
             hi = np.maximum(hi, w[:, :3].max(axis=0))
         return np.stack([lo, hi])
+
+    def alpha_bounds(self, rules: MaterialRules = MaterialRules()) -> np.ndarray | None:
+        """World-space box (2, 3) of the alpha-tested triangles of every instance (their vertices
+        transformed exactly); None when nothing is alpha-tested."""
+        alpha = self.alpha_tested(rules)
+        lo = np.full(3, np.inf)
+        hi = np.full(3, -np.inf)
+        verts: dict[int, np.ndarray] = {}
+        for mi, m in self.instances:
+            if mi not in verts:
+                mg = self.meshes[mi].merged
+                used = np.unique(mg["triangles"][alpha[mg["material"]]])
+                verts[mi] = mg["positions"][used].astype(np.float64)
+            p = verts[mi]
+            if len(p) == 0:
+                continue
+            w = p @ m[:3, :3].T + m[:3, 3]
+            lo = np.minimum(lo, w.min(axis=0))
+            hi = np.maximum(hi, w.max(axis=0))
+        return np.stack([lo, hi]) if np.all(lo <= hi) else None
 
     def counts(self, rules: MaterialRules = MaterialRules()) -> dict:
         """Triangle counts over instances (what is traced) and over prototypes (what is baked)."""

@@ -16,9 +16,11 @@ Example::
     0
 """
 
-from .camera import DEFAULT_LIGHT, SHADOW_TNEAR, Camera, default_camera, light_direction
+from .camera import (DEFAULT_LIGHT, SHADOW_TNEAR, Camera, choose_default_camera, default_camera, gltf_camera,
+                     light_direction)
 from .metrics import coverage_error, differing_pixels, summary
 from .prepare import Prepared, SchemeRun, prepare, trace_scheme
 
-__all__ = ["Camera", "default_camera", "light_direction", "DEFAULT_LIGHT", "SHADOW_TNEAR", "prepare", "Prepared",
-           "trace_scheme", "SchemeRun", "summary", "differing_pixels", "coverage_error"]
+__all__ = ["Camera", "default_camera", "choose_default_camera", "gltf_camera", "light_direction", "DEFAULT_LIGHT",
+           "SHADOW_TNEAR", "prepare", "Prepared", "trace_scheme", "SchemeRun", "summary", "differing_pixels",
+           "coverage_error"]

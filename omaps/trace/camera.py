@@ -7,7 +7,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["Camera", "default_camera", "DEFAULT_LIGHT", "SHADOW_TNEAR", "light_direction"]
+__all__ = ["Camera", "default_camera", "choose_default_camera", "gltf_camera", "framed", "DEFAULT_LIGHT",
+           "SHADOW_TNEAR", "light_direction"]
 
 DEFAULT_LIGHT = (0.45, 0.8, 0.4)  # towards the sun: high enough to light the ground, low enough to cross crowns
 SHADOW_TNEAR = 1e-5  # shadow ray start, as a fraction of the scene's diagonal
@@ -27,13 +28,24 @@ class Camera:
     eye: np.ndarray
     target: np.ndarray
     fov: float  # vertical field of view, degrees
+    up: np.ndarray | None = None  # the image's up direction (None: world +Y, or +Z looking straight up or down)
 
     def basis(self, width: int, height: int) -> np.ndarray:
+        """eye(3), forward(3), right(3), up(3) as the ray loops read them (docs/FORMAT.md "Camera
+        and light"): right and up scaled by the half-extent of the image plane at distance 1."""
         f = np.asarray(self.target, float) - np.asarray(self.eye, float)
         f /= np.linalg.norm(f)
-        up = np.array([0.0, 1.0, 0.0])
-        if abs(f @ up) > 0.999:
-            up = np.array([0.0, 0.0, 1.0])
+        if self.up is not None:
+            up = np.asarray(self.up, float)
+            up = up - (up @ f) * f
+            n = float(np.linalg.norm(up))
+            if not n > 1e-9 * float(np.linalg.norm(self.up)):
+                raise ValueError("the camera's up vector must not be parallel to its view direction")
+            up = up / n
+        else:
+            up = np.array([0.0, 1.0, 0.0])
+            if abs(f @ up) > 0.999:
+                up = np.array([0.0, 0.0, 1.0])
         r = np.cross(f, up)
         r /= np.linalg.norm(r)
         u = np.cross(r, f)
@@ -41,23 +53,127 @@ class Camera:
         return np.concatenate([self.eye, f, r * th * width / height, u * th]).astype(np.float64)
 
     def to_json(self) -> dict:
-        return {"eye": [float(x) for x in self.eye], "target": [float(x) for x in self.target], "fov": self.fov}
+        out = {"eye": [float(x) for x in self.eye], "target": [float(x) for x in self.target], "fov": self.fov}
+        if self.up is not None:
+            out["up"] = [float(x) for x in self.up]
+        return out
 
 
-def default_camera(bounds: np.ndarray) -> Camera:
-    """A low, grazing view through the foliage. A wide scene (a forest) is crossed along its
-    diagonal from just inside one corner, eye at an eighth of the scene's height, looking slightly
-    up; a compact one (a tree) is framed whole from the side, low, through its crown."""
-    lo, hi = bounds
+def gltf_camera(scene, index: int) -> Camera:
+    """Camera ``index`` of the file (``Scene.cameras``): its node's world position, view direction
+    and up (roll), its vertical field of view; the aspect ratio is the traced image's. Raises
+    ``InputError`` naming the file when there is no such camera or it cannot be used
+    (orthographic, not placed by a node of the default scene, a degenerate transform)."""
+    from ..errors import InputError
+
+    cams = scene.cameras
+    if not 0 <= index < len(cams):
+        have = "no cameras" if not cams else f"{len(cams)} camera{'s' if len(cams) > 1 else ''} (0-{len(cams) - 1})"
+        raise InputError(f"--camera gltf:{index}: the file has {have}", scene.path)
+    c = cams[index]
+    if c.problem is not None:
+        raise InputError(f"--camera gltf:{index}: {c.problem}", scene.path)
+    return Camera(np.array(c.eye, float), np.array(c.eye, float) + c.forward, math.degrees(c.yfov),
+                  np.array(c.up, float))
+
+
+def _grazing(box: np.ndarray) -> Camera:
+    lo, hi = box
     size = hi - lo
-    height = size[1]
-    if float(np.hypot(size[0], size[2])) >= 3 * height:
-        eye = lo + size * np.array([0.03, 0.12, 0.03])
-        target = lo + size * np.array([0.97, 0.2, 0.97])
-        return Camera(eye, target, 60.0)
+    eye = lo + size * np.array([0.03, 0.12, 0.03])
+    target = lo + size * np.array([0.97, 0.2, 0.97])
+    return Camera(eye, target, 60.0)
+
+
+def _wide(box: np.ndarray) -> bool:
+    size = box[1] - box[0]
+    return float(np.hypot(size[0], size[2])) >= 3 * size[1]
+
+
+FRONT = np.array([-0.6, 0.08, 0.8])  # from the front (glTF: an asset faces +Z), a little left and above
+
+
+def framed(box: np.ndarray, direction=FRONT, fov: float = 50.0, aspect: float = 1.0) -> Camera:
+    """The box whole in view (its bounding sphere inside the narrower field of view), seen from
+    ``direction`` (from the box's centre towards the eye)."""
+    lo, hi = box
     c = (lo + hi) / 2
-    radius = float(np.linalg.norm(size)) / 2
-    d = radius / math.sin(math.radians(50) / 2)
-    direction = np.array([-0.6, 0.08, -0.8])
-    direction /= np.linalg.norm(direction)
-    return Camera(c + d * direction, c, 50.0)
+    radius = max(float(np.linalg.norm(hi - lo)) / 2, 1e-6)
+    half = math.radians(fov) / 2
+    if aspect < 1:
+        half = math.atan(math.tan(half) * aspect)
+    d = np.asarray(direction, float)
+    d = d / np.linalg.norm(d)
+    return Camera(c + radius / math.sin(half) * d, c, fov)
+
+
+def default_camera(bounds: np.ndarray, alpha_bounds: np.ndarray | None = None, aspect: float = 1.0) -> Camera:
+    """The preferred default view, from the scene's ``bounds`` and the box of its alpha-tested
+    geometry (``Scene.alpha_bounds``; None: the scene's). A wide scene (horizontally at least
+    three times its height: a forest) whose alpha-tested geometry spreads over at least half of
+    it along x and z is crossed along its diagonal from just inside one corner, eye at an eighth
+    of its height, looking slightly up; a wide alpha box elsewhere is crossed the same way; any
+    other alpha box (a tree) is framed whole, from the front, low, through its crown."""
+    bounds = np.asarray(bounds, float)
+    box = bounds if alpha_bounds is None else np.asarray(alpha_bounds, float)
+    size, asize = bounds[1] - bounds[0], box[1] - box[0]
+    if _wide(bounds) and asize[0] >= 0.5 * size[0] and asize[2] >= 0.5 * size[2]:
+        return _grazing(bounds)
+    if _wide(box):
+        return _grazing(box)
+    return framed(box, FRONT, 50.0, aspect)
+
+
+MIN_ALPHA_FRACTION = 0.01  # the preferred view is kept if alpha-tested surfaces fill this share of it
+PROBE = 64  # probe image width
+
+
+def _candidates(box: np.ndarray, aspect: float) -> list[tuple[str, Camera]]:
+    """Fallback views of the alpha box: framed from eight sides, four from above and straight
+    down, and from its centre along the four horizontal axes (geometry inside a building)."""
+    out = []
+    for k in range(8):
+        a = math.radians(45 * k)
+        out.append((f"framed, azimuth {45 * k}", framed(box, (-math.sin(a), 0.08, math.cos(a)), 50.0, aspect)))
+    for k in range(4):
+        a = math.radians(45 + 90 * k)
+        out.append((f"framed from above, azimuth {45 + 90 * k}",
+                    framed(box, (-math.sin(a), 1.0, math.cos(a)), 50.0, aspect)))
+    out.append(("framed from straight above", framed(box, (0, 1, 0), 50.0, aspect)))
+    c = box.mean(axis=0)
+    for k, d in enumerate(([0, 0, -1], [1, 0, 0], [0, 0, 1], [-1, 0, 0])):
+        out.append((f"from the centre, azimuth {90 * k}", Camera(c.copy(), c + np.array(d, float), 70.0)))
+    return out
+
+
+def choose_default_camera(prep, width: int, height: int) -> tuple[Camera, dict]:
+    """The default camera of a prepared scene (``trace.prepare``), checked to show its
+    alpha-tested geometry: ``default_camera`` if alpha-tested surfaces are the first surface hit
+    in at least MIN_ALPHA_FRACTION of a small probe image (opaque-only traversal), otherwise the
+    fallback view (``_candidates``) where they fill the most pixels, if any does better. Returns
+    the camera and what was chosen (for the report)."""
+    from .embree import GEOM_ALPHA
+    from .rays import run_primary
+
+    scene = prep.scene
+    bounds = scene.bounds()
+    abox = scene.alpha_bounds(prep.rules)
+    aspect = width / height
+    pw = PROBE
+    ph = max(8, min(4 * PROBE, round(PROBE / aspect)))
+
+    def alpha_fraction(cam: Camera) -> float:
+        r = run_primary(prep.bvh, None, 0, cam.basis(pw, ph), pw, ph)
+        return float(np.count_nonzero(r.geom == GEOM_ALPHA)) / (pw * ph)
+
+    best = default_camera(bounds, abox, aspect)
+    if abox is None:
+        return best, {"chosen": "default", "alpha_fraction": 0.0}
+    frac = first = alpha_fraction(best)
+    label = "default"
+    if frac < MIN_ALPHA_FRACTION:
+        for name, cam in _candidates(abox, aspect):
+            f = alpha_fraction(cam)
+            if f > frac:
+                best, frac, label = cam, f, name
+    return best, {"chosen": label, "alpha_fraction": frac, "default_alpha_fraction": first}
