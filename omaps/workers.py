@@ -12,8 +12,16 @@ import threading
 from concurrent.futures import ProcessPoolExecutor
 
 
-def _ignore_sigint() -> None:
+_SIGINT = {signal.SIGINT}
+_MASKS = hasattr(signal, "pthread_sigmask")
+
+
+def _worker_start() -> None:
+    """In each worker: ignore SIGINT, then let signals through again (they were blocked from
+    the worker's start, see ``process_pool``)."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    if _MASKS:
+        signal.pthread_sigmask(signal.SIG_UNBLOCK, _SIGINT)
 
 
 def _noop() -> None:
@@ -22,20 +30,22 @@ def _noop() -> None:
 
 @contextlib.contextmanager
 def process_pool(jobs: int):
-    """A ``ProcessPoolExecutor`` of ``jobs`` spawned workers that ignore SIGINT. Its processes
-    start here, with SIGINT ignored in this process too (a spawned child keeps an ignored signal
-    from its very start, before it could install the initializer), and are terminated if the
-    block raises (an error, KeyboardInterrupt) instead of draining the queued work."""
+    """A ``ProcessPoolExecutor`` of ``jobs`` spawned workers that ignore SIGINT. The workers
+    start here with SIGINT blocked (a child inherits the signal mask, so a Ctrl-C while it is
+    still starting cannot print its traceback; this process receives it once they are started),
+    and they are terminated if the block raises (an error, KeyboardInterrupt) instead of
+    draining the queued work."""
     pool = ProcessPoolExecutor(max_workers=jobs, mp_context=multiprocessing.get_context("spawn"),
-                               initializer=_ignore_sigint)
-    main = threading.current_thread() is threading.main_thread()
-    previous = signal.signal(signal.SIGINT, signal.SIG_IGN) if main else None
+                               initializer=_worker_start)
     try:
-        pool.submit(_noop)  # launches every worker (spawn starts them all at the first submit)
-    finally:
-        if main:
-            signal.signal(signal.SIGINT, previous)
-    try:
+        block = _MASKS and threading.current_thread() is threading.main_thread()
+        if block:
+            signal.pthread_sigmask(signal.SIG_BLOCK, _SIGINT)
+        try:
+            pool.submit(_noop)  # launches every worker (spawn starts them all at the first submit)
+        finally:
+            if block:
+                signal.pthread_sigmask(signal.SIG_UNBLOCK, _SIGINT)  # a pending Ctrl-C arrives here
         yield pool
     except BaseException:
         processes = list((getattr(pool, "_processes", None) or {}).values())
