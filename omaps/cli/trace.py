@@ -234,6 +234,9 @@ def cmd_trace(a) -> int:
                                             if r["rays_per_second"] else None)
     bad = {n: r["differing_pixels"] + r.get("differing_shadow_rays", 0) + r.get("deferred_differing_shadow_rays", 0)
            for n, r in report["schemes"].items()}
+    # a failed check still writes every output asked for, complete, and says so (then exit 1)
+    report["passed"] = not any(bad.values())
+    report["changed_visible_result"] = {n: v for n, v in bad.items() if v}
     _print_report(report, names, a.shadows)
     if two_state:
         _print_two_state(two_state)

@@ -100,6 +100,8 @@ class _Reader:
         self._buffers: dict[int, bytes] = {}
 
     def warn(self, message: str) -> None:
+        if message in self.warnings:  # one warning per problem, however many images or materials share it
+            return
         self.warnings.append(message)
         warnings.warn(f"{self.path}: {message}", SceneWarning, stacklevel=2)
 
@@ -276,9 +278,12 @@ class _Reader:
 
     def check_unused_images(self, used: set) -> None:
         """Name referenced image files that are missing but not a base colour (normal maps and the
-        like), once each, so no missing file goes unmentioned."""
-        for ii, im in enumerate(self.g.images or []):
-            if ii in used or not im.uri or im.uri.startswith("data:"):
+        like), once each, so no missing file goes unmentioned (a file that is also a base colour
+        was named as one)."""
+        images = self.g.images or []
+        used_uris = {images[ii].uri for ii in used if isinstance(ii, int) and 0 <= ii < len(images)}
+        for ii, im in enumerate(images):
+            if ii in used or not im.uri or im.uri.startswith("data:") or im.uri in used_uris:
                 continue
             if not os.path.isfile(os.path.join(self.folder, unquote(im.uri))):
                 self.warn(f"image file {im.uri!r} is missing (not a base colour texture, so not needed)")
@@ -309,6 +314,7 @@ class _Reader:
                 raise InputError(f"{label}: vertex index out of range", self.path)
             tris = _triangles(idx, mode)
             unknown = np.zeros(len(tris), bool)
+            own = None  # triangles given vertices of their own, all at UV (0, 0)
             uv_acc = getattr(p.attributes, f"TEXCOORD_{mat.texcoord}", None)
             if uv_acc is None:
                 uvs = np.zeros((n, 2))
@@ -324,9 +330,10 @@ class _Reader:
                     bad_t = bad_v[tris].any(axis=1)
                     uvs = np.where(bad_v[:, None], 0.0, uvs)
                     unknown |= bad_t
+                    own = bad_t
                     if mat.alpha_mode != "OPAQUE":
                         self.warn(f"{label}: {int(bad_t.sum())} triangles have NaN or infinite texture "
-                                  "coordinates: they are unknown (read as (0, 0))")
+                                  "coordinates: they are unknown (all C), read as UV (0, 0) at every vertex")
             vertex_alpha = None
             colour = getattr(p.attributes, "COLOR_0", None)
             if colour is not None:
@@ -337,6 +344,8 @@ class _Reader:
                         unknown[:] = True
                         self.warn(f"{label}: COLOR_0 alpha is not 1 everywhere: its {len(tris)} triangles are "
                                   "unknown and the tracer's shader multiplies by it")
+            if own is not None:
+                positions, uvs, tris, vertex_alpha = _own_vertices(positions, uvs, tris, vertex_alpha, own)
             prims.append(Primitive(mi, pi, positions, uvs, tris, material, vertex_alpha, unknown))
         return Mesh(mi, name, prims)
 
@@ -466,6 +475,21 @@ def _triangles(idx: np.ndarray, mode: int) -> np.ndarray:
         b = np.where(k % 2 == 0, idx[k + 1], idx[k])
         return np.stack([a, b, idx[k + 2]], axis=1)
     return np.stack([np.full(len(k), idx[0]), idx[k + 1], idx[k + 2]], axis=1)  # fan
+
+
+def _own_vertices(positions, uvs, tris, vertex_alpha, sel):
+    """Triangles ``sel`` get three new vertices each (same positions and vertex alpha) at UV
+    (0, 0): a triangle with NaN texture coordinates reads one defined point of the texture, and
+    its neighbours keep theirs. Pairing welds by position, so the pairs are unchanged."""
+    k = np.flatnonzero(sel)
+    old = tris[k].ravel()
+    tris = tris.copy()
+    tris[k] = len(positions) + np.arange(3 * len(k)).reshape(-1, 3)
+    positions = np.concatenate([positions, positions[old]])
+    uvs = np.concatenate([uvs, np.zeros((len(old), 2))])
+    if vertex_alpha is not None:
+        vertex_alpha = np.concatenate([vertex_alpha, vertex_alpha[old]])
+    return positions, uvs, tris, vertex_alpha
 
 
 def node_matrix(n) -> np.ndarray:
