@@ -92,27 +92,39 @@ class AlphaTest:
         v = np.asarray(values)
         return v >= self.threshold if self.inclusive else v > self.threshold
 
+    def bounds(self) -> np.ndarray:
+        """The rule as bounds on alpha, float64 (o_bound, o_inclusive, t_bound, t_inclusive): an
+        alpha (a texel's, or every alpha a region can read) is O iff it is > o_bound (>= when
+        o_inclusive), T iff it is < t_bound (<= when t_inclusive), C otherwise."""
+        if self.rule == "unknown":
+            return np.array([np.inf, 0.0, -np.inf, 0.0])
+        if self.rule == "levels":
+            return np.array([self.high, 1.0, self.low, 1.0])
+        if self.tolerance > 0:  # within the tolerance of the threshold either decision may happen
+            return np.array([self.threshold + self.tolerance, 0.0, self.threshold - self.tolerance, 0.0])
+        if self.inclusive:
+            return np.array([self.threshold, 1.0, self.threshold, 0.0])
+        return np.array([self.threshold, 0.0, self.threshold, 1.0])
+
     def texel_states(self) -> np.ndarray:
         """T/O/C code of every texel, uint8 (H, W)."""
         v = np.asarray(self.value)
-        if self.rule == "unknown":
-            return np.full(v.shape, states.C, dtype=np.uint8)
-        if self.rule == "levels":
-            out = np.full(v.shape, states.C, dtype=np.uint8)
-            out[v <= self.low] = states.T
-            out[v >= self.high] = states.O
-            return out
-        out = np.where(self.passes(v), states.O, states.T).astype(np.uint8)
-        if self.tolerance > 0:
-            out[np.abs(v - self.threshold) <= self.tolerance] = states.C
+        ob, oi, tb, ti = self.bounds()
+        out = np.full(v.shape, states.C, dtype=np.uint8)
+        out[v <= tb if ti else v < tb] = states.T
+        out[v >= ob if oi else v > ob] = states.O
         return out
 
     def grid(self) -> FootprintGrid:
         """The footprint grid the bakers rasterise over (made once per test: the tracer's schemes
-        and an OMM's primitives of one material share it)."""
+        and an OMM's primitives of one material share it). Under the linear filter it is exact:
+        a region's part of a cell whose taps disagree is decided from the extremes of the
+        bilinear alpha over it (``omaps.bilinear``)."""
         grid = self.__dict__.get("_grid")
         if grid is None:
-            grid = footprint_grid(self.texel_states(), self.filter, self.wrap_u, self.wrap_v)
+            exact = self.filter == "linear" and self.rule != "unknown"
+            grid = footprint_grid(self.texel_states(), self.filter, self.wrap_u, self.wrap_v,
+                                  self.value if exact else None, self.bounds() if exact else None)
             object.__setattr__(self, "_grid", grid)
         return grid
 

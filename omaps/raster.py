@@ -15,10 +15,11 @@ import numpy as np
 from numba import njit
 
 from . import states
+from .bilinear import POLY_MAX, cell_flag
 
 
 @njit(cache=True, inline="always")
-def _cell(c, size, period):
+def cell_index(c, size, period):
     if period:
         r = c % period
         return r + period if r < 0 else r
@@ -46,9 +47,11 @@ def edge_extent(ax, ay, bx, by, y0, y1, xmin, xmax):
 
 
 @njit(cache=True)
-def polygon_flags(flags, period_x, period_y, poly, grow=0.0):
+def polygon_flags(flags, mixed, values, bounds, period_x, period_y, poly, grow=0.0):
     """OR of the flags of every cell overlapped by convex polygon ``poly`` (K, 2) given in cell
     coordinates (texel coordinates plus the grid offset). 0 when the polygon has no area.
+    The grid's arrays come from ``FootprintGrid.kernel_args``: in an exact bilinear grid a mixed
+    cell's flag is the polygon's own part of it (``bilinear.cell_flag``).
 
     ``grow`` > 0: the polygon grown by a square of half-side ``grow`` (its Minkowski sum), which
     has area even when the polygon has none: per band, the polygon's x-extent over the band
@@ -60,6 +63,9 @@ def polygon_flags(flags, period_x, period_y, poly, grow=0.0):
         ymin = min(ymin, poly[i, 1])
         ymax = max(ymax, poly[i, 1])
     hc, wc = flags.shape
+    exact = values.shape[0] > 0
+    buf_a = np.empty((0, 2))
+    buf_b = np.empty((0, 2))
     acc = 0
     for r in range(int(math.floor(ymin - grow)), int(math.ceil(ymax + grow))):
         y0 = max(float(r) - grow, ymin)
@@ -75,27 +81,34 @@ def polygon_flags(flags, period_x, period_y, poly, grow=0.0):
         xmax += grow
         if not xmax > xmin:
             continue
-        row = _cell(r, hc, period_y)
+        row = cell_index(r, hc, period_y)
         for c in range(int(math.floor(xmin)), int(math.ceil(xmax))):
-            acc |= flags[row, _cell(c, wc, period_x)]
+            col = cell_index(c, wc, period_x)
+            f = flags[row, col]
+            if exact and mixed[row, col]:
+                if buf_a.shape[0] == 0:
+                    buf_a = np.empty((POLY_MAX, 2))
+                    buf_b = np.empty((POLY_MAX, 2))
+                f = cell_flag(values, bounds, period_x, period_y, row, col, poly, k, c, r, grow, buf_a, buf_b)
+            acc |= f
             if acc == 3:
                 return acc
     return acc
 
 
 @njit(cache=True)
-def polygons_flags(flags, period_x, period_y, polys):
+def polygons_flags(flags, mixed, values, bounds, period_x, period_y, polys):
     """``polygon_flags`` for each polygon of ``polys`` (R, K, 2)."""
     out = np.empty(polys.shape[0], dtype=np.uint8)
     for i in range(polys.shape[0]):
-        out[i] = polygon_flags(flags, period_x, period_y, polys[i])
+        out[i] = polygon_flags(flags, mixed, values, bounds, period_x, period_y, polys[i])
     return out
 
 
 def region_states(grid, polys_texel: np.ndarray) -> np.ndarray:
     """States (T/O/C codes) of convex regions given in *texel* coordinates, shape (R, K, 2)."""
     polys = np.ascontiguousarray(polys_texel, dtype=np.float64) + grid.offset
-    f = polygons_flags(grid.flags, grid.period_x, grid.period_y, polys)
+    f = polygons_flags(*grid.kernel_args(), polys)
     if np.any(f == 0):
         bad = int(np.flatnonzero(f == 0)[0])
         raise ValueError(f"region {bad} has no area")

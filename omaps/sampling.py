@@ -7,9 +7,13 @@ single rasteriser serves every case:
 * ``nearest``: cell (x, y) is texel (x, y), covering [x, x+1] x [y, y+1] in texel units.
 * ``linear``: a hit at texel coordinate p reads the taps floor(p - 0.5) and floor(p - 0.5) + 1
   in each axis, i.e. the hit lies in a *dual* cell [c - 0.5, c + 0.5] whose flag is the OR of
-  its four taps. The grid is shifted by +0.5 (``offset``). This is conservative: it also counts
-  a tap whose bilinear weight is zero on the cell's boundary, and a region is known only when
-  all its taps agree (so their weighted mean agrees too).
+  its four taps. The grid is shifted by +0.5 (``offset``). The OR is exact for a whole cell (a
+  bilinear function takes its extremes over the cell at its corners, the taps) and for every
+  cell whose taps agree. A cell whose taps disagree is *mixed*: part of it may still be known.
+  A grid made from an alpha test (``AlphaTest.grid``) keeps the tap values and the test's
+  bounds, and the bakers then decide each region's part of a mixed cell exactly from the
+  extremes of the bilinear alpha over it (``omaps.bilinear``); a grid made from texel states
+  alone counts a mixed cell as C wherever a region touches it (conservative, not exact).
 
 Out-of-range cells are handled by the grid's per-axis ``period`` (wrap, mirror: the grid repeats)
 or by clamping (period 0: indices clamp to the grid's edge).
@@ -18,7 +22,7 @@ or by clamping (period 0: indices clamp to the grid's edge).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from numba import njit
@@ -102,6 +106,21 @@ class FootprintGrid:
     period_y: int
     width: int  # texture size in texels
     height: int
+    # exact bilinear (empty when absent): 1 where a cell's taps disagree, the texel values the
+    # cells' taps read (extended like the flags: mirror doubled), and the alpha test's bounds
+    # (O iff min > bounds[0], or >= when bounds[1]; T iff max < bounds[2], or <= when bounds[3])
+    mixed: np.ndarray = field(default_factory=lambda: np.zeros((1, 1), np.uint8))
+    values: np.ndarray = field(default_factory=lambda: np.zeros((0, 0), np.float64))
+    bounds: np.ndarray = field(default_factory=lambda: np.zeros(4, np.float64))
+
+    @property
+    def exact(self) -> bool:
+        """Whether mixed cells are decided exactly (a linear grid of an alpha test)."""
+        return self.values.size > 0
+
+    def kernel_args(self) -> tuple:
+        """(flags, mixed, values, bounds, period_x, period_y): what the numba rasterisers read."""
+        return self.flags, self.mixed, self.values, self.bounds, self.period_x, self.period_y
 
     def cells_within_texture(self) -> tuple[np.ndarray, np.ndarray]:
         """Flags and area weights of the cells that cover the texture [0,W]x[0,H] (for the
@@ -137,9 +156,11 @@ def _extend(arr: np.ndarray, axis: int, mode: str) -> tuple[np.ndarray, int]:
 
 
 def footprint_grid(texel_states: np.ndarray, filter: str = "nearest", wrap: str = "clamp",
-                   wrap_v: str | None = None) -> FootprintGrid:
+                   wrap_v: str | None = None, values: np.ndarray | None = None,
+                   bounds=None) -> FootprintGrid:
     """Build the grid for texel states (H, W) under a filter and addressing (``wrap`` for u,
-    ``wrap_v`` for v, default the same)."""
+    ``wrap_v`` for v, default the same). ``values`` (H, W) and ``bounds`` (the alpha test's, see
+    ``FootprintGrid``) make a linear grid exact; ``AlphaTest.grid`` passes them."""
     filter_code(filter)
     wrap_code(wrap)
     wrap_v = wrap if wrap_v is None else wrap_v
@@ -154,9 +175,22 @@ def footprint_grid(texel_states: np.ndarray, filter: str = "nearest", wrap: str 
     if filter == "nearest":
         return FootprintGrid(np.ascontiguousarray(f), 0.0, px, py, w, h)
     # linear: dual cell c reads taps c-1 and c (addressed); OR them along each axis.
-    f = _dual(f, 1, px)
-    f = _dual(f, 0, py)
-    return FootprintGrid(np.ascontiguousarray(f), 0.5, px, py, w, h)
+    known = (f != states.FLAG_C).astype(np.uint8)
+    f = _dual(_dual(f, 1, px), 0, py)
+    if values is None:
+        return FootprintGrid(np.ascontiguousarray(f), 0.5, px, py, w, h)
+    v = np.asarray(values, dtype=np.float64)
+    if v.shape != s.shape:
+        raise InputError(f"values have shape {v.shape}, texel states {s.shape}")
+    v, _ = _extend(v, 1, wrap)
+    v, _ = _extend(v, 0, wrap_v)
+    # a C cell can be narrowed only when some tap is known (all taps C: every point is C)
+    mixed = ((f == states.FLAG_C) & (_dual(_dual(known, 1, px), 0, py) > 0)).astype(np.uint8)
+    b = np.asarray(bounds, dtype=np.float64)
+    if b.shape != (4,):
+        raise ValueError("bounds must be (o_bound, o_inclusive, t_bound, t_inclusive)")
+    return FootprintGrid(np.ascontiguousarray(f), 0.5, px, py, w, h, np.ascontiguousarray(mixed),
+                         np.ascontiguousarray(v), b)
 
 
 def _dual(f: np.ndarray, axis: int, period: int) -> np.ndarray:

@@ -6,6 +6,9 @@ symmetric), and region-texel overlap by the separating-axis test on open convex 
 counts as separated). Exact for dyadic coordinates.
 """
 
+import math
+from fractions import Fraction
+
 import numpy as np
 
 T, O, C = 0, 1, 2
@@ -113,4 +116,112 @@ def triangle_states(states_img, tri_uv, level, filter="nearest", wrap="clamp"):
     for t in subdivide(tri_uv, level):
         key = tuple(sorted(map(tuple, np.round(t, 12))))
         out[key] = region_state(texels, t * scale, filter)
+    return out
+
+
+# ---- exact bilinear ---------------------------------------------------------------------------
+# The bilinear alpha at texel coordinate p interpolates the four texels around p - 1/2: it is
+# bilinear on each "dual" square between texel centres, [i - 1/2, i + 1/2] x [j - 1/2, j + 1/2].
+# Its extremes over a convex polygon are found by enumerating candidate points (not by clipping,
+# as omaps does): the polygon's vertices, where its edges cross the dual grid lines, the dual grid
+# points inside it, and the stationary point of the quadratic along each edge piece within one
+# dual square. Along a grid line the function is linear, and inside a square it has only a
+# saddle, so these candidates hold both extremes. Generic arithmetic: pass Fractions for exact.
+
+def _tap(values, wrap_u, wrap_v, x, y):
+    """Texel (x, y), any integers, addressed like np.pad's wrap / edge / symmetric."""
+    h, w = values.shape
+    return values[_address(y, h, wrap_v), _address(x, w, wrap_u)]
+
+
+def _address(i, n, mode):
+    if mode == "wrap":
+        return i % n
+    if mode == "clamp":
+        return min(max(i, 0), n - 1)
+    r = i % (2 * n)  # mirror: ... 1 0 | 0 1 ... n-1 | n-1 ...
+    return r if r < n else 2 * n - 1 - r
+
+
+def bilinear_at(values, wrap_u, wrap_v, x, y):
+    """The bilinear alpha at texel coordinate (x, y) (numbers of any exact type)."""
+    fx, fy = x - Fraction(1, 2), y - Fraction(1, 2)
+    x0, y0 = math.floor(fx), math.floor(fy)
+    ax, ay = fx - x0, fy - y0
+    t = [[Fraction(float(_tap(values, wrap_u, wrap_v, x0 + i, y0 + j))) for i in (0, 1)] for j in (0, 1)]
+    top = t[0][0] + ax * (t[0][1] - t[0][0])
+    bot = t[1][0] + ax * (t[1][1] - t[1][0])
+    return top + ay * (bot - top)
+
+
+def _inside(poly, p):
+    s = [(b[0] - a[0]) * (p[1] - a[1]) - (b[1] - a[1]) * (p[0] - a[0]) for a, b in zip(poly, poly[1:] + poly[:1])]
+    return all(v >= 0 for v in s) or all(v <= 0 for v in s)
+
+
+def bilinear_extremes(values, wrap_u, wrap_v, poly_texel):
+    """Exact (min, max) Fractions of the bilinear alpha over a convex polygon (texel coords)."""
+    half = Fraction(1, 2)
+    poly = [(Fraction(float(x)), Fraction(float(y))) for x, y in poly_texel]
+    xs = [p[0] for p in poly]
+    ys = [p[1] for p in poly]
+    gx = [i + half for i in range(math.floor(min(xs)) - 1, math.ceil(max(xs)) + 1)]
+    gy = [j + half for j in range(math.floor(min(ys)) - 1, math.ceil(max(ys)) + 1)]
+    cands = list(poly)
+    cands += [(x, y) for x in gx for y in gy if _inside(poly, (x, y))]
+    for a, b in zip(poly, poly[1:] + poly[:1]):
+        d = (b[0] - a[0], b[1] - a[1])
+        ts = {Fraction(0), Fraction(1)}
+        for axis, lines in ((0, gx), (1, gy)):
+            if d[axis] != 0:
+                ts |= {(g - a[axis]) / d[axis] for g in lines if 0 < (g - a[axis]) / d[axis] < 1}
+        ts = sorted(ts)
+        for t in ts:
+            cands.append((a[0] + t * d[0], a[1] + t * d[1]))
+        for t0, t1 in zip(ts, ts[1:]):  # one dual square per piece: a quadratic in t
+            f0 = bilinear_at(values, wrap_u, wrap_v, a[0] + t0 * d[0], a[1] + t0 * d[1])
+            tm = (t0 + t1) / 2
+            fm = bilinear_at(values, wrap_u, wrap_v, a[0] + tm * d[0], a[1] + tm * d[1])
+            f1 = bilinear_at(values, wrap_u, wrap_v, a[0] + t1 * d[0], a[1] + t1 * d[1])
+            # q(u) = f0 + c1 u + c2 u^2 on u in [0, 1] through the three values
+            c2 = 2 * (f0 + f1 - 2 * fm)
+            c1 = f1 - f0 - c2
+            if c2 != 0:
+                u = -c1 / (2 * c2)
+                if 0 < u < 1:
+                    t = t0 + u * (t1 - t0)
+                    cands.append((a[0] + t * d[0], a[1] + t * d[1]))
+    vals = [bilinear_at(values, wrap_u, wrap_v, x, y) for x, y in cands]
+    return min(vals), max(vals)
+
+
+def exact_state(lo, hi, mode="cutoff", cutoff=0.5, t_max=30.0, o_min=225.0):
+    """The corpus rules (8-bit alpha) on a region's exact alpha range."""
+    if mode == "levels":
+        return T if hi <= Fraction(t_max) else (O if lo >= Fraction(o_min) else C)
+    c = Fraction(cutoff) * 255
+    return O if lo > c else (T if hi <= c else C)
+
+
+def bilinear_triangle_states(alpha8, tri_uv, level, wrap="clamp", **rule):
+    """Dict from micro-triangle (its sorted vertex tuple) to its exact bilinear state."""
+    h, w = alpha8.shape
+    scale = np.array([w, h], dtype=np.float64)
+    out = {}
+    for t in subdivide(tri_uv, level):
+        key = tuple(sorted(map(tuple, np.round(t, 12))))
+        out[key] = exact_state(*bilinear_extremes(alpha8, wrap, wrap, list(t * scale)), **rule)
+    return out
+
+
+def bilinear_square_map(alpha8, n, wrap="clamp", **rule):
+    """The corpus pair's N x N map (cells in texel space) with exact bilinear states."""
+    h, w = alpha8.shape
+    out = np.empty((n, n), dtype=np.uint8)
+    for j in range(n):
+        for i in range(n):
+            x0, x1 = i * w / n, (i + 1) * w / n
+            y0, y1 = j * h / n, (j + 1) * h / n
+            lo, hi = bilinear_extremes(alpha8, wrap, wrap, [[x0, y0], [x1, y0], [x1, y1], [x0, y1]])
+            out[j, i] = exact_state(lo, hi, **rule)
     return out

@@ -48,7 +48,7 @@ def raster_rows(grid, tris_uv, level, grow=0.0):
     uv = (w0[None, ..., None] * t[:, None, None, 0] + bary[None, ..., 0, None] * t[:, None, None, 1]
           + bary[None, ..., 1, None] * t[:, None, None, 2])
     polys = uv.reshape(-1, 3, 2) * np.array([grid.width, grid.height], dtype=np.float64) + grid.offset
-    flags = np.array([raster.polygon_flags(grid.flags, grid.period_x, grid.period_y, np.ascontiguousarray(p), grow)
+    flags = np.array([raster.polygon_flags(*grid.kernel_args(), np.ascontiguousarray(p), grow)
                       for p in polys], dtype=np.uint8)
     assert np.all(flags > 0)  # every region reads something
     return states.FLAG_TO_STATE[flags].reshape(len(t), -1)

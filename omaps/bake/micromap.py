@@ -13,7 +13,11 @@ subdivision tree in the bird-curve order, and two facts make it fast without cha
   at once (the descendants of node k of level l are k*4^(L-l) ... (k+1)*4^(L-l) - 1);
 * a leaf (a micro-triangle under a mixed box) is rasterised exactly as ``raster.polygon_flags``
   does -- the same vertex arithmetic, the same row bands and x-extents -- but each row's cell
-  span is read from the table in O(1) instead of cell by cell.
+  span is read from the table in O(1) instead of cell by cell; only a span holding mixed
+  bilinear cells (``FootprintGrid.mixed``) is walked cell by cell, each mixed cell decided by
+  ``bilinear.cell_flag`` as ``raster.polygon_flags`` decides it.
+
+A box holding a mixed cell is never filled as C from the table: part of it may be known.
 
 Triangles run in parallel (numba ``prange``); ``numba.set_num_threads`` picks the thread count.
 
@@ -37,9 +41,10 @@ import numba
 import numpy as np
 from numba import njit, prange
 
+from ..bilinear import POLY_MAX, cell_flag
 from ..birdcurve import MAX_LEVEL
 from ..errors import InputError
-from ..raster import edge_extent
+from ..raster import cell_index, edge_extent
 from ..sampling import FootprintGrid
 
 __all__ = ["bake_micromaps", "bake_micromap_rows", "dynamic_levels", "micro_starts", "check_level",
@@ -72,24 +77,30 @@ def check_uv_triangles(tris_uv) -> np.ndarray:
 
 
 def flag_table(grid: FootprintGrid) -> np.ndarray:
-    """Summed-area table (Hc+1, Wc+1, 2) int32 of the T bit (plane 0) and O bit (plane 1):
-    ``sat[y, x, k]`` counts the cells above row y and left of column x with bit k."""
-    return _flag_table(grid.flags)
+    """Summed-area table (Hc+1, Wc+1, 3) int32 of the T bit (plane 0), the O bit (plane 1) and
+    mixed cells (plane 2, ``FootprintGrid.mixed``; none unless the grid is exact): ``sat[y, x, k]``
+    counts the cells above row y and left of column x with bit k."""
+    return _flag_table(grid.flags, grid.mixed if grid.exact else np.zeros((0, 0), np.uint8))
 
 
 @njit(cache=True)
-def _flag_table(flags):
+def _flag_table(flags, mixed):
     h, w = flags.shape
-    sat = np.zeros((h + 1, w + 1, 2), dtype=np.int32)
+    has_mixed = mixed.shape[0] > 0
+    sat = np.zeros((h + 1, w + 1, 3), dtype=np.int32)
     for y in range(h):
         rt = 0
         ro = 0
+        rm = 0
         for x in range(w):
             f = flags[y, x]
             rt += f & 1
             ro += (f >> 1) & 1
+            if has_mixed:
+                rm += mixed[y, x]
             sat[y + 1, x + 1, 0] = sat[y, x + 1, 0] + rt
             sat[y + 1, x + 1, 1] = sat[y, x + 1, 1] + ro
+            sat[y + 1, x + 1, 2] = sat[y, x + 1, 2] + rm
     return sat
 
 
@@ -120,28 +131,35 @@ def _rect(sat, y0, y1, x0, x1, k):
 
 @njit(cache=True, inline="always")
 def _box(sat, r0, r1, c0, c1, period_y, period_x):
-    """(cells with the T bit, cells with the O bit, distinct cells) of the box [c0,c1)x[r0,r1)."""
+    """(cells with the T bit, with the O bit, mixed cells, distinct cells) of the box
+    [c0,c1)x[r0,r1)."""
     ya0, yb0, ya1, yb1 = _axis_ranges(r0, r1, sat.shape[0] - 1, period_y)
     xa0, xb0, xa1, xb1 = _axis_ranges(c0, c1, sat.shape[1] - 1, period_x)
     nt = _rect(sat, ya0, yb0, xa0, xb0, 0)
     no = _rect(sat, ya0, yb0, xa0, xb0, 1)
+    nm = _rect(sat, ya0, yb0, xa0, xb0, 2)
     if xb1 > xa1:  # the x range wraps around the period
         nt += _rect(sat, ya0, yb0, xa1, xb1, 0)
         no += _rect(sat, ya0, yb0, xa1, xb1, 1)
+        nm += _rect(sat, ya0, yb0, xa1, xb1, 2)
     if yb1 > ya1:
         nt += _rect(sat, ya1, yb1, xa0, xb0, 0)
         no += _rect(sat, ya1, yb1, xa0, xb0, 1)
+        nm += _rect(sat, ya1, yb1, xa0, xb0, 2)
         if xb1 > xa1:
             nt += _rect(sat, ya1, yb1, xa1, xb1, 0)
             no += _rect(sat, ya1, yb1, xa1, xb1, 1)
+            nm += _rect(sat, ya1, yb1, xa1, xb1, 2)
     n = (yb0 - ya0 + yb1 - ya1) * (xb0 - xa0 + xb1 - xa1)
-    return nt, no, n
+    return nt, no, nm, n
 
 
 @njit(cache=True)
-def _leaf_flag(sat, period_y, period_x, x0, y0, x1, y1, x2, y2, grow):
+def _leaf_flag(sat, grid, x0, y0, x1, y1, x2, y2, grow, scratch):
     """OR of the flags of the cells a micro-triangle (grown by ``grow``) overlaps (0: no area):
-    ``raster.polygon_flags``' arithmetic, each row's cell span read in O(1)."""
+    ``raster.polygon_flags``' arithmetic, each row's cell span read in O(1) unless it holds mixed
+    cells. ``grid``: ``FootprintGrid.kernel_args()``; ``scratch`` (2 * POLY_MAX + 3, 2)."""
+    flags, mixed, values, bounds, period_x, period_y = grid
     ymin = min(y0, min(y1, y2))
     ymax = max(y0, max(y1, y2))
     acc = 0
@@ -159,11 +177,33 @@ def _leaf_flag(sat, period_y, period_x, x0, y0, x1, y1, x2, y2, grow):
         xmax += grow
         if not xmax > xmin:
             continue
-        nt, no, n = _box(sat, r, r + 1, int(math.floor(xmin)), int(math.ceil(xmax)), period_y, period_x)
-        if nt > 0:
-            acc |= 1
-        if no > 0:
-            acc |= 2
+        c0 = int(math.floor(xmin))
+        c1 = int(math.ceil(xmax))
+        nt, no, nm, n = _box(sat, r, r + 1, c0, c1, period_y, period_x)
+        if nm == 0:
+            if nt > 0:
+                acc |= 1
+            if no > 0:
+                acc |= 2
+        else:
+            tri = scratch[2 * POLY_MAX:]
+            tri[0, 0] = x0
+            tri[0, 1] = y0
+            tri[1, 0] = x1
+            tri[1, 1] = y1
+            tri[2, 0] = x2
+            tri[2, 1] = y2
+            hc, wc = flags.shape
+            row = cell_index(r, hc, period_y)
+            for c in range(c0, c1):
+                col = cell_index(c, wc, period_x)
+                f = flags[row, col]
+                if mixed[row, col]:
+                    f = cell_flag(values, bounds, period_x, period_y, row, col, tri, 3, c, r, grow,
+                                  scratch[:POLY_MAX], scratch[POLY_MAX:2 * POLY_MAX])
+                acc |= f
+                if acc == 3:
+                    return 3
         if acc == 3:
             return 3
     return acc
@@ -185,10 +225,12 @@ STACK = 3 * MAX_LEVEL + 4  # nodes pending: 3 more per level down, plus the root
 
 
 @njit(cache=True)
-def _bake_one(sat, period_y, period_x, tri, level, w, h, offset, grow, out, st_l, st_k, st_v):
+def _bake_one(sat, grid, tri, level, w, h, offset, grow, out, st_l, st_k, st_v, scratch):
     """States of one triangle's 4**level micro-triangles into ``out``; returns how many
     micro-triangles had no area (the reference raises on those). ``st_*``: the node stack
     (level, index, barycentric grid coordinates of p0, p1, p2), STACK entries."""
+    period_x = grid[4]
+    period_y = grid[5]
     n = 1 << level
     inv_n = 1.0 / n
     scale = 1.0
@@ -215,7 +257,7 @@ def _bake_one(sat, period_y, period_x, tri, level, w, h, offset, grow, out, st_l
         x2, y2 = _vertex(tri, i2, j2, inv_n, w, h, offset)
         state = -1
         if lv == level:  # a leaf: rasterise exactly (its box was mixed at the parent already)
-            f = _leaf_flag(sat, period_y, period_x, x0, y0, x1, y1, x2, y2, grow)
+            f = _leaf_flag(sat, grid, x0, y0, x1, y1, x2, y2, grow, scratch)
             if f == 0:
                 empty += 1
                 state = 2
@@ -226,13 +268,13 @@ def _bake_one(sat, period_y, period_x, tri, level, w, h, offset, grow, out, st_l
             c1 = int(math.ceil(max(x0, max(x1, x2)) + margin))
             r0 = int(math.floor(min(y0, min(y1, y2)) - margin))
             r1 = int(math.ceil(max(y0, max(y1, y2)) + margin))
-            nt, no, nc = _box(sat, r0, r1, c0, c1, period_y, period_x)
+            nt, no, nm, nc = _box(sat, r0, r1, c0, c1, period_y, period_x)
             if no == 0:
                 state = 0  # T
             elif nt == 0:
                 state = 1  # O
-            elif nt == nc and no == nc:
-                state = 2  # every cell is C
+            elif nt == nc and no == nc and nm == 0:
+                state = 2  # every cell is C, none of them mixed
         if state >= 0:
             span = 1 << (2 * (level - lv))
             out[k * span:(k + 1) * span] = state
@@ -266,17 +308,18 @@ CHUNK = 64  # triangles per parallel work item (one node stack each)
 
 
 @njit(cache=True, parallel=True)
-def _bake_all(sat, period_y, period_x, tris, levels, starts, w, h, offset, grow, out):
+def _bake_all(sat, grid, tris, levels, starts, w, h, offset, grow, out):
     empty = np.zeros(tris.shape[0], dtype=np.int64)
     n_chunks = (tris.shape[0] + CHUNK - 1) // CHUNK
     for c in prange(n_chunks):
         st_l = np.empty(STACK, dtype=np.int64)
         st_k = np.empty(STACK, dtype=np.int64)
         st_v = np.empty((STACK, 6), dtype=np.int64)
+        scratch = np.empty((2 * POLY_MAX + 3, 2))
         for t in range(c * CHUNK, min((c + 1) * CHUNK, tris.shape[0])):
             n = 1 << (2 * levels[t])
-            empty[t] = _bake_one(sat, period_y, period_x, tris[t], levels[t], w, h, offset, grow,
-                                 out[starts[t]:starts[t] + n], st_l, st_k, st_v)
+            empty[t] = _bake_one(sat, grid, tris[t], levels[t], w, h, offset, grow,
+                                 out[starts[t]:starts[t] + n], st_l, st_k, st_v, scratch)
     return empty
 
 
@@ -307,7 +350,7 @@ def bake_micromaps(grid: FootprintGrid, tris_uv, levels, grow: float = 0.0,
     if len(t):
         sat = flag_table(grid) if sat is None else sat
         with numba.parallel_chunksize(1):  # hand out chunks dynamically: threads may be slowed unevenly
-            empty = _bake_all(sat, grid.period_y, grid.period_x, t, lv, starts, float(grid.width),
+            empty = _bake_all(sat, grid.kernel_args(), t, lv, starts, float(grid.width),
                               float(grid.height), float(grid.offset), float(grow), out)
         if empty.any():
             bad = int(np.flatnonzero(empty)[0])

@@ -8,7 +8,8 @@ A pair is given by its corner UVs (P, 6, 2): the UVs at A's corners (0,0), (1,0)
 B's (0,0), (1,1), (0,1) (``omaps.pair``). Cell (i, j) covers s in [i/N, (i+1)/N], t in
 [j/N, (j+1)/N]; its part in A (t <= s) and its part in B (t >= s) are mapped to texture space by
 each triangle's own affine UV map (``pair.pair_weights``), grown by ``grow`` texels, and the
-cell's flag is the OR of the footprint flags either part overlaps (``raster.polygon_flags``).
+cell's flag is the OR of the footprint flags either part overlaps (``raster.polygon_flags``; in
+an exact bilinear grid, the part's own state in each mixed cell).
 A lone triangle (``has_b`` False) leaves the cells wholly in B at flag 0: cells no hit reaches,
 stored as C (a "don't care" encoders never need to keep).
 
@@ -78,7 +79,7 @@ def _area2(poly, k):
 
 
 @njit(cache=True)
-def _pair_flags(flags, px, py, off, w, h, uv, has_b, n, grow, out):
+def _pair_flags(flags, mixed, values, bounds, px, py, off, w, h, uv, has_b, n, grow, out):
     """Flags (n, n) of one pair's square map into ``out``."""
     rect = np.empty((4, 2))
     poly = np.empty((8, 2))
@@ -118,14 +119,14 @@ def _pair_flags(flags, px, py, off, w, h, uv, has_b, n, grow, out):
                     vv = w0 * uv[b, 1] + w1 * uv[b + 1, 1] + w2 * uv[b + 2, 1]
                     pts[v, 0] = u * w + off
                     pts[v, 1] = vv * h + off
-                acc |= raster.polygon_flags(flags, px, py, pts[:k], grow)
+                acc |= raster.polygon_flags(flags, mixed, values, bounds, px, py, pts[:k], grow)
             out[j, i] = acc
 
 
 @njit(cache=True, parallel=True)
-def _bake_pairs(flags, px, py, off, w, h, uv, has_b, n, grow, out):
+def _bake_pairs(flags, mixed, values, bounds, px, py, off, w, h, uv, has_b, n, grow, out):
     for p in prange(uv.shape[0]):
-        _pair_flags(flags, px, py, off, w, h, uv[p], has_b[p], n, grow, out[p])
+        _pair_flags(flags, mixed, values, bounds, px, py, off, w, h, uv[p], has_b[p], n, grow, out[p])
 
 
 def bake_pair_flags(grid: FootprintGrid, corner_uv, has_b, n: int, grow: float = 0.0) -> np.ndarray:
@@ -137,7 +138,7 @@ def bake_pair_flags(grid: FootprintGrid, corner_uv, has_b, n: int, grow: float =
         raise InputError("pair corner UVs must be finite")
     out = np.zeros((len(uv), n, n), np.uint8)
     if len(uv):
-        _bake_pairs(grid.flags, grid.period_x, grid.period_y, float(grid.offset), float(grid.width),
+        _bake_pairs(*grid.kernel_args(), float(grid.offset), float(grid.width),
                     float(grid.height), uv, hb, n, float(grow), out)
     return out
 

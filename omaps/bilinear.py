@@ -1,0 +1,155 @@
+"""The exact state of a region's part of a mixed bilinear cell, from the alpha's extremes there.
+
+Under bilinear filtering a hit in footprint cell (r, c) (``omaps.sampling``) reads
+``f(x, y) = a00 + x (a01 - a00) + y (a10 - a00) + x y (a00 - a01 - a10 + a11)`` at local
+coordinates (x, y) in [0, 1]², the cell's four taps a.. (the texels of rows r-1, r and columns
+c-1, c, addressed). A region is O there iff the minimum of f over its part of the cell passes the
+alpha test, T iff the maximum fails it. f has no extremum inside a convex polygon (its only
+critical point is a saddle), so over the region clipped to the cell its extremes lie at the
+clipped polygon's vertices or inside an edge, where f is a quadratic of the edge parameter.
+
+A cell is only evaluated here when its taps disagree (``FootprintGrid.mixed``); elsewhere the OR
+of the tap flags is already exact. Real geometry (the tracer's maps, OMMs) is baked with a
+growth ``grow`` > 0 (``bake.micromap.GROW_TEXEL``), and two allowances then keep the answer
+conservative for the shader:
+
+* growth: the grown region is bounded by clipping the *ungrown* region to the cell grown by
+  ``grow`` and widening the extremes by ``grow`` times f's slope bound there;
+* rounding: the extremes are widened by 1e-12 of the largest tap (the shader's float64
+  evaluation, ``sampling.sample_texture``) and by the slope times 1e-14 texel (the clipping's
+  arithmetic), so a region whose extreme is within that of the cut-off stays C.
+
+With no growth (the corpus pair's exact regions, which no ray reads) the extremes are compared
+as computed: for dyadic regions and integer alphas the arithmetic is exact, so a tie -- the
+alpha equal to the cut-off, e.g. on the edge between texels 0 and 255 at cut-off 127.5 --
+follows the rule's own > or >=.
+
+Example: a cell whose alpha rises from 0 on the left to 255 on the right, cut-off 127.5, is O on
+its right half and C across the middle::
+
+    >>> import numpy as np
+    >>> from omaps.bilinear import POLY_MAX, cell_flag
+    >>> values = np.array([[0.0, 255.0]]); bounds = np.array([127.5, 0, 127.5, 1])
+    >>> right = np.array([[1.6, 0.0], [2.0, 0.0], [2.0, 1.0], [1.6, 1.0]])  # in cell (0, 1)
+    >>> a, b = np.empty((POLY_MAX, 2)), np.empty((POLY_MAX, 2))
+    >>> int(cell_flag(values, bounds, 0, 0, 0, 1, right, 4, 1, 0, 0.0, a, b))  # FLAG_O
+    2
+    >>> int(cell_flag(values, bounds, 0, 0, 0, 1, right - [0.3, 0.0], 4, 1, 0, 0.0, a, b))  # FLAG_C
+    3
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+__all__ = ["cell_flag", "cell_taps", "region_extremes", "POLY_MAX"]
+
+POLY_MAX = 24  # vertices of a region clipped to a cell: at most the region's (<= 8) + 4
+
+
+@njit(cache=True, inline="always")
+def cell_taps(values, period_x, period_y, row, col):
+    """The taps (a00, a01, a10, a11) of stored cell (row, col): rows row-1, row and columns
+    col-1, col of ``values`` (extended like the flags), periodic or clamped."""
+    h, w = values.shape
+    if period_y:
+        ya = row - 1 if row > 0 else period_y - 1
+        yb = row
+    else:
+        ya = max(row - 1, 0)
+        yb = min(row, h - 1)
+    if period_x:
+        xa = col - 1 if col > 0 else period_x - 1
+        xb = col
+    else:
+        xa = max(col - 1, 0)
+        xb = min(col, w - 1)
+    return values[ya, xa], values[ya, xb], values[yb, xa], values[yb, xb]
+
+
+@njit(cache=True, inline="always")
+def _clip_axis(src, k, dst, axis, bound, keep_above):
+    """Polygon src[:k] clipped to coordinate ``axis`` >= bound (``keep_above``) or <= bound."""
+    m = 0
+    for i in range(k):
+        p0 = src[i, axis]
+        p1 = src[(i + 1) % k, axis]
+        in0 = p0 >= bound if keep_above else p0 <= bound
+        in1 = p1 >= bound if keep_above else p1 <= bound
+        if in0:
+            dst[m, 0] = src[i, 0]
+            dst[m, 1] = src[i, 1]
+            m += 1
+        if in0 != in1:
+            j = (i + 1) % k
+            f = (bound - p0) / (p1 - p0)
+            o = 1 - axis
+            dst[m, axis] = bound
+            dst[m, o] = src[i, o] + f * (src[j, o] - src[i, o])
+            m += 1
+    return m
+
+
+@njit(cache=True)
+def region_extremes(poly, k, ox, oy, lo, hi, a00, a01, a10, a11, buf_a, buf_b):
+    """(min, max) of the bilinear f of taps a.. over polygon poly[:k] - (ox, oy) (local
+    coordinates) clipped to the box [lo, hi]²; (inf, -inf) when nothing is left. ``buf_*``:
+    scratch (POLY_MAX, 2)."""
+    for i in range(k):
+        buf_a[i, 0] = poly[i, 0] - ox
+        buf_a[i, 1] = poly[i, 1] - oy
+    k = _clip_axis(buf_a, k, buf_b, 0, lo, True)
+    k = _clip_axis(buf_b, k, buf_a, 0, hi, False)
+    k = _clip_axis(buf_a, k, buf_b, 1, lo, True)
+    k = _clip_axis(buf_b, k, buf_a, 1, hi, False)
+    b = a01 - a00
+    c = a10 - a00
+    d = a00 - a01 - a10 + a11
+    mn = np.inf
+    mx = -np.inf
+    for i in range(k):
+        px = buf_a[i, 0]
+        py = buf_a[i, 1]
+        v = a00 + b * px + c * py + d * px * py
+        mn = min(mn, v)
+        mx = max(mx, v)
+        dx = buf_a[(i + 1) % k, 0] - px
+        dy = buf_a[(i + 1) % k, 1] - py
+        q2 = d * dx * dy  # f along the edge: v + q1 s + q2 s², s in [0, 1]
+        if q2 != 0.0:
+            q1 = b * dx + c * dy + d * (px * dy + py * dx)
+            s = -q1 / (2.0 * q2)
+            if 0.0 < s < 1.0:
+                x = px + s * dx
+                y = py + s * dy
+                v = a00 + b * x + c * y + d * x * y
+                mn = min(mn, v)
+                mx = max(mx, v)
+    return mn, mx
+
+
+@njit(cache=True)
+def cell_flag(values, bounds, period_x, period_y, row, col, poly, k, c, r, grow, buf_a, buf_b):
+    """Flag (1 T, 2 O, 3 C) of convex polygon poly[:k] (grid coordinates), grown by ``grow``,
+    within the cell of unaddressed index (r, c), stored at (row, col). ``buf_*``: scratch
+    (POLY_MAX, 2). See the module docstring for the allowances."""
+    a00, a01, a10, a11 = cell_taps(values, period_x, period_y, row, col)
+    mn, mx = region_extremes(poly, k, float(c), float(r), -grow, 1.0 + grow, a00, a01, a10, a11, buf_a, buf_b)
+    if mn > mx:  # the region misses the cell by rounding: count all of it
+        return 3
+    sx = max(abs(a01 - a00), abs(a11 - a10))
+    sy = max(abs(a10 - a00), abs(a11 - a01))
+    slack = 0.0
+    if grow > 0.0:
+        amax = max(max(abs(a00), abs(a01)), max(abs(a10), abs(a11)))
+        slack = (grow + 1e-14) * (sx + sy) * (1.0 + 2.0 * grow) + 1e-12 * amax
+    lo = mn - slack
+    hi = mx + slack
+    opaque = lo >= bounds[0] if bounds[1] != 0.0 else lo > bounds[0]
+    transparent = hi <= bounds[2] if bounds[3] != 0.0 else hi < bounds[2]
+    if opaque and not transparent:
+        return 2
+    if transparent and not opaque:
+        return 1
+    return 3
