@@ -19,9 +19,13 @@ One reader, one policy per case, for ``omaps trace``, ``omaps omm`` and all late
   are read; points and lines are left out and listed in ``Scene.skipped``;
 * ``COLOR_0`` alpha multiplies the base colour alpha (glTF's rule): where it is not 1 everywhere,
   the primitive's triangles are *unknown* (all C) and the tracer's shader multiplies by it;
-* texture coordinates that are NaN or infinite, or missing although the material samples a
-  texture: a warning naming mesh, primitive and count; those triangles are unknown, and their
-  coordinates are read as (0, 0).
+* texture coordinates that are NaN or infinite: a warning naming mesh, primitive and count;
+  those triangles are unknown and get vertices of their own at UV (0, 0) (the shader reads that
+  one point; their neighbours keep their coordinates); missing although the material samples a
+  texture: the same warning, the primitive's triangles unknown at UV (0, 0);
+* cameras are read (``Scene.cameras``: perspective ``yfov`` and the world transform of the first
+  node of the default scene placing each) and checked only when one is used;
+* a warning is given once per problem (a missing file named by several images or materials once).
 """
 
 from __future__ import annotations
