@@ -5,7 +5,7 @@ import importlib
 
 import pytest
 
-MODULES = ["omaps", "omaps.alpha_test", "omaps.coverage", "omaps.promotion", "omaps.bake.micromap",
+MODULES = ["omaps", "omaps.alpha_test", "omaps.atomic", "omaps.coverage", "omaps.promotion", "omaps.bake.micromap",
            "omaps.bake.square", "omaps.bake.pair_maps", "omaps.codecs.raw", "omaps.codecs.registry", "omaps.schemes",
            "omaps.corpus.evaluate", "omaps.omm", "omaps.omm.pipeline", "omaps.texture"]
 
