@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 from PIL import Image
 
+from conftest import SCENES, needs_scenes
 from gltf_files import write_quad_gltf
 from omaps.cli import main
 
@@ -281,12 +282,13 @@ def test_trace_help_explains_every_column(tmp_path, inputs, capsys):
 
 # --- Ctrl-C -----------------------------------------------------------------------------------
 
-def _interrupt(args, cwd, wait_for: bytes):
+def _interrupt(args, cwd, wait_for: bytes, group=False):
     """Run ``omaps ARGS`` with progress bars forced on, send SIGINT once the pattern ``wait_for``
-    has appeared on its stderr (the work has started; no timing), and return (exit code, stderr)."""
+    has appeared on its stderr (the work has started; no timing), and return (exit code, stderr).
+    ``group``: to the whole process group, workers included, as a terminal's Ctrl-C does."""
     env = dict(os.environ, OMAPS_PROGRESS="1", PYTHONUNBUFFERED="1")
     p = subprocess.Popen([sys.executable, "-m", "omaps", *map(str, args)], cwd=cwd, env=env,
-                         stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+                         stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, start_new_session=group)
     seen = b""
     while not re.search(wait_for, seen):
         chunk = p.stderr.read1(4096)
@@ -294,7 +296,10 @@ def _interrupt(args, cwd, wait_for: bytes):
             break
         seen += chunk
     assert re.search(wait_for, seen), seen.decode(errors="replace")
-    p.send_signal(signal.SIGINT)
+    if group:
+        os.killpg(p.pid, signal.SIGINT)
+    else:
+        p.send_signal(signal.SIGINT)
     rest = p.stderr.read()
     p.wait()
     return p.returncode, (seen + rest).decode(errors="replace")
@@ -306,8 +311,10 @@ def _many_textures(folder, n):
         Image.fromarray(_disc(96, 0.2 + 0.25 * i / n)).save(folder / f"t{i:03d}.png")
 
 
-@pytest.mark.parametrize("stage, wait_for", [("workers", rb"\| *[1-9]\d*/120 \["), ("pictures", rb"pictures:")])
-def test_ctrl_c_eval(tmp_path, stage, wait_for):
+@pytest.mark.parametrize("stage, wait_for, group", [("workers", rb"\| *[1-9]\d*/120 \[", False),
+                                                    ("workers", rb"\| *[1-9]\d*/120 \[", True),
+                                                    ("pictures", rb"pictures:", False)])
+def test_ctrl_c_eval(tmp_path, stage, wait_for, group):
     """Interrupted while the worker pool computes, or while the --show pictures are drawn:
     'omaps: interrupted', exit 130, no traceback (workers included), and nothing written."""
     tex = tmp_path / "tex"
@@ -316,7 +323,7 @@ def test_ctrl_c_eval(tmp_path, stage, wait_for):
     out.mkdir()
     schemes = "vq4x64-thorough" if stage == "workers" else "sq4"
     rc, err = _interrupt(["eval", tex, "--schemes", schemes, "--jobs", "2", "--json", out / "r.json",
-                          "--csv", out / "r.csv", "--show", out / "maps"], tmp_path, wait_for)
+                          "--csv", out / "r.csv", "--show", out / "maps"], tmp_path, wait_for, group)
     assert rc == 130, err
     assert err.rstrip().endswith("omaps: interrupted") and "Traceback" not in err, err
     assert listing(out) == []
@@ -334,3 +341,15 @@ def test_ctrl_c_omm(tmp_path, inputs):
     assert rc == 130, err
     assert err.rstrip().endswith("omaps: interrupted") and "Traceback" not in err, err
     assert listing(out) == ["omm", os.path.join("omm", "omm.json")]
+
+
+@needs_scenes
+def test_ctrl_c_trace(tmp_path):
+    """Interrupted (the whole process group) while the encoder's worker pool runs."""
+    out = tmp_path / "out"
+    out.mkdir()
+    rc, err = _interrupt(["trace", SCENES / "palm.glb", "--schemes", "none,vq4-thorough", "--size", "32", "--jobs", "2",
+                          "--json", out / "t.json", "--heatmap", out / "h.png"], tmp_path, rb"encode vq4", group=True)
+    assert rc == 130, err
+    assert err.rstrip().endswith("omaps: interrupted") and "Traceback" not in err, err
+    assert listing(out) == []
