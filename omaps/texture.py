@@ -111,16 +111,33 @@ def load_alpha(path, channel=None, name: str = "array") -> AlphaTexture:
         raise InputError("no such file", path)
     if os.path.isdir(path):
         raise InputError("is a folder, not an image", path)
+    with open_image(path, path) as im:
+        return _alpha_from_image(im, name, path, channel)
+
+
+def open_image(source, path) -> Image.Image:
+    """Open and decode an image through Pillow: ``source`` a file name or a binary file object,
+    ``path`` the name to report. The one boundary where Pillow's many exception types on corrupt
+    or hostile data (OSError, SyntaxError, struct.error, NotImplementedError, EOFError,
+    DecompressionBombError, ...) become an ``InputError`` naming the file, with Pillow's message.
+    The returned image is loaded; close it (it is a context manager)."""
     try:
-        with Image.open(path) as im:
-            im.load()
-            return _alpha_from_image(im, name, path, channel)
-    except InputError:
-        raise
+        im = Image.open(source)
     except UnidentifiedImageError:
         raise InputError("not an image Pillow can read", path) from None
-    except (OSError, SyntaxError, ValueError) as exc:  # truncated / corrupt / unsupported variant
-        raise InputError(f"cannot decode image ({exc})", path) from None
+    except Exception as exc:  # noqa: BLE001 -- the third-party decode boundary, message kept
+        raise InputError(f"cannot decode image ({type(exc).__name__}: {exc})", path) from None
+    try:
+        im.load()
+        if im.width <= 0 or im.height <= 0:
+            raise InputError(f"empty image ({im.width}x{im.height})", path)
+        return im
+    except InputError:
+        im.close()
+        raise
+    except Exception as exc:  # noqa: BLE001 -- as above: truncated data, bad chunks, unsupported variants
+        im.close()
+        raise InputError(f"cannot decode image ({type(exc).__name__}: {exc})", path) from None
 
 
 def _alpha_from_image(im: Image.Image, name: str, path: str, channel) -> AlphaTexture:

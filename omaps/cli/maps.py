@@ -216,7 +216,10 @@ def cmd_decode(a) -> int:
         raise InputError("no such file", a.block) from None
     if len(data) != codec.block_bytes:
         raise InputError(f"a {codec.name} block is {codec.block_bytes} bytes, this file has {len(data)}", a.block)
-    m = codec.decode(data)
+    try:
+        m = codec.decode(data)
+    except InputError as exc:  # a block no map decodes from (a raw map holding code 3)
+        raise InputError(exc.problem, a.block) from None
     if a.json:
         print(json.dumps({"settings": {"codec": codec.name, "block": a.block}, "codec": codec.name,
                           "size": int(m.shape[0]), "savings": known_fraction(m), "states": m.tolist()}))

@@ -117,7 +117,12 @@ def _raw(n: int) -> Codec:
         return pack_states(maps.reshape(len(maps), -1))
 
     def dec(data):
-        return unpack_states(np.frombuffer(data, np.uint8), n * n)[0].reshape(n, n)
+        m = unpack_states(np.frombuffer(data, np.uint8), n * n)[0].reshape(n, n)
+        if m.max() > states.C:  # the one 2-bit code that is no state: a corrupt map, not a guess
+            j, i = np.argwhere(m > states.C)[0]
+            raise InputError(f"cell ({i}, {j}) of the sq{n} map holds code {m[j, i]}, which is no state "
+                             "(0 T, 1 O, 2 C)")
+        return m
 
     return Codec(f"sq{n}", n, 2 * n * n, row_bytes(n * n), (), (), None, None, enc, dec, square_lookup(n))
 

@@ -10,6 +10,7 @@ and the problem.
 from __future__ import annotations
 
 import json
+import math
 import os
 
 import numpy as np
@@ -17,7 +18,8 @@ import numpy as np
 from .. import atomic
 from ..errors import InputError
 from . import format as omm_format
-from .pipeline import OmmResult
+from .inputs import check_spec
+from .pipeline import OmmResult, OmmSettings
 
 
 def check_target(folder) -> str:
@@ -62,9 +64,77 @@ def _read(folder, name) -> bytes:
 def _json(folder, name) -> dict:
     path = os.path.join(folder, name)
     try:
-        return json.loads(_read(folder, name))
-    except (ValueError, UnicodeDecodeError) as exc:
+        doc = json.loads(_read(folder, name))
+    except (ValueError, UnicodeDecodeError, RecursionError) as exc:
         raise InputError(f"not valid JSON ({exc})", path) from None
+    if not isinstance(doc, dict):
+        raise InputError(f"holds {type(doc).__name__}, not a JSON object", path)
+    return doc
+
+
+# omm.json's settings: the Python types each may have (None: may be null)
+_SETTING_TYPES = {"source": (str,), "level": (int, None), "dynamic_scale": (float, None), "max_level": (int,),
+                  "promotion": (str,), "special": (bool,), "dedup": (bool,), "seed": (int,), "encoder": (str, None),
+                  "effort": (str, None)}
+
+
+def _is(value, kind) -> bool:
+    if kind is None:
+        return value is None
+    if kind is bool or kind is str:
+        return isinstance(value, kind)
+    if isinstance(value, bool) or not isinstance(value, (int, float) if kind is float else int):
+        return False
+    return math.isfinite(value) if kind is float else -(2 ** 63) <= value < 2 ** 63
+
+
+def settings_from_summary(summary: dict, path=None) -> OmmSettings:
+    """The ``OmmSettings`` omm.json records (``summary``), every field checked: an InputError
+    naming ``path`` and the field otherwise."""
+    s = summary.get("settings")
+    if not isinstance(s, dict):
+        raise InputError(f"settings is {s!r}, not an object", path)
+    for key, kinds in _SETTING_TYPES.items():
+        if not any(_is(s.get(key), k) for k in kinds):
+            raise InputError(f"settings.{key} is {s.get(key)!r}", path)
+    if s["dynamic_scale"] is not None and s["dynamic_scale"] <= 0:
+        raise InputError(f"settings.dynamic_scale is {s['dynamic_scale']}, not positive", path)
+    fmt = summary.get("format")
+    if not isinstance(fmt, str) or summary.get("format_code") != omm_format.FORMAT_NAMES.get(fmt):
+        raise InputError(f"format {fmt!r} and format_code {summary.get('format_code')!r} do not match "
+                         f"({', '.join(f'{k} = {v}' for k, v in omm_format.FORMAT_NAMES.items())})", path)
+    try:
+        return OmmSettings(format=fmt, level=s["level"] if s["level"] is not None else 4,
+                           dynamic_scale=s["dynamic_scale"], max_level=s["max_level"], promotion=s["promotion"],
+                           special=s["special"], dedup=s["dedup"], source=s["source"], encoder=s["encoder"],
+                           effort=s["effort"], seed=s["seed"])
+    except InputError as exc:
+        raise InputError(f"settings: {exc.problem}", path) from None
+
+
+def _pair_blocks_info(summary: dict, path) -> int:
+    """omm.json's ``pair_blocks`` (a square source's codec and block count), checked against the
+    codec; the number of blocks."""
+    from ..codecs import get_codec
+
+    info = summary.get("pair_blocks")
+    if not isinstance(info, dict):
+        raise InputError(f"pair_blocks is {info!r}: {omm_format.PAIR_BLOCKS_FILE} is present but not described",
+                         path)
+    name = info.get("codec")
+    try:
+        codec = get_codec(name) if isinstance(name, str) else None
+    except InputError:
+        codec = None
+    if codec is None:
+        raise InputError(f"pair_blocks.codec is {name!r}, not a codec", path)
+    if info.get("block_bytes") != codec.block_bytes or isinstance(info.get("block_bytes"), bool):
+        raise InputError(f"pair_blocks.block_bytes is {info.get('block_bytes')!r}, a {codec.name} block has "
+                         f"{codec.block_bytes}", path)
+    n = info.get("blocks")
+    if isinstance(n, bool) or not isinstance(n, int) or n < 0:
+        raise InputError(f"pair_blocks.blocks is {n!r}, not a count", path)
+    return n
 
 
 def read(folder) -> OmmResult:
@@ -104,21 +174,33 @@ def read(folder) -> OmmResult:
         raise InputError("usage counts do not match the triangle records and the index buffer",
                          os.path.join(folder, omm_format.USAGE_FILE))
     summary = _json(folder, omm_format.SUMMARY_FILE)
+    sum_path = os.path.join(folder, omm_format.SUMMARY_FILE)
+    settings_from_summary(summary, sum_path)
+    if summary.get("input") is not None:
+        try:
+            check_spec(summary["input"])
+        except InputError as exc:
+            raise InputError(exc.problem, sum_path) from None
     blocks = records = None
     if os.path.exists(os.path.join(folder, omm_format.PAIR_BLOCKS_FILE)):
         blocks = _read(folder, omm_format.PAIR_BLOCKS_FILE)
+        n_blocks = _pair_blocks_info(summary, sum_path)
+        block_bytes = summary["pair_blocks"]["block_bytes"]
+        if len(blocks) != n_blocks * block_bytes:
+            raise InputError(f"size {len(blocks)} is not {n_blocks} blocks of {block_bytes} bytes (omm.json)",
+                             os.path.join(folder, omm_format.PAIR_BLOCKS_FILE))
         raw = _read(folder, omm_format.PAIRS_FILE)
         rec_path = os.path.join(folder, omm_format.PAIRS_FILE)
         if len(raw) != omm_format.PAIR_RECORD.itemsize * len(index):
             raise InputError(f"size {len(raw)} is not {omm_format.PAIR_RECORD.itemsize} bytes per triangle", rec_path)
         records = np.frombuffer(raw, dtype=omm_format.PAIR_RECORD)
-        n_blocks = int((summary.get("pair_blocks") or {}).get("blocks", -1))
         if np.any(records["pair"] < 0) or np.any(records["pair"] >= n_blocks) or np.any(records["corners"] > 3):
             raise InputError("a pair index or corner code is out of range", rec_path)
-    stats = summary.get("statistics", {})
+    stats = summary.get("statistics")
+    if not isinstance(stats, dict):
+        raise InputError(f"statistics is {stats!r}, not an object", sum_path)
     for key, got in (("triangles", len(index)), ("micromaps", len(tris)), ("data_bytes", len(data))):
-        if stats.get(key) != got:
-            raise InputError(f"statistics.{key} is {stats.get(key)!r}, the files hold {got}",
-                             os.path.join(folder, omm_format.SUMMARY_FILE))
+        if stats.get(key) != got or isinstance(stats.get(key), bool):
+            raise InputError(f"statistics.{key} is {stats.get(key)!r}, the files hold {got}", sum_path)
     return OmmResult(data.copy(), tris.copy(), index.copy(), usage, summary, blocks,
                      None if records is None else records.copy())

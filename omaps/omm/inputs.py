@@ -18,7 +18,7 @@ from ..errors import InputError
 from ..texture import load_alpha
 from .pipeline import Geometry
 
-__all__ = ["texture_spec", "gltf_spec", "load_uvs", "load_geometries"]
+__all__ = ["texture_spec", "gltf_spec", "check_spec", "load_uvs", "load_geometries"]
 
 
 def texture_spec(texture, uvs, cutoff=None, filter=None, wrap=None, channel=None) -> dict:
@@ -31,13 +31,55 @@ def gltf_spec(path, rules: MaterialRules = MaterialRules()) -> dict:
     return {"kind": "gltf", "path": os.path.abspath(path), **rules.settings()}
 
 
+def check_spec(spec) -> dict:
+    """An input spec as omm.json records it (``texture_spec`` / ``gltf_spec``), checked: an
+    InputError saying which field is wrong (the caller names the file)."""
+    if not isinstance(spec, dict):
+        raise InputError(f"input is {spec!r}, not an object")
+
+    def field(key, kinds, optional=False):
+        v = spec.get(key)
+        if v is None and optional:
+            return None
+        ok = (isinstance(v, str) if kinds is str else
+              isinstance(v, (int, float)) and not isinstance(v, bool) and np.isfinite(v))
+        if not ok:
+            raise InputError(f"input.{key} is {v!r}, {'a string' if kinds is str else 'a finite number'} expected")
+        return v
+
+    kind = spec.get("kind")
+    if kind == "texture":
+        field("texture", str), field("uvs", str)
+        channel = spec.get("channel")
+        if channel is not None and (not isinstance(channel, (str, int)) or isinstance(channel, bool)):
+            raise InputError(f"input.channel is {channel!r}, a channel name or index expected")
+        StateRule("cutoff", cutoff=field("cutoff", float))
+        MaterialRules(filter=field("filter", str), wrap=field("wrap", str))  # checks the names
+    elif kind == "gltf":
+        field("path", str)
+        blend = field("blend", str) if "blend" in spec else "levels"
+        blend_cutoff = field("blend_cutoff", float) if "blend_cutoff" in spec else 0.5
+        MaterialRules(field("cutoff", float, True), field("filter", str, True), field("wrap", str, True), blend,
+                      blend_cutoff)
+    else:
+        raise InputError(f"input.kind is {kind!r}, texture or gltf expected")
+    return spec
+
+
 def load_uvs(path) -> np.ndarray:
+    """A .npy array of UV triangles (T, 3, 2), checked (``bake.micromap.check_uv_triangles``);
+    an InputError naming the file otherwise."""
+    if not os.path.exists(path):
+        raise InputError("no such file", path)
     try:
         uvs = np.load(path, allow_pickle=False)
-    except FileNotFoundError:
-        raise InputError("no such file", path) from None
-    except (OSError, ValueError) as exc:
-        raise InputError(f"cannot read UV array ({exc})", path) from None
+    except Exception as exc:  # noqa: BLE001 -- numpy's .npy parsing, the third-party decode boundary
+        raise InputError(f"cannot read UV array ({type(exc).__name__}: {exc})", path) from None
+    if not isinstance(uvs, np.ndarray):
+        uvs.close()
+        raise InputError("not a .npy array (an .npz archive?)", path)
+    if uvs.dtype.kind not in "biuf":
+        raise InputError(f"UV array of dtype {uvs.dtype}, numbers expected", path)
     try:
         return check_uv_triangles(uvs)
     except InputError as exc:

@@ -8,20 +8,14 @@ import os
 import numpy as np
 
 from ..codecs import get_codec
+from ..errors import InputError
 from . import files, pairs
+from .files import settings_from_summary
 from . import format as omm_format
 from .inputs import load_geometries
-from .pipeline import OmmResult, OmmSettings, build
+from .pipeline import OmmResult, build
 
 __all__ = ["verify", "settings_from_summary"]
-
-
-def settings_from_summary(summary: dict) -> OmmSettings:
-    s = summary["settings"]
-    return OmmSettings(format=summary["format"], level=s["level"] if s["level"] is not None else 4,
-                       dynamic_scale=s["dynamic_scale"], max_level=s["max_level"], promotion=s["promotion"],
-                       special=s["special"], dedup=s["dedup"], source=s["source"], encoder=s["encoder"],
-                       effort=s["effort"], seed=s["seed"])
 
 
 def verify(folder) -> tuple[OmmResult, list[str], list[str]]:
@@ -40,7 +34,7 @@ def verify(folder) -> tuple[OmmResult, list[str], list[str]]:
     if len(res.triangles) and not np.all(res.triangles["format"] == fmt_code):
         problems.append(f"micromap formats differ from omm.json's format {fmt_code}")
     if res.pair_blocks is not None:
-        problems += _check_pair_blocks(res)
+        problems += _check_pair_blocks(res, os.path.join(folder, omm_format.PAIR_BLOCKS_FILE))
         done.append("micromaps against the decoded pair blocks")
     spec = res.summary.get("input")
     if spec is not None:
@@ -74,21 +68,27 @@ def _compare(res: OmmResult, again: OmmResult) -> list[str]:
     return ["buffers differ from a re-bake (same states, different packing)"]
 
 
-def _check_pair_blocks(res: OmmResult) -> list[str]:
+def _check_pair_blocks(res: OmmResult, path) -> list[str]:
     info = res.summary["pair_blocks"]
     codec = get_codec(info["codec"])
     raw = res.pair_blocks
     bb = codec.block_bytes
     if len(raw) != info["blocks"] * bb:
         return [f"{omm_format.PAIR_BLOCKS_FILE} has {len(raw)} bytes, {info['blocks']} blocks of {bb} expected"]
-    maps = codec.decode_many(np.frombuffer(raw, np.uint8).reshape(-1, bb)) if info["blocks"] else np.zeros(
-        (0, codec.map_size, codec.map_size), np.uint8)
+    try:
+        maps = codec.decode_many(np.frombuffer(raw, np.uint8).reshape(-1, bb)) if info["blocks"] else np.zeros(
+            (0, codec.map_size, codec.map_size), np.uint8)
+    except InputError as exc:  # a block that decodes to no map (a raw map holding code 3)
+        raise InputError(exc.problem, path) from None
     rec = res.pair_records
     expanded = pairs.expand(maps, rec["pair"].astype(np.int64), rec["corners"])
     two_state = res.summary["format_code"] == omm_format.FORMAT_2_STATE
     for t in range(len(res.index)):
-        s = np.broadcast_to(res.triangle_states(t), expanded[t].shape)
+        s = res.triangle_states(t)
         want = expanded[t]
+        if len(s) not in (1, len(want)):
+            return [f"triangle {t} has {len(s)} micro-triangles, its pair map expands to {len(want)}"]
+        s = np.broadcast_to(s, want.shape)
         known = want < 2
         if not (np.array_equal(s[known], want[known]) and (two_state or np.all(s[~known] >= 2))):
             return [f"triangle {t} disagrees with its decoded pair block"]

@@ -31,7 +31,9 @@ One reader, one policy per case, for ``omaps trace``, ``omaps omm`` and all late
 from __future__ import annotations
 
 import base64
+import dataclasses
 import io
+import math
 import os
 import warnings
 from urllib.parse import unquote
@@ -56,6 +58,7 @@ _WRAP = {33071: "clamp", 33648: "mirror", 10497: "wrap"}
 _COMPONENTS = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4, "MAT2": 4, "MAT3": 9, "MAT4": 16}
 _DTYPES = {5120: np.int8, 5121: np.uint8, 5122: np.int16, 5123: np.uint16, 5125: np.uint32, 5126: np.float32}
 _TRIANGLES, _STRIP, _FAN = 4, 5, 6
+MAX_ZERO_ACCESSOR = 1 << 24  # elements of an accessor without a bufferView (zeros, maybe sparse)
 
 
 def load_scene(path) -> Scene:
@@ -109,66 +112,141 @@ class _Reader:
         self.warnings.append(message)
         warnings.warn(f"{self.path}: {message}", SceneWarning, stacklevel=2)
 
+    # -- checked fields: every value the reader uses is checked where it is read --------------
+    def _int(self, value, what: str, lo: int = 0, hi: int | None = None) -> int:
+        """``value`` as an int in [lo, hi); an InputError saying what is wrong otherwise."""
+        if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
+            raise InputError(f"{what} is {value!r}, not an integer", self.path)
+        if value < lo or (hi is not None and value >= hi):
+            raise InputError(f"{what} is {value}, outside {lo}..{'' if hi is None else hi - 1}", self.path)
+        return int(value)
+
+    def _ref(self, value, items, what: str) -> int:
+        """A reference (an index into the document's list ``items``) that must exist."""
+        n = len(items) if isinstance(items, list) else 0
+        if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or not 0 <= value < n:
+            raise InputError(f"{what} {value!r} does not exist ({n} defined)", self.path)
+        if not dataclasses.is_dataclass(items[value]):
+            raise InputError(f"{what} {value} is {items[value]!r}, not an object", self.path)
+        return int(value)
+
+    def _numbers(self, value, n: int, what: str) -> list[float]:
+        """A list of ``n`` finite numbers."""
+        if (not isinstance(value, (list, tuple)) or len(value) != n
+                or not all(isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x)
+                           for x in value)):
+            raise InputError(f"{what} must be {n} finite number{'s' if n > 1 else ''}, got {value!r}", self.path)
+        return [float(x) for x in value]
+
+    def _number(self, value, what: str) -> float:
+        return self._numbers([value], 1, what)[0]
+
+    def _list(self, value, what: str, objects: bool = False) -> list:
+        """An optional JSON array (None: empty); ``objects``: of glTF objects."""
+        if value is None:
+            return []
+        if not isinstance(value, list):
+            raise InputError(f"{what} is {value!r}, not an array", self.path)
+        if objects:
+            for i, item in enumerate(value):
+                if not dataclasses.is_dataclass(item):
+                    raise InputError(f"{what}[{i}] is {item!r}, not an object", self.path)
+        return value
+
+    def _dict(self, value, what: str) -> dict:
+        """An optional JSON object (None: empty)."""
+        if value is None:
+            return {}
+        if not isinstance(value, dict):
+            raise InputError(f"{what} is {value!r}, not an object", self.path)
+        return value
+
+    def _uri(self, value, what: str) -> str | None:
+        if value is not None and not isinstance(value, str):
+            raise InputError(f"{what}: uri is {value!r}, not a string", self.path)
+        return value
+
     # -- raw data ---------------------------------------------------------------------------
     def _uri_bytes(self, uri: str) -> bytes | None:
         """Bytes of a data URI or a file beside the scene; None when the file is missing."""
         if uri.startswith("data:"):
+            head, comma, payload = uri.partition(",")
+            if not comma or not head.endswith(";base64"):
+                raise InputError(f"data URI {uri[:40]!r}... is not base64 data", self.path)
             try:
-                return base64.b64decode(uri.split(",", 1)[1])
-            except (IndexError, ValueError):
-                raise InputError("bad data URI", self.path) from None
+                return base64.b64decode(payload)
+            except ValueError as exc:
+                raise InputError(f"bad base64 in a data URI ({exc})", self.path) from None
         full = os.path.join(self.folder, unquote(uri))
         try:
             with open(full, "rb") as f:
                 return f.read()
-        except OSError:
+        except (OSError, ValueError):  # missing, a folder, unreadable, a NUL in the name
             return None
 
     def buffer(self, i: int) -> bytes:
+        i = self._ref(i, self.g.buffers, "buffer")
         if i not in self._buffers:
             b = self.g.buffers[i]
-            if b.uri is None:
+            uri = self._uri(b.uri, f"buffer {i}")
+            length = self._int(b.byteLength, f"buffer {i}: byteLength")
+            if uri is None:
                 data = self.g.binary_blob()
                 if data is None:
                     raise InputError(f"buffer {i} has no URI and the file has no binary chunk", self.path)
             else:
-                data = self._uri_bytes(b.uri)
+                data = self._uri_bytes(uri)
                 if data is None:
-                    raise InputError(f"buffer {i}: file {b.uri!r} is missing or unreadable", self.path)
-            if b.byteLength is not None and len(data) < b.byteLength:
-                raise InputError(f"buffer {i} holds {len(data)} bytes, byteLength says {b.byteLength}", self.path)
+                    raise InputError(f"buffer {i}: file {uri!r} is missing or unreadable", self.path)
+            if len(data) < length:
+                raise InputError(f"buffer {i} holds {len(data)} bytes, byteLength says {length}", self.path)
             self._buffers[i] = bytes(data)
         return self._buffers[i]
 
     def view_bytes(self, vi: int) -> tuple[bytes, int | None]:
+        """The bytes of bufferView ``vi`` and its byteStride (None: tightly packed)."""
+        vi = self._ref(vi, self.g.bufferViews, "bufferView")
         v = self.g.bufferViews[vi]
-        data = self.buffer(v.buffer)
-        off = v.byteOffset or 0
-        if off + v.byteLength > len(data):
-            raise InputError(f"bufferView {vi} runs past the end of buffer {v.buffer}", self.path)
-        return data[off:off + v.byteLength], v.byteStride
+        data = self.buffer(self._ref(v.buffer, self.g.buffers, f"bufferView {vi}: buffer"))
+        off = 0 if v.byteOffset is None else self._int(v.byteOffset, f"bufferView {vi}: byteOffset")
+        length = self._int(v.byteLength, f"bufferView {vi}: byteLength")
+        stride = None if v.byteStride is None else self._int(v.byteStride, f"bufferView {vi}: byteStride", 1)
+        if off + length > len(data):
+            raise InputError(f"bufferView {vi} (bytes {off}..{off + length}) runs past the end of buffer {v.buffer} "
+                             f"({len(data)} bytes)", self.path)
+        return data[off:off + length], stride
 
-    def accessor(self, ai: int) -> np.ndarray:
+    def accessor(self, ai: int, types=None) -> np.ndarray:
         """Accessor ``ai`` as an array (count, components): floats as float64, normalised
-        integers scaled to [0, 1] or [-1, 1], other integers as int64."""
-        if not isinstance(ai, int) or not 0 <= ai < len(self.g.accessors or []):
-            raise InputError(f"accessor {ai} does not exist", self.path)
+        integers scaled to [0, 1] or [-1, 1], other integers as int64. ``types``: the accessor
+        types (``"VEC3"``, ...) the caller accepts. Every offset, length, stride and count is
+        checked against its bufferView here, before any byte is read."""
+        ai = self._ref(ai, self.g.accessors, "accessor")
         a = self.g.accessors[ai]
-        if a.componentType not in _DTYPES or a.type not in _COMPONENTS:
-            raise InputError(f"accessor {ai}: unsupported type {a.type}/{a.componentType}", self.path)
+        what = f"accessor {ai}"
+        if not isinstance(a.componentType, int) or a.componentType not in _DTYPES \
+                or not isinstance(a.type, str) or a.type not in _COMPONENTS:
+            raise InputError(f"{what}: unsupported type {a.type!r}/{a.componentType!r}", self.path)
+        if types is not None and a.type not in types:
+            raise InputError(f"{what} is {a.type}, {' or '.join(types)} expected here", self.path)
         dt = np.dtype(_DTYPES[a.componentType]).newbyteorder("<")
         ncomp = _COMPONENTS[a.type]
-        count = int(a.count or 0)
+        count = self._int(a.count, f"{what}: count")
         if a.bufferView is None:
+            if count > MAX_ZERO_ACCESSOR:
+                raise InputError(f"{what} has no bufferView and {count} elements (at most {MAX_ZERO_ACCESSOR})",
+                                 self.path)
             out = np.zeros((count, ncomp), dtype=dt)
         else:
             raw, stride = self.view_bytes(a.bufferView)
-            start = a.byteOffset or 0
+            start = 0 if a.byteOffset is None else self._int(a.byteOffset, f"{what}: byteOffset")
             elem = dt.itemsize * ncomp
             stride = stride or elem
+            if stride < elem:
+                raise InputError(f"{what}: byteStride {stride} is smaller than one element ({elem} bytes)", self.path)
             need = start + stride * (count - 1) + elem if count else 0
             if need > len(raw):
-                raise InputError(f"accessor {ai} runs past the end of its bufferView", self.path)
+                raise InputError(f"{what} needs {need} bytes, its bufferView {a.bufferView} has {len(raw)}", self.path)
             if count == 0:
                 out = np.zeros((0, ncomp), dtype=dt)
             else:
@@ -178,12 +256,19 @@ class _Reader:
         if a.sparse is not None:
             out = out.copy()
             s = a.sparse
-            idx = self._sparse_part(s.indices.bufferView, s.indices.byteOffset, s.count, 1,
-                                    np.dtype(_DTYPES[s.indices.componentType]))
-            val = self._sparse_part(s.values.bufferView, s.values.byteOffset, s.count, ncomp, dt)
+            n = self._int(getattr(s, "count", None), f"{what}: sparse count", 0, count + 1)
+            ind, val = getattr(s, "indices", None), getattr(s, "values", None)
+            if ind is None or val is None:
+                raise InputError(f"{what}: sparse needs indices and values", self.path)
+            ict = getattr(ind, "componentType", None)
+            if ict not in (5121, 5123, 5125) or isinstance(ict, bool):
+                raise InputError(f"{what}: sparse indices componentType {ict!r} is not an unsigned integer type",
+                                 self.path)
+            idx = self._sparse_part(what, "indices", ind, n, 1, np.dtype(_DTYPES[ict]))
+            val = self._sparse_part(what, "values", val, n, ncomp, dt)
             idx = idx.ravel().astype(np.int64)
-            if idx.size and (idx.min() < 0 or idx.max() >= count):
-                raise InputError(f"accessor {ai}: sparse index out of range", self.path)
+            if idx.size and idx.max() >= count:
+                raise InputError(f"{what}: sparse index {int(idx.max())} is out of range ({count} elements)", self.path)
             out[idx] = val
         if dt.kind == "f":
             return out.astype(np.float64)
@@ -191,35 +276,40 @@ class _Reader:
             return np.maximum(out.astype(np.float64) / np.iinfo(dt).max, -1.0)
         return out.astype(np.int64)
 
-    def _sparse_part(self, view, offset, count, ncomp, dt):
-        raw, _ = self.view_bytes(view)
-        start = offset or 0
+    def _sparse_part(self, what, part, ref, count, ncomp, dt):
+        raw, _ = self.view_bytes(getattr(ref, "bufferView", None))
+        offset = getattr(ref, "byteOffset", None)
+        start = 0 if offset is None else self._int(offset, f"{what}: sparse {part} byteOffset")
         n = count * ncomp * dt.itemsize
         if start + n > len(raw):
-            raise InputError("sparse accessor runs past the end of its bufferView", self.path)
+            raise InputError(f"{what}: sparse {part} need {start + n} bytes, their bufferView has {len(raw)}",
+                             self.path)
         return np.frombuffer(raw[start:start + n], dtype=dt.newbyteorder("<")).reshape(count, ncomp)
 
     # -- textures and materials -------------------------------------------------------------
     def image(self, ii: int) -> Texture:
-        from PIL import Image, UnidentifiedImageError
+        from ..texture import open_image
 
         im = self.g.images[ii]
-        label = im.uri if im.uri and not im.uri.startswith("data:") else (im.name or f"image {ii}")
+        uri = self._uri(im.uri, f"image {ii}")
+        label = uri if uri and not uri.startswith("data:") else (im.name if isinstance(im.name, str) and im.name
+                                                                 else f"image {ii}")
+        data = problem = None
         if im.bufferView is not None:
             data, _ = self.view_bytes(im.bufferView)
-        elif im.uri:
-            data = self._uri_bytes(im.uri)
-        else:
-            data = None
+        elif uri:
+            try:
+                data = self._uri_bytes(uri)
+            except InputError as exc:  # an image (unlike a buffer) that cannot be read is a warning
+                problem = f"image {label!r}: {exc.problem}"
         if data is None:
-            problem = f"image file {label!r} is missing"
+            problem = problem or f"image file {label!r} is missing"
         else:
             try:
-                with Image.open(io.BytesIO(data)) as pil:
-                    pil.load()
+                with open_image(io.BytesIO(data), label) as pil:
                     return _texture(label, pil)
-            except (UnidentifiedImageError, OSError, ValueError, SyntaxError) as exc:
-                problem = f"image {label!r} cannot be decoded ({exc})"
+            except InputError as exc:
+                problem = f"image {label!r} cannot be decoded ({exc.problem})"
         return Texture(label, None, 255, None, problem)
 
     def materials(self) -> tuple[list[Material], list[Texture], list[np.ndarray]]:
@@ -227,32 +317,41 @@ class _Reader:
         textures: list[Texture] = []
         by_image: dict[int, int] = {}
         mats, transforms = [], []
-        for mi, m in enumerate(self.g.materials or []):
+        for mi, m in enumerate(self._list(self.g.materials, "materials", True)):
+            name = m.name if isinstance(m.name, str) and m.name else f"material {mi}"
+            what = f"material {mi} ({name})"
             pbr = m.pbrMetallicRoughness
-            factor = tuple(float(x) for x in (pbr.baseColorFactor if pbr and pbr.baseColorFactor else [1, 1, 1, 1]))
+            factor = (1.0, 1.0, 1.0, 1.0)
+            if pbr is not None and pbr.baseColorFactor is not None:
+                factor = tuple(self._numbers(pbr.baseColorFactor, 4, f"{what}: baseColorFactor"))
+            if m.alphaMode is not None and not isinstance(m.alphaMode, str):
+                raise InputError(f"{what}: alphaMode {m.alphaMode!r} is not a string", self.path)
             mode = (m.alphaMode or "OPAQUE").upper()
             if mode not in ALPHA_MODES:
-                raise InputError(f"material {mi} ({m.name}): unknown alphaMode {m.alphaMode!r}", self.path)
-            cutoff = 0.5 if m.alphaCutoff is None else float(m.alphaCutoff)
+                raise InputError(f"{what}: unknown alphaMode {m.alphaMode!r}", self.path)
+            cutoff = 0.5 if m.alphaCutoff is None else self._number(m.alphaCutoff, f"{what}: alphaCutoff")
+            if cutoff < 0:
+                raise InputError(f"{what}: alphaCutoff {cutoff} is negative", self.path)
             tex_index, filt, wu, wv, coord, xf = -1, "linear", "wrap", "wrap", 0, np.eye(2, 3)
-            info = pbr.baseColorTexture if pbr else None
-            name = m.name or f"material {mi}"
+            info = pbr.baseColorTexture if pbr is not None else None
             if info is not None and info.index is not None:
-                if not 0 <= info.index < len(self.g.textures or []):
-                    raise InputError(f"material {mi} ({name}): texture {info.index} does not exist", self.path)
-                t = self.g.textures[info.index]
+                ti = self._ref(info.index, self.g.textures, f"{what}: texture")
+                t = self.g.textures[ti]
                 source = t.source
                 if source is None:
-                    source = ((t.extensions or {}).get("EXT_texture_webp") or {}).get("source")
+                    webp = self._dict(self._dict(t.extensions, f"texture {ti}: extensions").get("EXT_texture_webp"),
+                                      f"texture {ti}: EXT_texture_webp")
+                    source = webp.get("source")
                 if source is None:
-                    key = ("none", info.index)
+                    key = ("none", ti)
                     if key not in by_image:
                         by_image[key] = len(textures)
-                        problem = f"texture {info.index} has no image omaps can decode (KTX2 / basisu?)"
-                        textures.append(Texture(f"texture {info.index}", None, 255, None, problem))
+                        problem = f"texture {ti} has no image omaps can decode (KTX2 / basisu?)"
+                        textures.append(Texture(f"texture {ti}", None, 255, None, problem))
                         self.warn(f"{problem}: the maps of {name} are unknown")
                     tex_index = by_image[key]
                 else:
+                    source = self._ref(source, self.g.images, f"texture {ti}: image")
                     if source not in by_image:
                         by_image[source] = len(textures)
                         tex = self.image(source)
@@ -266,56 +365,73 @@ class _Reader:
                         self.warn(f"material {mi} ({name}) is {mode} but its base colour image {tex.name!r} has "
                                   "no alpha channel: alpha is 1 everywhere")
                 if t.sampler is not None:
-                    s = self.g.samplers[t.sampler]
+                    s = self.g.samplers[self._ref(t.sampler, self.g.samplers, f"texture {ti}: sampler")]
                     filt = "nearest" if s.magFilter in _GL_NEAREST else "linear"
-                    wu = _WRAP.get(s.wrapS or 10497, "wrap")
-                    wv = _WRAP.get(s.wrapT or 10497, "wrap")
-                coord = info.texCoord or 0
-                ext = (info.extensions or {}).get("KHR_texture_transform")
-                if ext:
-                    xf = texture_transform_matrix(ext)
-                    coord = ext.get("texCoord", coord)
-            mats.append(Material(mi, name, mode, cutoff, factor, tex_index, filt, wu, wv, int(coord),
-                                 bool(m.doubleSided)))
+                    wu, wv = (self._wrap(w, f"sampler {t.sampler}: {key}") for key, w in (("wrapS", s.wrapS),
+                                                                                         ("wrapT", s.wrapT)))
+                coord = 0 if info.texCoord is None else self._int(info.texCoord, f"{what}: texCoord")
+                ext = self._dict(info.extensions, f"{what}: baseColorTexture extensions").get("KHR_texture_transform")
+                if ext is not None:
+                    ext = self._dict(ext, f"{what}: KHR_texture_transform")
+                    xf = texture_transform_matrix({
+                        "offset": self._numbers(ext.get("offset", [0.0, 0.0]), 2, f"{what}: texture transform offset"),
+                        "rotation": self._number(ext.get("rotation", 0.0), f"{what}: texture transform rotation"),
+                        "scale": self._numbers(ext.get("scale", [1.0, 1.0]), 2, f"{what}: texture transform scale")})
+                    if ext.get("texCoord") is not None:
+                        coord = self._int(ext["texCoord"], f"{what}: texture transform texCoord")
+            mats.append(Material(mi, name, mode, cutoff, factor, tex_index, filt, wu, wv, coord, bool(m.doubleSided)))
             transforms.append(xf)
         return mats, textures, transforms
+
+    def _wrap(self, code, what: str) -> str:
+        if code is None:
+            return "wrap"
+        if isinstance(code, bool) or not isinstance(code, int) or code not in _WRAP:
+            raise InputError(f"{what} is {code!r}, not a glTF wrap mode (33071, 33648, 10497)", self.path)
+        return _WRAP[code]
 
     def check_unused_images(self, used: set) -> None:
         """Name referenced image files that are missing but not a base colour (normal maps and the
         like), once each, so no missing file goes unmentioned (a file that is also a base colour
         was named as one)."""
-        images = self.g.images or []
+        images = self._list(self.g.images, "images", True)
         used_uris = {images[ii].uri for ii in used if isinstance(ii, int) and 0 <= ii < len(images)}
         for ii, im in enumerate(images):
-            if ii in used or not im.uri or im.uri.startswith("data:") or im.uri in used_uris:
+            uri = self._uri(im.uri, f"image {ii}")
+            if ii in used or not uri or uri.startswith("data:") or uri in used_uris:
                 continue
-            if not os.path.isfile(os.path.join(self.folder, unquote(im.uri))):
-                self.warn(f"image file {im.uri!r} is missing (not a base colour texture, so not needed)")
+            if not os.path.isfile(os.path.join(self.folder, unquote(uri))):
+                self.warn(f"image file {uri!r} is missing (not a base colour texture, so not needed)")
 
     # -- geometry ---------------------------------------------------------------------------
     def mesh(self, mi: int, mats: list[Material], transforms, default_material: int, skipped: list) -> Mesh:
         m = self.g.meshes[mi]
-        name = m.name or f"mesh {mi}"
+        name = m.name if isinstance(m.name, str) and m.name else f"mesh {mi}"
         prims = []
-        for pi, p in enumerate(m.primitives):
+        for pi, p in enumerate(self._list(m.primitives, f"mesh {mi} ({name}): primitives", True)):
             where = {"mesh": mi, "primitive": pi, "name": name}
             label = f"mesh {mi} ({name}) primitive {pi}"
-            mode = _TRIANGLES if p.mode is None else p.mode
+            mode = _TRIANGLES if p.mode is None else self._int(p.mode, f"{label}: mode", 0, 7)
             if mode not in (_TRIANGLES, _STRIP, _FAN):
                 skipped.append({**where, "reason": f"primitive mode {mode} (points or lines) has no triangles"})
                 continue
-            if p.attributes.POSITION is None:
+            if p.attributes is None or getattr(p.attributes, "POSITION", None) is None:
                 skipped.append({**where, "reason": "no POSITION attribute"})
                 continue
-            material = default_material if p.material is None else p.material
-            if not 0 <= material < len(mats):
-                raise InputError(f"{label}: material {material} does not exist", self.path)
+            material = default_material if p.material is None else self._ref(p.material, self.g.materials,
+                                                                            f"{label}: material")
             mat = mats[material]
-            positions = self.accessor(p.attributes.POSITION)[:, :3]
+            positions = self.accessor(p.attributes.POSITION, ("VEC3",))
             n = len(positions)
-            idx = np.arange(n, dtype=np.int64) if p.indices is None else self.accessor(p.indices).ravel()
-            if idx.size and (idx.min() < 0 or idx.max() >= n):
-                raise InputError(f"{label}: vertex index out of range", self.path)
+            if p.indices is None:
+                idx = np.arange(n, dtype=np.int64)
+            else:
+                ia = self._ref(p.indices, self.g.accessors, f"{label}: indices accessor")
+                if self.g.accessors[ia].componentType not in (5121, 5123, 5125) or self.g.accessors[ia].normalized:
+                    raise InputError(f"{label}: indices accessor {ia} is not of an unsigned integer type", self.path)
+                idx = self.accessor(ia, ("SCALAR",)).ravel()
+            if idx.size and idx.max() >= n:
+                raise InputError(f"{label}: vertex index {int(idx.max())} is out of range ({n} vertices)", self.path)
             tris = _triangles(idx, mode)
             unknown = np.zeros(len(tris), bool)
             own = None  # triangles given vertices of their own, all at UV (0, 0)
@@ -327,7 +443,7 @@ class _Reader:
                               f"the primitive lacks: its {len(tris)} triangles are unknown")
                     unknown[:] = True
             else:
-                uvs = self.accessor(uv_acc)[:, :2]
+                uvs = self._attribute(uv_acc, ("VEC2",), n, f"{label}: TEXCOORD_{mat.texcoord}")
                 uvs = uvs @ transforms[material][:, :2].T + transforms[material][:, 2]
                 bad_v = ~np.isfinite(uvs).all(axis=1)
                 if bad_v.any():
@@ -341,7 +457,7 @@ class _Reader:
             vertex_alpha = None
             colour = getattr(p.attributes, "COLOR_0", None)
             if colour is not None:
-                col = self.accessor(colour)
+                col = self._attribute(colour, ("VEC3", "VEC4"), n, f"{label}: COLOR_0")
                 if col.shape[1] == 4 and not np.all(col[:, 3] == 1.0):
                     vertex_alpha = np.clip(np.nan_to_num(col[:, 3], nan=0.0), 0.0, 1.0)
                     if mat.alpha_mode != "OPAQUE":
@@ -353,33 +469,43 @@ class _Reader:
             prims.append(Primitive(mi, pi, positions, uvs, tris, material, vertex_alpha, unknown))
         return Mesh(mi, name, prims)
 
+    def _attribute(self, ai, types, n: int, what: str) -> np.ndarray:
+        """A vertex attribute: one element per vertex, as POSITION has."""
+        out = self.accessor(ai, types)
+        if len(out) != n:
+            raise InputError(f"{what} (accessor {ai}) has {len(out)} elements, POSITION has {n}", self.path)
+        return out
+
     def node_instances(self) -> list[tuple[int, np.ndarray]]:
         g = self.g
-        nodes = g.nodes or []
+        nodes = self._list(g.nodes, "nodes", True)
+        children = {}
+        for ni, n in enumerate(nodes):  # glTF node hierarchies are disjoint trees
+            for c in self._list(n.children, f"node {ni}: children"):
+                c = self._ref(c, nodes, f"node {ni}: child")
+                if c in children:
+                    raise InputError(f"node {c} has two parents (nodes {children[c]} and {ni}); glTF node "
+                                     "hierarchies are trees", self.path)
+                children[c] = ni
         if g.scenes:
-            si = g.scene or 0
-            if not 0 <= si < len(g.scenes):
-                raise InputError(f"default scene {si} does not exist", self.path)
-            roots = g.scenes[si].nodes or []
+            scenes = self._list(g.scenes, "scenes", True)
+            si = 0 if g.scene is None else self._ref(g.scene, scenes, "default scene")
+            roots = [self._ref(r, nodes, f"scene {si}: node") for r in self._list(scenes[si].nodes, f"scene {si}: nodes")]
         elif nodes:
-            roots = sorted(set(range(len(nodes))) - {c for n in nodes for c in (n.children or [])})
+            roots = sorted(set(range(len(nodes))) - set(children))
         else:  # meshes without nodes: each once, untransformed
-            return [(mi, np.eye(4)) for mi in range(len(g.meshes or []))]
+            return [(mi, np.eye(4)) for mi in range(len(self._list(g.meshes, "meshes")))]
         out = []
         cams = self._camera_nodes = {}
         stack = [(r, np.eye(4), ()) for r in reversed(roots)]
         while stack:
             ni, parent, path = stack.pop()
-            if not isinstance(ni, int) or not 0 <= ni < len(nodes):
-                raise InputError(f"node {ni} does not exist", self.path)
             if ni in path:
                 raise InputError("node hierarchy has a cycle", self.path)
             n = nodes[ni]
-            world = parent @ node_matrix(n)
+            world = parent @ self.node_matrix(ni)
             if n.mesh is not None:
-                if not 0 <= n.mesh < len(g.meshes or []):
-                    raise InputError(f"node {ni}: mesh {n.mesh} does not exist", self.path)
-                out.append((n.mesh, world))
+                out.append((self._ref(n.mesh, g.meshes, f"node {ni}: mesh"), world))
             if n.camera is not None:
                 if not isinstance(n.camera, int) or not 0 <= n.camera < len(g.cameras or []):
                     raise InputError(f"node {ni}: camera {n.camera} does not exist", self.path)
@@ -388,9 +514,21 @@ class _Reader:
                 stack.append((c, world, path + (ni,)))
         return out
 
+    def node_matrix(self, ni: int) -> np.ndarray:
+        """Node ``ni``'s local transform (``node_matrix``), its fields checked: finite numbers,
+        16 for ``matrix``, 3 for ``translation`` and ``scale``, 4 for ``rotation``."""
+        n = self.g.nodes[ni]
+        for key, size in (("matrix", 16), ("translation", 3), ("rotation", 4), ("scale", 3)):
+            if getattr(n, key) is not None:
+                self._numbers(getattr(n, key), size, f"node {ni}: {key}")
+        return node_matrix(n)
+
     def scene(self) -> Scene:
         g = self.g
-        required = sorted(set(g.extensionsRequired or []) - SUPPORTED_EXTENSIONS)
+        names = self._list(g.extensionsRequired, "extensionsRequired")
+        if not all(isinstance(e, str) for e in names):
+            raise InputError(f"extensionsRequired {names!r} is not a list of extension names", self.path)
+        required = sorted(set(names) - SUPPORTED_EXTENSIONS)
         if required:
             raise InputError(f"requires the glTF extension{'s' if len(required) > 1 else ''} "
                              f"{', '.join(required)}, which omaps cannot read", self.path)
