@@ -260,6 +260,7 @@ class Outputs:
         self._targets: dict[str, tuple[str, str, str | None]] = {}  # abs path -> (kind, option, manifest)
         self._given: dict[str, str] = {}  # as given -> abs path
         self._staged: dict[str, str] = {}  # abs path -> temporary path
+        self._made: list[str] = []  # folders created for the outputs, removed again on failure
 
     def _add(self, given, p: str, kind: str, option: str, manifest=None) -> None:
         for q, (k, opt, _) in self._targets.items():
@@ -290,7 +291,13 @@ class Outputs:
         if p not in self._staged:
             kind, option, _ = self._targets[p]
             parent = os.path.dirname(p)
+            missing = []
+            d = parent
+            while not os.path.lexists(d) and os.path.dirname(d) != d:
+                missing.append(d)
+                d = os.path.dirname(d)
             os.makedirs(parent, exist_ok=True)
+            self._made += missing  # deepest first
             self._staged[p] = (make_temp_folder(parent) if kind == "folder"
                                else make_temp_file(parent, os.path.splitext(p)[1]))
         return self._staged[p]
@@ -311,6 +318,10 @@ class Outputs:
         for tmp in self._staged.values():
             _remove(tmp)
         self._staged.clear()
+        for d in self._made:
+            with contextlib.suppress(OSError):
+                os.rmdir(d)  # only if still empty
+        self._made.clear()
 
     @contextlib.contextmanager
     def writing(self):

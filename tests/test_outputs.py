@@ -200,6 +200,9 @@ def test_failed_write_leaves_nothing(tmp_path, inputs, capsys, monkeypatch):
     err = capsys.readouterr().err
     assert err.strip() == f"omaps: error: {tmp_path / 'e.svg'}: No space left on device"
     assert listing(tmp_path) == []
+    out = tmp_path / "new" / "sub"  # folders made for the outputs go again too
+    assert main(argv("eval", inputs, out)) == 1
+    assert listing(tmp_path) == []
 
 
 def _settings_of(cmd, tmp_path, inputs, capsys):
