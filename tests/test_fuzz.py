@@ -153,7 +153,7 @@ def fix_png_crcs(data: bytes) -> bytes:
 
 # -- JSON mutations ------------------------------------------------------------------------------
 
-ODD_VALUES = (None, True, False, 0, -1, 1, 2, 3, 7, 255, 65536, 2 ** 31, -(2 ** 31), 2 ** 53, 10 ** 30, 0.5, -0.5,
+ODD_VALUES = (None, True, False, 0, -1, 1, 2, 3, 7, 255, 65536, 2 ** 31, -(2 ** 31), 2 ** 53, 10 ** 400, 0.5, -0.5,
               1e308, -1e308, math.nan, math.inf, -math.inf, "", "x", "data:", "data:,", "0", [], [0], [None],
               [1, 2], [math.nan] * 4, {}, {"index": 0})
 # keys a glTF reader looks at, inserted where they are not
@@ -654,7 +654,7 @@ def smallpine_doc() -> dict:
 
 
 @needs_scenes
-@fuzz_settings(40)
+@fuzz_settings(30)
 @given(st.data())
 def test_fuzzed_real_scene_json(data):
     """Mutations of a real glTF (smallpine): its JSON mutated, its buffer read from ../shared."""

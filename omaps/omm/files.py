@@ -10,7 +10,6 @@ and the problem.
 from __future__ import annotations
 
 import json
-import math
 import os
 
 import numpy as np
@@ -85,7 +84,7 @@ def _is(value, kind) -> bool:
         return isinstance(value, kind)
     if isinstance(value, bool) or not isinstance(value, (int, float) if kind is float else int):
         return False
-    return math.isfinite(value) if kind is float else -(2 ** 63) <= value < 2 ** 63
+    return -1e300 < value < 1e300 if kind is float else -(2 ** 63) <= value < 2 ** 63  # finite; int64
 
 
 def settings_from_summary(summary: dict, path=None) -> OmmSettings:

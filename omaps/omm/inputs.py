@@ -41,10 +41,11 @@ def check_spec(spec) -> dict:
         v = spec.get(key)
         if v is None and optional:
             return None
-        ok = (isinstance(v, str) if kinds is str else
-              isinstance(v, (int, float)) and not isinstance(v, bool) and np.isfinite(v))
-        if not ok:
-            raise InputError(f"input.{key} is {v!r}, {'a string' if kinds is str else 'a finite number'} expected")
+        if kinds is str:
+            if not isinstance(v, str) or not v:
+                raise InputError(f"input.{key} is {v!r}, a non-empty string expected")
+        elif isinstance(v, bool) or not isinstance(v, (int, float)) or not -1e300 < v < 1e300:  # no NaN, no inf
+            raise InputError(f"input.{key} is {v!r}, a finite number expected")
         return v
 
     kind = spec.get("kind")

@@ -33,7 +33,6 @@ from __future__ import annotations
 import base64
 import dataclasses
 import io
-import math
 import os
 import warnings
 from urllib.parse import unquote
@@ -133,8 +132,8 @@ class _Reader:
     def _numbers(self, value, n: int, what: str) -> list[float]:
         """A list of ``n`` finite numbers."""
         if (not isinstance(value, (list, tuple)) or len(value) != n
-                or not all(isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x)
-                           for x in value)):
+                or not all(isinstance(x, (int, float)) and not isinstance(x, bool) and -1e300 < x < 1e300
+                           for x in value)):  # finite (no NaN, no infinity, no int too large for a float)
             raise InputError(f"{what} must be {n} finite number{'s' if n > 1 else ''}, got {value!r}", self.path)
         return [float(x) for x in value]
 
