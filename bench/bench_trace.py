@@ -45,7 +45,7 @@ def main() -> None:
     t_prep = time.perf_counter() - t0
     w = h = a.size
     bounds = scene.bounds()
-    cam = trace.default_camera(bounds).basis(w, h)
+    cam = trace.choose_default_camera(prep, w, h)[0].basis(w, h)  # omaps trace's default view
     light = trace.light_direction()
     tnear = trace.SHADOW_TNEAR * float(np.linalg.norm(bounds[1] - bounds[0]))
     runs = {n: [] for n in ["opaque"] + names}

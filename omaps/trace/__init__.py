@@ -7,10 +7,10 @@ Example::
 
     >>> from omaps.scene import load_scene                                        # doctest: +SKIP
     >>> from omaps.schemes import parse_schemes                                   # doctest: +SKIP
-    >>> from omaps.trace import default_camera, prepare, trace_scheme, summary    # doctest: +SKIP
+    >>> from omaps.trace import choose_default_camera, prepare, trace_scheme, summary  # doctest: +SKIP
     >>> scene = load_scene("palm.glb")                                             # doctest: +SKIP
     >>> prep = prepare(scene, parse_schemes("none,vq4"))                          # doctest: +SKIP
-    >>> cam = default_camera(scene.bounds()).basis(256, 256)                      # doctest: +SKIP
+    >>> cam = choose_default_camera(prep, 256, 256)[0].basis(256, 256)            # doctest: +SKIP
     >>> ref, vq4 = (trace_scheme(prep, n, cam, 256, 256) for n in ("none", "vq4"))  # doctest: +SKIP
     >>> summary(vq4, ref, prep.maps["vq4"], 256, 256)["differing_pixels"]         # doctest: +SKIP
     0

@@ -43,10 +43,10 @@ def prepare(scene, schemes, rules: MaterialRules = MaterialRules(), jobs: int = 
 
         >>> from omaps.scene import load_scene                                        # doctest: +SKIP
         >>> from omaps.schemes import parse_schemes                                   # doctest: +SKIP
-        >>> from omaps.trace import default_camera, prepare, trace_scheme             # doctest: +SKIP
+        >>> from omaps.trace import choose_default_camera, prepare, trace_scheme      # doctest: +SKIP
         >>> scene = load_scene("palm.glb")                                             # doctest: +SKIP
         >>> prep = prepare(scene, parse_schemes("none,vq4"))                          # doctest: +SKIP
-        >>> cam = default_camera(scene.bounds()).basis(256, 256)                      # doctest: +SKIP
+        >>> cam = choose_default_camera(prep, 256, 256)[0].basis(256, 256)            # doctest: +SKIP
         >>> run = trace_scheme(prep, "vq4", cam, 256, 256)                            # doctest: +SKIP
         >>> run.primary.tests.mean()                                                   # doctest: +SKIP
     """
