@@ -295,3 +295,17 @@ def test_alpha_bounds_transform_each_instance(tmp_path):
     lo, hi = load_scene(f).alpha_bounds()
     np.testing.assert_allclose(lo, [0, 0, 0])
     np.testing.assert_allclose(hi, [11, 7, 0])
+
+
+def test_default_view_of_a_flat_alpha_quad_on_the_ground(tmp_path):
+    """A horizontal quad is wide but has no height: a grazing view would run along its plane, so
+    it is framed from above."""
+    f = write_quad_gltf(tmp_path / "flat.gltf", _checker(), nodes=[{"rotation": _quat([1, 0, 0], -90)}])
+    scene = load_scene(f)
+    lo, hi = scene.alpha_bounds()
+    assert hi[1] - lo[1] < 1e-6
+    prep = trace.prepare(scene, parse_schemes("none"))
+    cam, info = trace.choose_default_camera(prep, 96, 64)
+    f = (cam.target - cam.eye) / np.linalg.norm(cam.target - cam.eye)
+    assert info["chosen"] == "default" and f[1] < -0.5
+    assert _alpha_seen(prep, cam) > 0.05

@@ -86,11 +86,19 @@ def _grazing(box: np.ndarray) -> Camera:
 
 
 def _wide(box: np.ndarray) -> bool:
+    """Horizontally at least three times its height, but not flat: a grazing view needs height."""
     size = box[1] - box[0]
-    return float(np.hypot(size[0], size[2])) >= 3 * size[1]
+    across = float(np.hypot(size[0], size[2]))
+    return across >= 3 * size[1] and not _flat(box)
+
+
+def _flat(box: np.ndarray) -> bool:
+    size = box[1] - box[0]
+    return size[1] <= 1e-3 * float(np.hypot(size[0], size[2]))
 
 
 FRONT = np.array([-0.6, 0.08, 0.8])  # from the front (glTF: an asset faces +Z), a little left and above
+ABOVE = np.array([-0.6, 1.0, 0.8])  # flat geometry (ground cover, decals): from the front, well above
 
 
 def framed(box: np.ndarray, direction=FRONT, fov: float = 50.0, aspect: float = 1.0) -> Camera:
@@ -113,7 +121,8 @@ def default_camera(bounds: np.ndarray, alpha_bounds: np.ndarray | None = None, a
     three times its height: a forest) whose alpha-tested geometry spreads over at least half of
     it along x and z is crossed along its diagonal from just inside one corner, eye at an eighth
     of its height, looking slightly up; a wide alpha box elsewhere is crossed the same way; any
-    other alpha box (a tree) is framed whole, from the front, low, through its crown."""
+    other alpha box (a tree) is framed whole, from the front, low, through its crown (a flat one,
+    ground cover, from the front and well above)."""
     bounds = np.asarray(bounds, float)
     box = bounds if alpha_bounds is None else np.asarray(alpha_bounds, float)
     size, asize = bounds[1] - bounds[0], box[1] - box[0]
@@ -121,7 +130,7 @@ def default_camera(bounds: np.ndarray, alpha_bounds: np.ndarray | None = None, a
         return _grazing(bounds)
     if _wide(box):
         return _grazing(box)
-    return framed(box, FRONT, 50.0, aspect)
+    return framed(box, ABOVE if _flat(box) else FRONT, 50.0, aspect)
 
 
 MIN_ALPHA_FRACTION = 0.01  # the preferred view is kept if alpha-tested surfaces fill this share of it
