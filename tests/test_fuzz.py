@@ -515,11 +515,19 @@ def omm_mutations(draw, files: dict):
             del files[name]
             if not files:
                 break
-        elif op == "json" and name.endswith(".json"):
+        elif op == "json" and name.endswith(".json") and _parses(files[name]):
             files[name] = dumps(draw(mutated_json(json.loads(files[name])))).encode()
         else:
             files[name] = draw(mutated_bytes(files[name], 3))
     return files
+
+
+def _parses(raw: bytes) -> bool:
+    try:
+        json.loads(raw)
+        return True
+    except ValueError:  # a JSON file an earlier mutation damaged
+        return False
 
 
 def check_omm_result(res, problems, done) -> None:

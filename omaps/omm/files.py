@@ -93,9 +93,10 @@ def settings_from_summary(summary: dict, path=None) -> OmmSettings:
     s = summary.get("settings")
     if not isinstance(s, dict):
         raise InputError(f"settings is {s!r}, not an object", path)
+    s = {key: s.get(key) for key in _SETTING_TYPES}  # an absent key reads as null
     for key, kinds in _SETTING_TYPES.items():
-        if not any(_is(s.get(key), k) for k in kinds):
-            raise InputError(f"settings.{key} is {s.get(key)!r}", path)
+        if not any(_is(s[key], k) for k in kinds):
+            raise InputError(f"settings.{key} is {s[key]!r}", path)
     if s["dynamic_scale"] is not None and s["dynamic_scale"] <= 0:
         raise InputError(f"settings.dynamic_scale is {s['dynamic_scale']}, not positive", path)
     fmt = summary.get("format")
