@@ -1,4 +1,4 @@
-"""Reader policies on messy scenes, through both commands: NaN / infinite texture coordinates, a
+"""Reader policies on messy scenes, through both commands: NaN / infinite / huge texture coordinates, a
 MASK material whose image has no alpha channel (JPEG), missing files named exactly once, and a
 trace whose check fails."""
 
@@ -36,7 +36,7 @@ def _corners_opaque(n=16):
     return a
 
 
-# -- NaN and infinite texture coordinates --------------------------------------------------------
+# -- NaN, infinite and huge texture coordinates --------------------------------------------------------
 
 def _bad_uv_quad(tmp_path, value):
     uv = QUAD_UV.copy()
@@ -44,10 +44,10 @@ def _bad_uv_quad(tmp_path, value):
     return write_quad_gltf(tmp_path / "bad.gltf", _corners_opaque(), uvs=uv)
 
 
-MESSAGE = "mesh 0 (mesh 0) primitive 0: 1 triangles have NaN or infinite texture coordinates"
+MESSAGE = "mesh 0 (mesh 0) primitive 0: 1 triangles have NaN, infinite or huge (beyond 2^30 texels) texture"
 
 
-@pytest.mark.parametrize("value", [(np.nan, 0.5), (np.inf, 0.0), (0.3, -np.inf)])
+@pytest.mark.parametrize("value", [(np.nan, 0.5), (np.inf, 0.0), (0.3, -np.inf), (1e30, 0.0), (0.0, -1e9)])
 def test_bad_uvs_trace_compares_equal(tmp_path, capsys, value):
     f = _bad_uv_quad(tmp_path, value)
     j = tmp_path / "r.json"
@@ -66,8 +66,9 @@ def test_bad_uvs_trace_compares_equal(tmp_path, capsys, value):
 
 
 @pytest.mark.parametrize("fmt, specials", [("4state", (-3, -4)), ("2state", (-1, -2))])
-def test_bad_uvs_omm_special_index(tmp_path, capsys, fmt, specials):
-    f = _bad_uv_quad(tmp_path, (np.nan, np.nan))
+@pytest.mark.parametrize("value", [(np.nan, np.nan), (1e30, 1e30)])
+def test_bad_uvs_omm_special_index(tmp_path, capsys, fmt, specials, value):
+    f = _bad_uv_quad(tmp_path, value)
     out = tmp_path / "omm"
     assert main(["omm", f, "-o", str(out), "--level", "4", "--format", fmt, "--quiet"]) == 0
     assert capsys.readouterr().err.count(MESSAGE) == 1
@@ -89,7 +90,7 @@ def test_bad_uv_triangle_reads_the_texture_at_uv_origin(tmp_path):
     uv_zero = QUAD_UV[QUAD_IDX].copy()
     uv_zero[:3] = 0.0
     sampler = {"magFilter": 9729, "wrapS": 10497, "wrapT": 10497}
-    with pytest.warns(SceneWarning, match="NaN or infinite"):
+    with pytest.warns(SceneWarning, match="NaN, infinite or huge"):
         a = load_scene(write_quad_gltf(tmp_path / "nan.gltf", _corners_opaque(), positions=pos, uvs=uv_nan,
                                        indices=idx, sampler=sampler))
     b = load_scene(write_quad_gltf(tmp_path / "zero.gltf", _corners_opaque(), positions=pos, uvs=uv_zero,

@@ -19,7 +19,8 @@ One reader, one policy per case, for ``omaps trace``, ``omaps omm`` and all late
   are read; points and lines are left out and listed in ``Scene.skipped``;
 * ``COLOR_0`` alpha multiplies the base colour alpha (glTF's rule): where it is not 1 everywhere,
   the primitive's triangles are *unknown* (all C) and the tracer's shader multiplies by it;
-* texture coordinates that are NaN or infinite: a warning naming mesh, primitive and count;
+* texture coordinates that are NaN, infinite or huge (beyond ``MAX_TEXEL_COORDINATE`` texels from
+  the origin): a warning naming mesh, primitive and count;
   those triangles are unknown and get vertices of their own at UV (0, 0) (the shader reads that
   one point; their neighbours keep their coordinates); missing although the material samples a
   texture: the same warning, the primitive's triangles unknown at UV (0, 0);
@@ -58,6 +59,10 @@ _COMPONENTS = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4, "MAT2": 4, "MAT3": 
 _DTYPES = {5120: np.int8, 5121: np.uint8, 5122: np.int16, 5123: np.uint16, 5125: np.uint32, 5126: np.float32}
 _TRIANGLES, _STRIP, _FAN = 4, 5, 6
 MAX_ZERO_ACCESSOR = 1 << 24  # elements of an accessor without a bufferView (zeros, maybe sparse)
+# texture coordinates beyond this many texels from the origin (|u| * width or |v| * height) are
+# treated like NaN: float64 texel arithmetic there is too coarse for the 2^-20-texel growth the
+# maps rely on, and a texel index must stay far inside int64
+MAX_TEXEL_COORDINATE = float(1 << 30)
 
 
 def load_scene(path) -> Scene:
@@ -444,15 +449,19 @@ class _Reader:
             else:
                 uvs = self._attribute(uv_acc, ("VEC2",), n, f"{label}: TEXCOORD_{mat.texcoord}")
                 uvs = uvs @ transforms[material][:, :2].T + transforms[material][:, 2]
-                bad_v = ~np.isfinite(uvs).all(axis=1)
+                tex = self._textures[mat.texture] if mat.texture >= 0 else None
+                size = max(tex.alpha.shape) if tex is not None and tex.alpha is not None else 1
+                with np.errstate(invalid="ignore"):
+                    bad_v = ~(np.abs(uvs) * size <= MAX_TEXEL_COORDINATE).all(axis=1)  # NaN and inf too
                 if bad_v.any():
                     bad_t = bad_v[tris].any(axis=1)
                     uvs = np.where(bad_v[:, None], 0.0, uvs)
                     unknown |= bad_t
                     own = bad_t
                     if mat.alpha_mode != "OPAQUE":
-                        self.warn(f"{label}: {int(bad_t.sum())} triangles have NaN or infinite texture "
-                                  "coordinates: they are unknown (all C), read as UV (0, 0) at every vertex")
+                        self.warn(f"{label}: {int(bad_t.sum())} triangles have NaN, infinite or huge (beyond "
+                                  "2^30 texels) texture coordinates: they are unknown (all C), read as UV (0, 0) "
+                                  "at every vertex")
             vertex_alpha = None
             colour = getattr(p.attributes, "COLOR_0", None)
             if colour is not None:
@@ -532,6 +541,7 @@ class _Reader:
             raise InputError(f"requires the glTF extension{'s' if len(required) > 1 else ''} "
                              f"{', '.join(required)}, which omaps cannot read", self.path)
         mats, textures, transforms = self.materials()
+        self._textures = textures
         self.check_unused_images({src for m in g.materials or [] for src in [_base_image(g, m)] if src is not None})
         default_material = len(mats)
         mats.append(Material(default_material, "default", "OPAQUE", 0.5, (1, 1, 1, 1), -1, "linear", "wrap", "wrap",
