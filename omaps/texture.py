@@ -125,7 +125,7 @@ def open_image(source, path) -> Image.Image:
         im = Image.open(source)
     except UnidentifiedImageError:
         raise InputError("not an image Pillow can read", path) from None
-    except Exception as exc:  # noqa: BLE001 -- the third-party decode boundary, message kept
+    except Exception as exc:  # the third-party decode boundary, message kept
         raise InputError(f"cannot decode image ({type(exc).__name__}: {exc})", path) from None
     try:
         im.load()
@@ -135,7 +135,7 @@ def open_image(source, path) -> Image.Image:
     except InputError:
         im.close()
         raise
-    except Exception as exc:  # noqa: BLE001 -- as above: truncated data, bad chunks, unsupported variants
+    except Exception as exc:  # as above: truncated data, bad chunks, unsupported variants
         im.close()
         raise InputError(f"cannot decode image ({type(exc).__name__}: {exc})", path) from None
 

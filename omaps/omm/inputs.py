@@ -74,7 +74,7 @@ def load_uvs(path) -> np.ndarray:
         raise InputError("no such file", path)
     try:
         uvs = np.load(path, allow_pickle=False)
-    except Exception as exc:  # noqa: BLE001 -- numpy's .npy parsing, the third-party decode boundary
+    except Exception as exc:  # numpy's .npy parsing: the third-party decode boundary, message kept
         raise InputError(f"cannot read UV array ({type(exc).__name__}: {exc})", path) from None
     if not isinstance(uvs, np.ndarray):
         uvs.close()
