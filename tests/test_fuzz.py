@@ -675,6 +675,29 @@ def test_fuzzed_real_scene_json(data):
         check_scene_geometry(path)
 
 
+@lru_cache(maxsize=None)
+def palm_glb() -> tuple[dict, bytes]:
+    """palm.glb's JSON chunk (parsed) and BIN chunk (images in buffer views), read from ../shared."""
+    data = (SCENES / "palm.glb").read_bytes()
+    json_len = struct.unpack_from("<I", data, 12)[0]
+    bin_len = struct.unpack_from("<I", data, 20 + json_len)[0]
+    return json.loads(data[20:20 + json_len]), data[28 + json_len:28 + json_len + bin_len]
+
+
+@needs_scenes
+@fuzz_settings(20)
+@given(st.data())
+def test_fuzzed_real_glb(data):
+    """Mutations of a real GLB (palm.glb): its JSON chunk mutated and packed again with its BIN
+    chunk (geometry and both images in buffer views), written to a temporary folder."""
+    doc, blob = palm_glb()
+    with tempfile.TemporaryDirectory() as d, quiet():
+        path = os.path.join(d, "palm.glb")
+        with open(path, "wb") as f:
+            f.write(glb_bytes(data.draw(mutated_json(doc)), blob))
+        check_scene_geometry(path)
+
+
 # -- the CLI: exit 2 and "omaps: error: FILE: ..." for each reader -----------------------------------
 
 def _cli_error(argv, path, capsys) -> str:
