@@ -40,10 +40,14 @@ its right half and C across the middle::
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from numba import njit
 
-__all__ = ["cell_flag", "cell_taps", "region_extremes", "POLY_MAX"]
+from .sampling import cell_index
+
+__all__ = ["cell_flag", "point_flag", "cell_taps", "region_extremes", "POLY_MAX"]
 
 POLY_MAX = 24  # vertices of a region clipped to a cell: at most the region's (<= 8) + 4
 
@@ -96,13 +100,33 @@ def region_extremes(poly, k, ox, oy, lo, hi, a00, a01, a10, a11, buf_a, buf_b):
     """(min, max) of the bilinear f of taps a.. over polygon poly[:k] - (ox, oy) (local
     coordinates) clipped to the box [lo, hi]²; (inf, -inf) when nothing is left. ``buf_*``:
     scratch (POLY_MAX, 2)."""
+    xmin = ymin = np.inf
+    xmax = ymax = -np.inf
     for i in range(k):
-        buf_a[i, 0] = poly[i, 0] - ox
-        buf_a[i, 1] = poly[i, 1] - oy
-    k = _clip_axis(buf_a, k, buf_b, 0, lo, True)
-    k = _clip_axis(buf_b, k, buf_a, 0, hi, False)
-    k = _clip_axis(buf_a, k, buf_b, 1, lo, True)
-    k = _clip_axis(buf_b, k, buf_a, 1, hi, False)
+        x = poly[i, 0] - ox
+        y = poly[i, 1] - oy
+        buf_a[i, 0] = x
+        buf_a[i, 1] = y
+        xmin = min(xmin, x)
+        xmax = max(xmax, x)
+        ymin = min(ymin, y)
+        ymax = max(ymax, y)
+    # clip only against the box sides the polygon crosses (a small region often lies inside)
+    cur = buf_a
+    other = buf_b
+    if xmin < lo:
+        k = _clip_axis(cur, k, other, 0, lo, True)
+        cur, other = other, cur
+    if xmax > hi:
+        k = _clip_axis(cur, k, other, 0, hi, False)
+        cur, other = other, cur
+    if ymin < lo:
+        k = _clip_axis(cur, k, other, 1, lo, True)
+        cur, other = other, cur
+    if ymax > hi:
+        k = _clip_axis(cur, k, other, 1, hi, False)
+        cur, other = other, cur
+    buf_a = cur
     b = a01 - a00
     c = a10 - a00
     d = a00 - a01 - a10 + a11
@@ -138,10 +162,16 @@ def cell_flag(values, bounds, period_x, period_y, row, col, poly, k, c, r, grow,
     mn, mx = region_extremes(poly, k, float(c), float(r), -grow, 1.0 + grow, a00, a01, a10, a11, buf_a, buf_b)
     if mn > mx:  # the region misses the cell by rounding: count all of it
         return 3
-    sx = max(abs(a01 - a00), abs(a11 - a10))
-    sy = max(abs(a10 - a00), abs(a11 - a01))
+    return _classify(mn, mx, a00, a01, a10, a11, bounds, grow)
+
+
+@njit(cache=True, inline="always")
+def _classify(mn, mx, a00, a01, a10, a11, bounds, grow):
+    """Flag of an alpha range [mn, mx] read in a cell of taps a.., with the allowances."""
     slack = 0.0
     if grow > 0.0:
+        sx = max(abs(a01 - a00), abs(a11 - a10))
+        sy = max(abs(a10 - a00), abs(a11 - a01))
         amax = max(max(abs(a00), abs(a01)), max(abs(a10), abs(a11)))
         slack = (grow + 1e-14) * (sx + sy) * (1.0 + 2.0 * grow) + 1e-12 * amax
     lo = mn - slack
@@ -153,3 +183,23 @@ def cell_flag(values, bounds, period_x, period_y, row, col, poly, k, c, r, grow,
     if transparent and not opaque:
         return 1
     return 3
+
+
+@njit(cache=True)
+def point_flag(flags, mixed, values, bounds, period_x, period_y, x, y, grow):
+    """Flag of one point (x, y) (grid coordinates) of a region: part of the region's own flag,
+    so a region whose points' flags OR to 3 is C without clipping it to any cell (a quick
+    answer for regions across the cut-off). A point in a cell whose taps agree has its cell's
+    flag."""
+    c = math.floor(x)
+    r = math.floor(y)
+    hc, wc = flags.shape
+    row = cell_index(r, hc, period_y)
+    col = cell_index(c, wc, period_x)
+    if not mixed[row, col]:
+        return flags[row, col]
+    a00, a01, a10, a11 = cell_taps(values, period_x, period_y, row, col)
+    lx = x - c
+    ly = y - r
+    v = a00 + (a01 - a00) * lx + (a10 - a00) * ly + (a00 - a01 - a10 + a11) * lx * ly
+    return _classify(v, v, a00, a01, a10, a11, bounds, grow)

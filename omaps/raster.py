@@ -15,15 +15,8 @@ import numpy as np
 from numba import njit
 
 from . import states
-from .bilinear import POLY_MAX, cell_flag
-
-
-@njit(cache=True, inline="always")
-def cell_index(c, size, period):
-    if period:
-        r = c % period
-        return r + period if r < 0 else r
-    return 0 if c < 0 else (size - 1 if c >= size else c)
+from .bilinear import POLY_MAX, cell_flag, point_flag
+from .sampling import cell_index
 
 
 @njit(cache=True, inline="always")
@@ -86,7 +79,12 @@ def polygon_flags(flags, mixed, values, bounds, period_x, period_y, poly, grow=0
             col = cell_index(c, wc, period_x)
             f = flags[row, col]
             if exact and mixed[row, col]:
-                if buf_a.shape[0] == 0:
+                if buf_a.shape[0] == 0:  # the first mixed cell: the vertices' own flags first
+                    for i in range(k):
+                        acc |= point_flag(flags, mixed, values, bounds, period_x, period_y, poly[i, 0], poly[i, 1],
+                                          grow)
+                    if acc == 3:
+                        return acc
                     buf_a = np.empty((POLY_MAX, 2))
                     buf_b = np.empty((POLY_MAX, 2))
                 f = cell_flag(values, bounds, period_x, period_y, row, col, poly, k, c, r, grow, buf_a, buf_b)

@@ -80,6 +80,16 @@ def sample_texture(value, filt, mode_u, mode_v, x, y):
     return min(max(a, lo), hi)
 
 
+@njit(cache=True, inline="always")
+def cell_index(c, size, period):
+    """Stored index of footprint cell ``c`` (any integer) of an axis of ``size`` stored cells:
+    periodic with ``period``, or clamped when it is 0."""
+    if period:
+        r = c % period
+        return r + period if r < 0 else r
+    return 0 if c < 0 else (size - 1 if c >= size else c)
+
+
 def filter_code(filter: str, path=None) -> int:
     """0 nearest, 1 linear (the numba kernels' code); InputError naming ``path`` otherwise."""
     try:

@@ -3,13 +3,15 @@
 Plain numpy: texel states by direct comparison, addressing by ``np.pad`` (wrap / edge /
 symmetric), and region-texel overlap by the separating-axis test on open convex polygons
 (interiors overlap iff no axis among the edge normals separates the projections, touching
-counts as separated). Exact for dyadic coordinates.
+counts as separated). Exact for dyadic coordinates. The exact bilinear extremes (below) use
+rational arithmetic, with a float64 numba twin for benchmarks.
 """
 
 import math
 from fractions import Fraction
 
 import numpy as np
+from numba import njit
 
 T, O, C = 0, 1, 2
 PAD_MODES = {"wrap": "wrap", "clamp": "edge", "mirror": "symmetric"}
@@ -224,4 +226,112 @@ def bilinear_square_map(alpha8, n, wrap="clamp", **rule):
             y0, y1 = j * h / n, (j + 1) * h / n
             lo, hi = bilinear_extremes(alpha8, wrap, wrap, [[x0, y0], [x1, y0], [x1, y1], [x0, y1]])
             out[j, i] = exact_state(lo, hi, **rule)
+    return out
+
+
+# The same candidate points in float64 and numba, for benchmarks over millions of regions
+# (tests check it against the rational version above).
+
+@njit(cache=True)
+def _addr_f(i, n, mode):
+    if mode == 0:
+        return i % n
+    if mode == 1:
+        return min(max(i, 0), n - 1)
+    r = i % (2 * n)
+    return r if r < n else 2 * n - 1 - r
+
+
+@njit(cache=True)
+def _bilinear_f(values, mode, x, y):
+    h, w = values.shape
+    fx = x - 0.5
+    fy = y - 0.5
+    x0 = math.floor(fx)
+    y0 = math.floor(fy)
+    ax = fx - x0
+    ay = fy - y0
+    xa, xb = _addr_f(x0, w, mode), _addr_f(x0 + 1, w, mode)
+    ya, yb = _addr_f(y0, h, mode), _addr_f(y0 + 1, h, mode)
+    top = values[ya, xa] + ax * (values[ya, xb] - values[ya, xa])
+    bot = values[yb, xa] + ax * (values[yb, xb] - values[yb, xa])
+    return top + ay * (bot - top)
+
+
+@njit(cache=True)
+def bilinear_extremes_many(values, mode, tris):
+    """(min, max) of the bilinear alpha over each triangle of ``tris`` (R, 3, 2) in texel
+    coordinates; ``mode`` 0 wrap, 1 clamp, 2 mirror."""
+    out = np.empty((tris.shape[0], 2))
+    ts = np.empty(4096)
+    for r in range(tris.shape[0]):
+        p = tris[r]
+        mn = np.inf
+        mx = -np.inf
+        x_lo = math.floor(min(p[0, 0], min(p[1, 0], p[2, 0])) - 0.5)
+        x_hi = math.ceil(max(p[0, 0], max(p[1, 0], p[2, 0])) - 0.5)
+        y_lo = math.floor(min(p[0, 1], min(p[1, 1], p[2, 1])) - 0.5)
+        y_hi = math.ceil(max(p[0, 1], max(p[1, 1], p[2, 1])) - 0.5)
+        area = (p[1, 0] - p[0, 0]) * (p[2, 1] - p[0, 1]) - (p[1, 1] - p[0, 1]) * (p[2, 0] - p[0, 0])
+        for i in range(x_lo, x_hi + 1):  # grid points inside
+            for j in range(y_lo, y_hi + 1):
+                gx = i + 0.5
+                gy = j + 0.5
+                inside = True
+                for e in range(3):
+                    a = p[e]
+                    b = p[(e + 1) % 3]
+                    cr = (b[0] - a[0]) * (gy - a[1]) - (b[1] - a[1]) * (gx - a[0])
+                    if cr * area < 0:
+                        inside = False
+                if inside:
+                    v = _bilinear_f(values, mode, gx, gy)
+                    mn = min(mn, v)
+                    mx = max(mx, v)
+        for e in range(3):
+            a = p[e]
+            b = p[(e + 1) % 3]
+            dx = b[0] - a[0]
+            dy = b[1] - a[1]
+            n = 0
+            ts[n] = 0.0
+            ts[n + 1] = 1.0
+            n = 2
+            if dx != 0:
+                for i in range(x_lo, x_hi + 1):
+                    t = (i + 0.5 - a[0]) / dx
+                    if 0 < t < 1 and n < ts.shape[0]:
+                        ts[n] = t
+                        n += 1
+            if dy != 0:
+                for j in range(y_lo, y_hi + 1):
+                    t = (j + 0.5 - a[1]) / dy
+                    if 0 < t < 1 and n < ts.shape[0]:
+                        ts[n] = t
+                        n += 1
+            tt = np.sort(ts[:n])
+            for k in range(n):
+                v = _bilinear_f(values, mode, a[0] + tt[k] * dx, a[1] + tt[k] * dy)
+                mn = min(mn, v)
+                mx = max(mx, v)
+            for k in range(n - 1):
+                t0 = tt[k]
+                t1 = tt[k + 1]
+                if t1 - t0 <= 0:
+                    continue
+                tm = 0.5 * (t0 + t1)
+                f0 = _bilinear_f(values, mode, a[0] + t0 * dx, a[1] + t0 * dy)
+                fm = _bilinear_f(values, mode, a[0] + tm * dx, a[1] + tm * dy)
+                f1 = _bilinear_f(values, mode, a[0] + t1 * dx, a[1] + t1 * dy)
+                c2 = 2.0 * (f0 + f1 - 2.0 * fm)
+                c1 = f1 - f0 - c2
+                if c2 != 0.0:
+                    u = -c1 / (2.0 * c2)
+                    if 0.0 < u < 1.0:
+                        t = t0 + u * (t1 - t0)
+                        v = _bilinear_f(values, mode, a[0] + t * dx, a[1] + t * dy)
+                        mn = min(mn, v)
+                        mx = max(mx, v)
+        out[r, 0] = mn
+        out[r, 1] = mx
     return out

@@ -204,3 +204,13 @@ def test_real_leaf_against_exact_extremes(rng):
     for t in range(len(tris)):
         micro = birdcurve.uv_micro_triangles(tris[t], 2) * [w, h]
         check_regions(tex.alpha8, micro, got[t], rule, "clamp", Fraction(1, 1000))
+
+
+@settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(textures, st.one_of(triangles(dyadic), triangles(anyfloat)), st.sampled_from(WRAPS))
+def test_the_benchmarks_float_reference_agrees_with_the_rational_one(alpha8, tri, wrap):
+    h, w = alpha8.shape
+    t = tri * [w, h]
+    lo, hi = ref.bilinear_extremes(alpha8, wrap, wrap, list(t))
+    got = ref.bilinear_extremes_many(alpha8.astype(np.float64), wrap_code(wrap), t[None])[0]
+    assert abs(got[0] - float(lo)) < 1e-9 and abs(got[1] - float(hi)) < 1e-9

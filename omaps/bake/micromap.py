@@ -41,11 +41,11 @@ import numba
 import numpy as np
 from numba import njit, prange
 
-from ..bilinear import POLY_MAX, cell_flag
+from ..bilinear import POLY_MAX, cell_flag, point_flag
 from ..birdcurve import MAX_LEVEL
 from ..errors import InputError
-from ..raster import cell_index, edge_extent
-from ..sampling import FootprintGrid
+from ..raster import edge_extent
+from ..sampling import FootprintGrid, cell_index
 
 __all__ = ["bake_micromaps", "bake_micromap_rows", "dynamic_levels", "micro_starts", "check_level",
            "check_uv_triangles", "flag_table", "GROW_TEXEL", "MAX_LEVEL"]
@@ -160,6 +160,7 @@ def _leaf_flag(sat, grid, x0, y0, x1, y1, x2, y2, grow, scratch):
     ``raster.polygon_flags``' arithmetic, each row's cell span read in O(1) unless it holds mixed
     cells. ``grid``: ``FootprintGrid.kernel_args()``; ``scratch`` (2 * POLY_MAX + 3, 2)."""
     flags, mixed, values, bounds, period_x, period_y = grid
+    points_done = False
     ymin = min(y0, min(y1, y2))
     ymax = max(y0, max(y1, y2))
     acc = 0
@@ -180,12 +181,18 @@ def _leaf_flag(sat, grid, x0, y0, x1, y1, x2, y2, grow, scratch):
         c0 = int(math.floor(xmin))
         c1 = int(math.ceil(xmax))
         nt, no, nm, n = _box(sat, r, r + 1, c0, c1, period_y, period_x)
-        if nm == 0:
-            if nt > 0:
-                acc |= 1
-            if no > 0:
-                acc |= 2
-        else:
+        if nt > nm:  # cells other than mixed ones with the T bit
+            acc |= 1
+        if no > nm:
+            acc |= 2
+        if nm > 0 and acc != 3:  # the mixed cells, each decided on its own
+            if not points_done:  # the vertices' own flags first (``raster.polygon_flags`` does the same)
+                points_done = True
+                acc |= point_flag(flags, mixed, values, bounds, period_x, period_y, x0, y0, grow)
+                acc |= point_flag(flags, mixed, values, bounds, period_x, period_y, x1, y1, grow)
+                acc |= point_flag(flags, mixed, values, bounds, period_x, period_y, x2, y2, grow)
+                if acc == 3:
+                    return 3
             tri = scratch[2 * POLY_MAX:]
             tri[0, 0] = x0
             tri[0, 1] = y0
@@ -197,13 +204,11 @@ def _leaf_flag(sat, grid, x0, y0, x1, y1, x2, y2, grow, scratch):
             row = cell_index(r, hc, period_y)
             for c in range(c0, c1):
                 col = cell_index(c, wc, period_x)
-                f = flags[row, col]
                 if mixed[row, col]:
-                    f = cell_flag(values, bounds, period_x, period_y, row, col, tri, 3, c, r, grow,
-                                  scratch[:POLY_MAX], scratch[POLY_MAX:2 * POLY_MAX])
-                acc |= f
-                if acc == 3:
-                    return 3
+                    acc |= cell_flag(values, bounds, period_x, period_y, row, col, tri, 3, c, r, grow,
+                                     scratch[:POLY_MAX], scratch[POLY_MAX:2 * POLY_MAX])
+                    if acc == 3:
+                        return 3
         if acc == 3:
             return 3
     return acc
@@ -221,6 +226,7 @@ def _vertex(tri, i, j, inv_n, w, h, offset):
     return u * w + offset, v * h + offset
 
 
+NODE_EXACT_CELLS = 16  # a node box this small with mixed cells is rasterised before descending
 STACK = 3 * MAX_LEVEL + 4  # nodes pending: 3 more per level down, plus the root
 
 
@@ -275,6 +281,10 @@ def _bake_one(sat, grid, tri, level, w, h, offset, grow, out, st_l, st_k, st_v, 
                 state = 1  # O
             elif nt == nc and no == nc and nm == 0:
                 state = 2  # every cell is C, none of them mixed
+            elif nm > 0 and nc <= NODE_EXACT_CELLS:
+                f = _leaf_flag(sat, grid, x0, y0, x1, y1, x2, y2, grow, scratch)
+                if f == 1 or f == 2:
+                    state = f - 1  # known exactly: so is every micro-triangle inside it
         if state >= 0:
             span = 1 << (2 * (level - lv))
             out[k * span:(k + 1) * span] = state
