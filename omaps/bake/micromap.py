@@ -17,7 +17,9 @@ subdivision tree in the bird-curve order, and two facts make it fast without cha
   bilinear cells (``FootprintGrid.mixed``) is walked cell by cell, each mixed cell decided by
   ``bilinear.cell_flag`` as ``raster.polygon_flags`` decides it.
 
-A box holding a mixed cell is never filled as C from the table: part of it may be known.
+A box holding a mixed cell is never filled as C from the table: part of it may be known. A small
+one (at most NODE_EXACT_CELLS cells) is rasterised like a leaf first; when the node is known, so
+is every micro-triangle inside it (a part of a region reads a subset of its values).
 
 Triangles run in parallel (numba ``prange``); ``numba.set_num_threads`` picks the thread count.
 

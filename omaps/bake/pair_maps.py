@@ -4,7 +4,7 @@ the savings metric, on top of the two bakers.
 ``bake_square`` is the pair-square baker on the corpus pair, ``bake_pair_triangles`` the
 micromap baker on its two triangles; neither grows regions (the corpus pair's regions are exact
 and no ray is traced). ``known_fraction`` is the savings of a map with equal-area regions, and
-``texel_limit`` what an infinitely fine map could save.
+``texel_limit`` the savings of a map whose regions are the footprint cells.
 
 Example::
 
@@ -46,7 +46,8 @@ def known_fraction(map_states: np.ndarray) -> float:
 
 
 def texel_limit(grid: FootprintGrid) -> float:
-    """Area fraction of the texture whose footprint cell is known: what an infinitely fine map
-    could save (every region map is at most this)."""
+    """Area fraction of the texture whose footprint cell is known: the savings of a map whose
+    regions are the cells (under ``nearest`` the most any map can save; under exact bilinear a
+    finer map can save more, knowing the parts of a mixed cell on either side of the cut-off)."""
     f, w = grid.cells_within_texture()
     return float((w * (f != states.FLAG_C)).sum() / w.sum())

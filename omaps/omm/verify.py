@@ -1,5 +1,6 @@
-"""``verify``: read an OMM folder back and check it -- layout, the decoded pair blocks, and every
-micro-triangle against a re-bake of its recorded input when that input is present."""
+"""``verify``: read an OMM folder back and check it -- layout, the decoded pair blocks, and, when
+its recorded input is present, every micro-triangle against a re-bake and every known one
+against the alpha test itself."""
 
 from __future__ import annotations
 
@@ -7,7 +8,9 @@ import os
 
 import numpy as np
 
+from ..bake import micro_starts
 from ..codecs import get_codec
+from ..coverage import micro_fractions
 from ..errors import InputError
 from . import files, pairs
 from .files import settings_from_summary
@@ -51,7 +54,33 @@ def verify(folder) -> tuple[OmmResult, list[str], list[str]]:
             again = build(geoms, settings_from_summary(res.summary))
             problems += _compare(res, again)
             done.append(f"every micro-triangle against a re-bake of {src}")
+            if fmt_code == omm_format.FORMAT_4_STATE:
+                problems += _check_known_states(res, geoms)
+                done.append("every known micro-triangle against the alpha test at up to 64 points")
     return res, problems, done
+
+
+def _check_known_states(res: OmmResult, geoms) -> list[str]:
+    """Each T or O micro-triangle (and special index) of a 4-state OMM against the alpha test
+    itself -- the shader's fetch and comparison at points spread over it, not a baker: a known
+    state that any point contradicts is a problem (independent of the re-bake)."""
+    first = 0
+    for g in geoms:
+        n = len(g.tris_uv)
+        if n == 0:
+            continue
+        idx = res.index[first:first + n]
+        levels = np.where(idx >= 0, res.triangles["level"][np.maximum(idx, 0)], 0).astype(np.int64)
+        st = np.concatenate([res.triangle_states(first + t) for t in range(n)])
+        frac = micro_fractions(g.test, g.tris_uv, levels)
+        bad = ((st == 1) & (frac < 1.0)) | ((st == 0) & (frac > 0.0))
+        if np.any(bad):
+            k = int(np.flatnonzero(bad)[0])
+            t = int(np.searchsorted(micro_starts(levels), k, side="right") - 1)
+            return [f"triangle {first + t}: a micro-triangle stated {'TO'[int(st[k])]} is contradicted by the "
+                    f"alpha test at {frac[k]:.0%} opaque points"]
+        first += n
+    return []
 
 
 def _compare(res: OmmResult, again: OmmResult) -> list[str]:
