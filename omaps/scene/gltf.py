@@ -501,7 +501,8 @@ class _Reader:
         if g.scenes:
             scenes = self._list(g.scenes, "scenes", True)
             si = 0 if g.scene is None else self._ref(g.scene, scenes, "default scene")
-            roots = [self._ref(r, nodes, f"scene {si}: node") for r in self._list(scenes[si].nodes, f"scene {si}: nodes")]
+            roots = [self._ref(r, nodes, f"scene {si}: node")
+                     for r in self._list(scenes[si].nodes, f"scene {si}: nodes")]
         elif nodes:
             roots = sorted(set(range(len(nodes))) - set(children))
         else:  # meshes without nodes: each once, untransformed
