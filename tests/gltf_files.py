@@ -90,3 +90,13 @@ def write_quad_gltf(path, alpha, *, nodes=None, material=None, sampler=None, uv_
         json.dump(doc, f)
     return path
 
+
+
+def edit_json(path, fn):
+    """Apply ``fn`` to a .gltf file's JSON document in place; returns the path as a string."""
+    with open(path) as f:
+        doc = json.load(f)
+    fn(doc)
+    with open(path, "w") as f:
+        json.dump(doc, f)
+    return str(path)

@@ -9,20 +9,12 @@ import numpy as np
 import pytest
 
 from conftest import SCENES, needs_scenes
-from gltf_files import write_quad_gltf
+from gltf_files import edit_json, write_quad_gltf
 from omaps import trace
 from omaps.cli import main
 from omaps.cli.trace import bind_camera_value
 from omaps.scene import load_scene
 from omaps.schemes import parse_schemes
-
-
-def _edit(path, fn):
-    doc = json.loads(open(path).read())
-    fn(doc)
-    with open(path, "w") as f:
-        json.dump(doc, f)
-    return str(path)
 
 
 def _checker(n=8):
@@ -122,7 +114,7 @@ def _with_cameras(tmp_path, cameras, camera_nodes, name="cam.gltf"):
                 doc["nodes"].append({"translation": parent, "children": [k]})
                 k += 1
             doc["scenes"][0]["nodes"].append(k)
-    return _edit(f, fn)
+    return edit_json(f, fn)
 
 
 PERSP = {"type": "perspective", "perspective": {"yfov": math.radians(40), "znear": 0.01, "aspectRatio": 2.0}}
@@ -268,7 +260,7 @@ def test_default_view_looks_past_an_opaque_wall(tmp_path):
         doc["meshes"].append({"primitives": [{"attributes": {"POSITION": 0}, "indices": 2, "material": 1}]})
         doc["nodes"].append({"mesh": 1, "translation": [-4.0, -4.0, 0.3], "scale": [9.0, 9.0, 1.0]})
         doc["scenes"][0]["nodes"].append(len(doc["nodes"]) - 1)
-    _edit(f, fn)
+    edit_json(f, fn)
     scene = load_scene(f)
     prep = trace.prepare(scene, parse_schemes("none"))
     preferred = trace.default_camera(scene.bounds(), scene.alpha_bounds(), 96 / 64)

@@ -11,21 +11,13 @@ import pytest
 from PIL import Image
 
 from conftest import SCENES, needs_scenes
-from gltf_files import QUAD_IDX, QUAD_POS, QUAD_UV, write_quad_gltf
+from gltf_files import QUAD_IDX, QUAD_POS, QUAD_UV, edit_json, write_quad_gltf
 from omaps import trace
 from omaps.cli import main
 from omaps.scene import SceneWarning, load_scene
 from omaps.schemes import parse_schemes
 
 ALL_SCHEMES = "none,tri3,sq16,vq2,vq4,vq4x64"
-
-
-def _edit(path, fn):
-    doc = json.loads(open(path).read())
-    fn(doc)
-    with open(path, "w") as f:
-        json.dump(doc, f)
-    return str(path)
 
 
 def _corners_opaque(n=16):
@@ -121,7 +113,7 @@ def _jpeg_uri():
 
 def test_mask_material_with_a_jpeg_texture_warns(tmp_path, capsys):
     f = write_quad_gltf(tmp_path / "jpeg.gltf", np.zeros((2, 2), np.uint8))
-    _edit(f, lambda doc: doc["images"][0].update(uri=_jpeg_uri()))
+    edit_json(f, lambda doc: doc["images"][0].update(uri=_jpeg_uri()))
     with pytest.warns(SceneWarning, match=r"material 0 \(leaf\) is MASK but its base colour image .* has no alpha"):
         scene = load_scene(f)
     assert scene.textures[0].has_alpha is False and np.all(scene.textures[0].alpha == 255)
@@ -150,7 +142,7 @@ def test_each_missing_file_warns_once(tmp_path, capsys):
         doc["meshes"][0]["primitives"].append({**doc["meshes"][0]["primitives"][0], "material": 1})
         doc["nodes"].append({"mesh": 0, "translation": [2.0, 0.0, 0.0]})
         doc["scenes"][0]["nodes"].append(1)
-    _edit(f, fn)
+    edit_json(f, fn)
     with pytest.warns(SceneWarning) as rec:
         scene = load_scene(f)
     messages = [str(w.message) for w in rec]
