@@ -10,7 +10,7 @@ from tqdm import tqdm
 
 from ..atomic import Outputs
 from ..errors import InputError
-from ..omm import files, inputs
+from ..omm import files, gltf_io, inputs
 from ..omm import format as omm_format
 from ..omm.pipeline import OmmSettings, build
 from ..omm.verify import verify
@@ -28,10 +28,16 @@ def add_parser(sub) -> None:
                     "Writes omm_data.bin, omm_triangles.bin, omm_index.bin, omm_usage.json and omm.json "
                     "into DIR (all or nothing). With --verify DIR: check a written folder.")
     o.add_argument("inputs", nargs="*", metavar="INPUT", help="SCENE.gltf|.glb, or TEXTURE UVS.npy")
-    o.add_argument("-o", "--output", metavar="DIR", help="output folder (replaced whole if it is empty or holds an "
-                                                          "earlier omm.json; any other folder is left alone: error)")
-    o.add_argument("--verify", metavar="DIR", help="check an OMM folder: layout, usage counts, pair blocks, "
-                                                   "and a re-bake from its recorded inputs when they are present")
+    o.add_argument("-o", "--output", metavar="DIR|OUT.glb|OUT.gltf",
+                   help="output folder (replaced whole if it is empty or holds an earlier omm.json; any other "
+                        "folder is left alone: error), or, for a glTF input, a .glb / .gltf file: the scene with "
+                        "the EXT_mesh_opacity_micromap extension (and OMAPS_pair_opacity_maps with --from)")
+    o.add_argument("--verify", metavar="DIR|FILE.glb",
+                   help="check an OMM folder or glTF file: layout (the extension's rules), usage counts, pair "
+                        "blocks, and a re-bake from its recorded inputs (a glTF file: its own textures)")
+    o.add_argument("--expand", action="store_true",
+                   help="with one baked .glb/.gltf input holding OMAPS_pair_opacity_maps and -o OUT.glb|.gltf: "
+                        "decode the pair blocks into standard micromaps (EXT_mesh_opacity_micromap only)")
     lv = o.add_argument_group("subdivision")
     lv.add_argument("--level", type=int, default=None, help="one subdivision level for all, 0..12 (default 4)")
     lv.add_argument("--dynamic", type=float, default=None, metavar="SCALE",
@@ -95,20 +101,32 @@ def cmd_omm(a) -> int:
         if a.inputs or a.output:
             raise InputError("--verify DIR takes no inputs and no -o")
         return _cmd_verify(a.verify)
+    if a.expand:
+        return _cmd_expand(a)
     spec = _spec(a)
     if not a.output:
         raise InputError("give the output folder with -o DIR")
     outputs = Outputs(inputs=a.inputs)
-    outputs.folder(a.output, "-o", omm_format.SUMMARY_FILE)  # before the work, not after
+    to_gltf = gltf_io.is_gltf(a.output)
+    if to_gltf:
+        if spec["kind"] != "gltf":
+            raise InputError("a .glb / .gltf output needs a glTF input (a texture and UVs have no scene)", a.output)
+        outputs.file(a.output, "-o")
+    else:
+        outputs.folder(a.output, "-o", omm_format.SUMMARY_FILE)  # before the work, not after
     settings = _settings(a)
     t0 = time.perf_counter()
     geoms, skipped, warned = inputs.load_geometries(spec)
     with tqdm(total=len(geoms), desc="omm", unit="geometry", disable=not show_progress(a.quiet), leave=False) as bar:
         result = build(_counted(geoms, bar), settings)
     dt = time.perf_counter() - t0
+    extra = {"input": spec, "skipped_primitives": skipped, "warnings": warned}
     with outputs.writing():
-        files.write_into(outputs.path(a.output), result,
-                         {"input": spec, "skipped_primitives": skipped, "warnings": warned})
+        if to_gltf:
+            for w in gltf_io.write_gltf_result(spec["path"], outputs.path(a.output), a.output, result, extra):
+                print(f"omaps: warning: {w}", file=sys.stderr)
+        else:
+            files.write_into(outputs.path(a.output), result, extra)
     st = result.summary["statistics"]
     print(f"{a.output}: {st['triangles']} triangles, {st['micro_triangles']} micro-triangles "
           f"({st['transparent']} T, {st['opaque']} O, {st['unknown']} unknown; known area "
@@ -143,4 +161,26 @@ def _cmd_verify(folder) -> int:
             print(f"omaps: {folder}: {p}", file=sys.stderr)
         return 1
     print(f"{folder}: OK ({st['triangles']} triangles, {st['micromaps']} micromaps, {st['data_bytes']} data bytes)")
+    return 0
+
+
+def _cmd_expand(a) -> int:
+    """``omaps omm BAKED.glb --expand -o STD.glb``: the stored pair blocks decoded and expanded
+    into standard micromaps (``omm.pairs.expand``), packed as ``build`` packs them."""
+    from ..omm.expand import expand_result
+
+    if len(a.inputs) != 1 or not gltf_io.is_gltf(a.inputs[0]) or not a.output or not gltf_io.is_gltf(a.output):
+        raise InputError("--expand takes one baked .glb/.gltf and -o OUT.glb|OUT.gltf")
+    outputs = Outputs(inputs=a.inputs)
+    outputs.file(a.output, "-o")
+    res = gltf_io.read_gltf(a.inputs[0])
+    if res.pair_blocks is None:
+        raise InputError("holds no OMAPS_pair_opacity_maps pair blocks to expand", a.inputs[0])
+    out = expand_result(res)
+    with outputs.writing():
+        for w in gltf_io.write_gltf_result(a.inputs[0], outputs.path(a.output), a.output, out, None):
+            print(f"omaps: warning: {w}", file=sys.stderr)
+    st = out.summary["statistics"]
+    print(f"{a.output}: {st['triangles']} triangles from {res.summary['pair_blocks']['blocks']} "
+          f"{res.summary['pair_blocks']['codec']} pair blocks; {st['micromaps']} micromaps, {st['data_bytes']} data bytes")
     return 0

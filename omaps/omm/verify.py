@@ -31,13 +31,21 @@ def verify(folder) -> tuple[OmmResult, list[str], list[str]]:
         >>> problems                           # doctest: +SKIP
         []
     """
-    res = files.read(folder)
-    problems, done = [], ["layout, records, offsets, index entries, usage counts"]
+    from . import gltf_io
+
+    if gltf_io.is_gltf(folder):  # a scene with EXT_mesh_opacity_micromap: the reader checks the extension's rules
+        res = gltf_io.read_gltf(folder)
+        problems, done = [], ["EXT_mesh_opacity_micromap rules: usage counts = records, regions in range and "
+                              "disjoint, one index per triangle, index values valid"]
+    else:
+        res = files.read(folder)
+        problems, done = [], ["layout, records, offsets, index entries, usage counts"]
     fmt_code = res.summary.get("format_code")
     if len(res.triangles) and not np.all(res.triangles["format"] == fmt_code):
         problems.append(f"micromap formats differ from omm.json's format {fmt_code}")
     if res.pair_blocks is not None:
-        problems += _check_pair_blocks(res, os.path.join(folder, omm_format.PAIR_BLOCKS_FILE))
+        problems += _check_pair_blocks(res, folder if gltf_io.is_gltf(folder) else
+                                       os.path.join(folder, omm_format.PAIR_BLOCKS_FILE))
         done.append("micromaps against the decoded pair blocks")
     spec = res.summary.get("input")
     if spec is not None:

@@ -52,6 +52,7 @@ SUPPORTED_EXTENSIONS = frozenset({
     "KHR_materials_transmission", "KHR_materials_volume", "KHR_materials_iridescence", "KHR_materials_anisotropy",
     "KHR_materials_dispersion", "KHR_materials_unlit", "KHR_materials_variants", "KHR_materials_pbrSpecularGlossiness",
     "KHR_lights_punctual", "KHR_xmp_json_ld", "KHR_animation_pointer",
+    "EXT_mesh_opacity_micromap", "OMAPS_pair_opacity_maps",  # read by scene.micromaps
 })
 _GL_NEAREST = (9728, 9984, 9986)  # magFilter NEAREST, or min NEAREST_MIPMAP_*
 _WRAP = {33071: "clamp", 33648: "mirror", 10497: "wrap"}
@@ -559,7 +560,10 @@ class _Reader:
         skipped: list[dict] = []
         meshes = [self.mesh(mi, mats, transforms, default_material, skipped) for mi in used]
         inst = [(remap[mi], m) for mi, m in inst]
-        return Scene(self.path, meshes, inst, mats, textures, self.warnings, skipped, cameras)
+        from .micromaps import read_extensions
+
+        stored = read_extensions(self)  # EXT_mesh_opacity_micromap, OMAPS_pair_opacity_maps: their rules checked
+        return Scene(self.path, meshes, inst, mats, textures, self.warnings, skipped, cameras, stored)
 
     def camera(self, ci: int) -> SceneCamera:
         """Camera ``ci`` placed by its first node in the default scene (glTF: it looks down the

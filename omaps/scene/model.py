@@ -148,6 +148,7 @@ class Scene:
     warnings: list[str] = field(default_factory=list)
     skipped: list[dict] = field(default_factory=list)  # primitives left out: mesh, primitive, name, reason
     cameras: list[SceneCamera] = field(default_factory=list)  # every camera of the file, in order
+    micromaps: object = None  # scene.micromaps.StoredMicromaps: the file's stored opacity micromaps, if any
 
     def alpha_tested(self, rules: MaterialRules = MaterialRules()) -> np.ndarray:
         """Boolean per material: does the any-hit shader run on it?"""

@@ -1,0 +1,66 @@
+"""Pair blocks (``OMAPS_pair_opacity_maps`` of a baked glTF) expanded into standard micromaps:
+decoded by their codec, each pair's square map split into its triangles' level-log2 N micromaps
+(``pairs.expand``), unknown regions resolved by the recorded promotion with the scene's own
+alpha tests (``resolve.resolve``), then given special indices and shared as ``pipeline.build``
+does (its ``_Packer``): the micromaps equal those ``omm --from`` wrote beside the blocks."""
+
+from __future__ import annotations
+
+import warnings
+
+import numpy as np
+
+from .. import states
+from ..codecs import get_codec
+from . import pairs, resolve
+from . import format as omm_format
+from .files import settings_from_summary
+from .inputs import load_geometries
+from .pipeline import OmmResult, _Packer
+
+__all__ = ["decoded_blocks", "expand_result"]
+
+
+def decoded_blocks(res: OmmResult) -> np.ndarray:
+    """Every stored pair block decoded: (P, N, N) states."""
+    codec = get_codec(res.summary["pair_blocks"]["codec"])
+    raw = np.frombuffer(res.pair_blocks, np.uint8).reshape(-1, codec.block_bytes)
+    if len(raw) == 0:
+        return np.zeros((0, codec.map_size, codec.map_size), np.uint8)
+    return codec.decode_many(raw)
+
+
+def expand_result(res: OmmResult) -> OmmResult:
+    """Standard micromaps only (no pair blocks) from a result read with pair blocks."""
+    settings = settings_from_summary(res.summary)
+    fmt = settings.format_code
+    maps = decoded_blocks(res)
+    level = pairs.level_of_size(maps.shape[1])
+    rec = res.pair_records
+    three = pairs.expand(maps, rec["pair"].astype(np.int64), rec["corners"])  # (T, 4**L)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        geoms, _, _ = load_geometries(res.summary["input"])
+    packer = _Packer(settings)
+    parts, first = [], 0
+    for g in geoms:
+        n = len(g.tris_uv)
+        s3 = three[first:first + n].copy()
+        if g.unknown is not None:
+            s3[np.asarray(g.unknown, bool)] = states.C
+        starts = np.arange(n + 1, dtype=np.int64) << (2 * level)
+        omm = resolve.resolve(s3.ravel(), starts, np.full(n, level, np.int64), g.test, g.tris_uv, fmt,
+                              settings.promotion, settings.seed)
+        parts.append(packer.add(omm.reshape(n, -1), level) if n else np.zeros(0, np.int32))
+        first += n
+    if first != len(three):
+        raise RuntimeError(f"internal error: {first} triangles in the scene, {len(three)} pair records")
+    index = np.concatenate(parts) if parts else np.zeros(0, np.int32)
+    triangles = np.array(packer.records, dtype=omm_format.TRIANGLE_RECORD)
+    data = np.frombuffer(b"".join(packer.chunks), dtype=np.uint8).copy()
+    usage = omm_format.usage_histograms(triangles["level"], triangles["format"], index)
+    summary = {k: v for k, v in res.summary.items() if k != "pair_blocks"}
+    summary["expanded_from"] = res.summary["pair_blocks"]
+    summary["statistics"] = dict(summary.get("statistics") or {}, triangles=int(len(index)),
+                                 micromaps=int(len(triangles)), data_bytes=int(len(data)))
+    return OmmResult(data, triangles, index, usage, summary)

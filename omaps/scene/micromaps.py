@@ -1,0 +1,501 @@
+"""Opacity micromaps stored in a glTF file: the draft extension ``EXT_mesh_opacity_micromap``
+(KhronosGroup/glTF pull request 2623) and omaps' own ``OMAPS_pair_opacity_maps`` (the deck's
+compressed square maps per pair). docs/FORMAT.md "Opacity micromaps in glTF" states every field.
+
+Reading (``read_extensions``) runs inside the one scene reader (``scene.gltf``: it passes its
+checked accessor and bufferView readers), so the tracer and ``omaps omm --verify`` see exactly
+what the file stores; every rule of the extension is checked there and a broken one is an
+InputError naming the file. Writing (``write_gltf``) works on the file's JSON and binary chunk
+directly (no glTF library round trip), so every mesh, material, image, node, animation, camera
+and unknown extension or extra of the input is kept as it was: the new data is appended as
+buffer views (and accessors for the per-primitive indices).
+"""
+
+from __future__ import annotations
+
+import base64
+import json
+import os
+import struct
+from dataclasses import dataclass, field
+from urllib.parse import quote, unquote
+
+import numpy as np
+
+from ..errors import InputError
+
+__all__ = ["EXT_OMM", "EXT_PAIRS", "MicromapArray", "PrimitiveMicromap", "PairMaps", "PrimitivePairs",
+           "StoredMicromaps", "read_extensions", "write_gltf", "index_component_type", "encode_indices"]
+
+EXT_OMM = "EXT_mesh_opacity_micromap"
+EXT_PAIRS = "OMAPS_pair_opacity_maps"
+RECORD = np.dtype([("data_offset", "<u4"), ("level", "<u2"), ("format", "<u2")])  # VkMicromapTriangleKHR
+PAIR_RECORD = np.dtype([("pair", "<i4"), ("corners", "u1", (3,)), ("pad", "u1")])
+MAX_LEVEL = 12
+_UNSIGNED = {5121: 8, 5123: 16, 5125: 32}
+_SIGNED = {5122: 16, 5124: 32}
+_GLB_MAGIC, _JSON_CHUNK, _BIN_CHUNK = 0x46546C67, 0x4E4F534A, 0x004E4942
+
+
+@dataclass
+class MicromapArray:
+    """One element of the root ``micromaps``: packed states, records, usage histogram."""
+
+    data: np.ndarray  # uint8
+    triangles: np.ndarray  # RECORD (M,)
+    usage: list  # [(count, level, format)] as stored
+    extras: dict = field(default_factory=dict)
+
+
+@dataclass
+class PrimitiveMicromap:
+    micromap: int
+    values: np.ndarray  # int64 (T,) signed lookup values (specials -1..-4), base triangle not added
+    base: int = 0
+
+    @property
+    def records(self) -> np.ndarray:
+        """Per triangle its record index, or the special index (-1..-4)."""
+        return np.where(self.values >= 0, self.values + self.base, self.values)
+
+
+@dataclass
+class PairMaps:
+    """One element of ``OMAPS_pair_opacity_maps.maps``: a codec's blocks."""
+
+    codec: str
+    block_bytes: int
+    map_size: int
+    blocks: bytes
+    extras: dict = field(default_factory=dict)
+
+
+@dataclass
+class PrimitivePairs:
+    maps: int
+    records: np.ndarray  # PAIR_RECORD (T,)
+
+
+@dataclass
+class StoredMicromaps:
+    micromaps: list  # MicromapArray
+    primitives: dict  # (glTF mesh, primitive) -> PrimitiveMicromap
+    pair_maps: list  # PairMaps
+    pair_primitives: dict  # (glTF mesh, primitive) -> PrimitivePairs
+
+
+def micromap_bytes(level: int, fmt: int) -> int:
+    return max(1, (4 ** int(level) * (1 if int(fmt) == 1 else 2) + 7) // 8)
+
+
+# ---- reading (inside scene.gltf's reader) ------------------------------------------------------
+def _is_int(v) -> bool:
+    return isinstance(v, (int, np.integer)) and not isinstance(v, bool)
+
+
+def read_extensions(r) -> StoredMicromaps | None:
+    """Both extensions of the document the scene reader ``r`` holds (``r.g``: the document,
+    ``r.view_bytes``, ``r.accessor``, ``r.path``); None when the file has neither."""
+    g = r.g
+    root = g.extensions if isinstance(g.extensions, dict) else {}
+    has_prim = any(isinstance(getattr(p, "extensions", None), dict)
+                   and (EXT_OMM in p.extensions or EXT_PAIRS in p.extensions)
+                   for m in (g.meshes or []) for p in (getattr(m, "primitives", None) or []))
+    if EXT_OMM not in root and EXT_PAIRS not in root and not has_prim:
+        return None
+    path = r.path
+
+    def bad(msg):
+        raise InputError(f"{EXT_OMM}: {msg}", path)
+
+    arrays = []
+    ext = root.get(EXT_OMM, {"micromaps": []})
+    if not isinstance(ext, dict) or not isinstance(ext.get("micromaps"), list):
+        bad("the root extension needs a micromaps array")
+    for i, mm in enumerate(ext["micromaps"]):
+        arrays.append(_read_array(r, i, mm, bad))
+    pair_maps = []
+    pext = root.get(EXT_PAIRS, {"maps": []})
+    if not isinstance(pext, dict) or not isinstance(pext.get("maps"), list):
+        raise InputError(f"{EXT_PAIRS}: the root extension needs a maps array", path)
+    for i, pm in enumerate(pext["maps"]):
+        pair_maps.append(_read_pair_maps(r, i, pm))
+    prims, pair_prims = {}, {}
+    for mi, m in enumerate(g.meshes or []):
+        for pi, p in enumerate(getattr(m, "primitives", None) or []):
+            exts = p.extensions if isinstance(getattr(p, "extensions", None), dict) else {}
+            if EXT_OMM in exts:
+                prims[(mi, pi)] = _read_primitive(r, mi, pi, p, exts[EXT_OMM], arrays, bad)
+            if EXT_PAIRS in exts:
+                pair_prims[(mi, pi)] = _read_pair_primitive(r, mi, pi, p, exts[EXT_PAIRS], pair_maps)
+    return StoredMicromaps(arrays, prims, pair_maps, pair_prims)
+
+
+def _read_array(r, i, mm, bad) -> MicromapArray:
+    what = f"micromaps[{i}]"
+    if not isinstance(mm, dict):
+        bad(f"{what} is not an object")
+    for key in ("data", "triangles"):
+        if not _is_int(mm.get(key)):
+            bad(f"{what}.{key} is {mm.get(key)!r}, not a bufferView index")
+    lists = []
+    for key in ("usageCounts", "usageLevels", "usageFormats"):
+        v = mm.get(key)
+        if not isinstance(v, list) or not v or not all(_is_int(x) for x in v):
+            bad(f"{what}.{key} is {v!r}, not a non-empty array of integers")
+        lists.append(v)
+    counts, levels, formats = lists
+    if not len(counts) == len(levels) == len(formats):
+        bad(f"{what}: usageCounts, usageLevels and usageFormats differ in length")
+    if any(c < 1 for c in counts) or any(not 0 <= lv <= MAX_LEVEL for lv in levels) or any(f not in (1, 2) for f in formats):
+        bad(f"{what}: a usage entry is out of range (counts >= 1, levels 0..{MAX_LEVEL}, formats 1 or 2)")
+    data, _ = r.view_bytes(mm["data"])
+    raw, stride = r.view_bytes(mm["triangles"])
+    if stride is not None and (stride < 8 or stride % 4):
+        bad(f"{what}: the triangles bufferView has byteStride {stride} (at least 8, a multiple of 4)")
+    stride = stride or 8
+    n = (len(raw) - 8) // stride + 1 if len(raw) >= 8 else 0
+    if stride == 8 and len(raw) % 8:
+        bad(f"{what}: the triangles bufferView holds {len(raw)} bytes, not whole 8-byte records")
+    buf = np.frombuffer(raw, np.uint8)
+    rows = np.lib.stride_tricks.as_strided(buf, shape=(n, 8), strides=(stride, 1)) if n else np.zeros((0, 8), np.uint8)
+    tris = np.ascontiguousarray(rows).view(RECORD).ravel().copy()
+    bad_f = np.flatnonzero(~np.isin(tris["format"], (1, 2)))
+    if len(bad_f):
+        bad(f"{what}: record {bad_f[0]} has format {tris['format'][bad_f[0]]} (1 or 2)")
+    bad_l = np.flatnonzero(tris["level"] > MAX_LEVEL)
+    if len(bad_l):
+        bad(f"{what}: record {bad_l[0]} has subdivision level {tris['level'][bad_l[0]]} (at most {MAX_LEVEL})")
+    sizes = np.array([micromap_bytes(lv, f) for lv, f in zip(tris["level"], tris["format"])], np.int64)
+    start = tris["data_offset"].astype(np.int64)
+    end = start + sizes
+    over = np.flatnonzero(end > len(data))
+    if len(over):
+        bad(f"{what}: record {over[0]} reads data bytes up to {end[over[0]]} of {len(data)}")
+    order = np.argsort(start, kind="stable")
+    clash = np.flatnonzero(start[order][1:] < end[order][:-1])
+    if len(clash):
+        bad(f"{what}: the data regions of records {order[clash[0]]} and {order[clash[0] + 1]} overlap")
+    want: dict = {}
+    for lv, f in zip(tris["level"].tolist(), tris["format"].tolist()):
+        want[(lv, f)] = want.get((lv, f), 0) + 1
+    got: dict = {}
+    for c, lv, f in zip(counts, levels, formats):
+        got[(lv, f)] = got.get((lv, f), 0) + c
+    if got != want:
+        bad(f"{what}: the usage counts {sorted(got.items())} are not the records' {sorted(want.items())}")
+    extras = mm.get("extras") if isinstance(mm.get("extras"), dict) else {}
+    return MicromapArray(np.frombuffer(data, np.uint8).copy(), tris, list(zip(counts, levels, formats)), extras)
+
+
+def _triangle_count(r, p) -> int | None:
+    """The primitive's triangle count as the glTF spec defines it for TRIANGLES mode."""
+    attrs = getattr(p, "attributes", None)
+    acc = p.indices if p.indices is not None else getattr(attrs, "POSITION", None)
+    if not _is_int(acc) or not 0 <= acc < len(r.g.accessors or []):
+        return None
+    count = getattr(r.g.accessors[acc], "count", None)
+    return count // 3 if _is_int(count) else None
+
+
+def _read_primitive(r, mi, pi, p, e, arrays, bad) -> PrimitiveMicromap:
+    what = f"mesh {mi} primitive {pi}"
+    if not isinstance(e, dict):
+        bad(f"{what}: the extension is not an object")
+    if p.mode not in (None, 4):
+        bad(f"{what} has mode {p.mode}; micromaps need TRIANGLES (4)")
+    m = e.get("micromap")
+    if not _is_int(m) or not 0 <= m < len(arrays):
+        bad(f"{what}: micromap {m!r} does not exist ({len(arrays)} defined)")
+    base = e.get("micromapBaseTriangle", 0)
+    if not _is_int(base) or base < 0:
+        bad(f"{what}: micromapBaseTriangle is {base!r}, not a non-negative integer")
+    n = _triangle_count(r, p)
+    if n is None:
+        bad(f"{what}: no triangle count (indices or POSITION accessor)")
+    ai = e.get("micromapIndices")
+    if ai is None:
+        values = np.arange(n, dtype=np.int64)
+    else:
+        if not _is_int(ai) or not 0 <= ai < len(r.g.accessors or []):
+            bad(f"{what}: micromapIndices accessor {ai!r} does not exist")
+        a = r.g.accessors[ai]
+        ct = a.componentType
+        if ct not in _UNSIGNED and ct not in _SIGNED or a.normalized:
+            bad(f"{what}: micromapIndices accessor {ai} has componentType {ct!r} "
+                "(5121, 5123, 5125, 5122 or 5124, not normalized)")
+        if a.count != n:
+            bad(f"{what}: micromapIndices accessor {ai} has {a.count} elements, the primitive {n} triangles")
+        values = r.accessor(ai, ("SCALAR",)).ravel().astype(np.int64)
+        if ct in _UNSIGNED:
+            top = 1 << _UNSIGNED[ct]
+            values = np.where(values >= top - 4, values - top, values)  # two's-complement specials
+        elif np.any(values < -4):
+            bad(f"{what}: micromapIndices accessor {ai} holds {int(values.min())} (specials are -1..-4)")
+    out = PrimitiveMicromap(int(m), values, int(base))
+    rec = out.records
+    n_rec = len(arrays[m].triangles)
+    big = np.flatnonzero(rec >= n_rec)
+    if len(big):
+        bad(f"{what}: triangle {big[0]} references micromap triangle {rec[big[0]]} ({n_rec} records)")
+    return out
+
+
+def _read_pair_maps(r, i, pm) -> PairMaps:
+    from ..codecs import get_codec
+
+    what = f"{EXT_PAIRS}: maps[{i}]"
+    if not isinstance(pm, dict):
+        raise InputError(f"{what} is not an object", r.path)
+    try:
+        codec = get_codec(pm.get("codec")) if isinstance(pm.get("codec"), str) else None
+    except InputError:
+        codec = None
+    if codec is None:
+        raise InputError(f"{what}.codec is {pm.get('codec')!r}, not a codec", r.path)
+    if pm.get("blockBytes") != codec.block_bytes or pm.get("mapSize") != codec.map_size:
+        raise InputError(f"{what}: blockBytes / mapSize are {pm.get('blockBytes')!r} / {pm.get('mapSize')!r}, "
+                         f"a {codec.name} block has {codec.block_bytes} / {codec.map_size}", r.path)
+    if not _is_int(pm.get("blocks")):
+        raise InputError(f"{what}.blocks is {pm.get('blocks')!r}, not a bufferView index", r.path)
+    raw, stride = r.view_bytes(pm["blocks"])
+    if stride is not None or len(raw) % codec.block_bytes:
+        raise InputError(f"{what}: the blocks bufferView holds {len(raw)} bytes, not whole "
+                         f"{codec.block_bytes}-byte blocks (tightly packed)", r.path)
+    extras = pm.get("extras") if isinstance(pm.get("extras"), dict) else {}
+    return PairMaps(codec.name, codec.block_bytes, codec.map_size, bytes(raw), extras)
+
+
+def _read_pair_primitive(r, mi, pi, p, e, pair_maps) -> PrimitivePairs:
+    what = f"{EXT_PAIRS}: mesh {mi} primitive {pi}"
+    if not isinstance(e, dict) or not _is_int(e.get("maps")) or not 0 <= e["maps"] < len(pair_maps):
+        raise InputError(f"{what}: maps {e.get('maps') if isinstance(e, dict) else e!r} does not exist", r.path)
+    if not _is_int(e.get("pairs")):
+        raise InputError(f"{what}: pairs is not a bufferView index", r.path)
+    raw, stride = r.view_bytes(e["pairs"])
+    n = _triangle_count(r, p)
+    if stride is not None or len(raw) != 8 * (n or 0):
+        raise InputError(f"{what}: the pairs bufferView holds {len(raw)} bytes, not 8 per triangle ({n})", r.path)
+    rec = np.frombuffer(raw, PAIR_RECORD).copy()
+    pm = pair_maps[e["maps"]]
+    n_blocks = len(pm.blocks) // pm.block_bytes
+    if np.any(rec["pair"] < 0) or np.any(rec["pair"] >= n_blocks) or np.any(rec["corners"] > 3):
+        raise InputError(f"{what}: a pair index or corner code is out of range ({n_blocks} blocks)", r.path)
+    return PrimitivePairs(int(e["maps"]), rec)
+
+
+# ---- writing -------------------------------------------------------------------------------
+def index_component_type(n_records: int) -> int:
+    """The smallest unsigned component type whose two's-complement specials (-1..-4, the top four
+    values) cannot collide with a record index below ``n_records``."""
+    for ct, bits in _UNSIGNED.items():
+        if n_records <= (1 << bits) - 4:
+            return ct
+    raise InputError(f"{n_records} micromaps do not fit an UNSIGNED_INT index")
+
+
+def encode_indices(index: np.ndarray, ct: int) -> bytes:
+    """Signed lookup values (specials -1..-4) as the unsigned type's two's-complement patterns."""
+    dt = {5121: "<u1", 5123: "<u2", 5125: "<u4"}[ct]
+    return (np.asarray(index, np.int64) & ((1 << _UNSIGNED[ct]) - 1)).astype(dt).tobytes()
+
+
+def read_container(path) -> tuple[dict, bytes | None]:
+    """The JSON document and the GLB binary chunk (None for .gltf or a GLB without one)."""
+    try:
+        with open(path, "rb") as f:
+            raw = f.read()
+    except OSError as exc:
+        raise InputError(f"cannot read ({exc.strerror})", path) from None
+    try:
+        if raw[:4] == b"glTF":
+            magic, version, length = struct.unpack_from("<III", raw, 0)
+            pos, doc, bin_chunk = 12, None, None
+            while pos + 8 <= min(length, len(raw)):
+                clen, ctype = struct.unpack_from("<II", raw, pos)
+                body = raw[pos + 8:pos + 8 + clen]
+                if ctype == _JSON_CHUNK and doc is None:
+                    doc = json.loads(body.decode("utf-8"))
+                elif ctype == _BIN_CHUNK and bin_chunk is None:
+                    bin_chunk = bytes(body)
+                pos += 8 + clen
+            if not isinstance(doc, dict):
+                raise ValueError("no JSON chunk")
+            return doc, bin_chunk
+        doc = json.loads(raw.decode("utf-8"))
+        if not isinstance(doc, dict):
+            raise ValueError("not a JSON object")
+        return doc, None
+    except (ValueError, UnicodeDecodeError, struct.error, RecursionError) as exc:
+        raise InputError(f"cannot read glTF ({exc})", path) from None
+
+
+def _data_uri(uri: str, path) -> bytes:
+    head, comma, payload = uri.partition(",")
+    if not comma or not head.endswith(";base64"):
+        raise InputError(f"data URI {uri[:40]!r}... is not base64 data", path)
+    try:
+        return base64.b64decode(payload)
+    except ValueError as exc:
+        raise InputError(f"bad base64 in a data URI ({exc})", path) from None
+
+
+def _relocated(uri, src_dir: str, out_dir: str):
+    """A relative file URI of the input, as seen from the output's folder."""
+    if not isinstance(uri, str) or uri.startswith("data:") or "://" in uri or src_dir == out_dir:
+        return uri
+    return quote(os.path.relpath(os.path.join(src_dir, unquote(uri)), out_dir).replace(os.sep, "/"))
+
+
+class _Appender:
+    """New buffer views (8-byte aligned) in one new or extended buffer."""
+
+    def __init__(self, base: int = 0):
+        self.base = base
+        self.blob = bytearray()
+        self.views: list[dict] = []
+
+    def add(self, raw: bytes) -> int:
+        self.blob += b"\0" * ((-(self.base + len(self.blob))) % 8)
+        self.views.append({"byteOffset": self.base + len(self.blob), "byteLength": len(raw)})
+        self.blob += raw
+        return len(self.views) - 1
+
+
+def write_gltf(src, out_tmp, out_final, micromaps: list[dict], prim_omm: dict, pair_maps: list[dict],
+               prim_pairs: dict, warn=None) -> None:
+    """Write ``src`` with the extensions to ``out_tmp`` (.glb or .gltf by ``out_final``'s suffix;
+    ``out_final`` is where it will be renamed to, for relative URIs). Earlier micromaps of either
+    extension in ``src`` are replaced.
+
+    ``micromaps``: [{data: bytes, triangles: RECORD array, usage: [(count, level, format)], extras}];
+    ``prim_omm``: (mesh, primitive) -> (micromap, signed int64 lookup values);
+    ``pair_maps``: [{codec, blockBytes, mapSize, blocks: bytes, extras}];
+    ``prim_pairs``: (mesh, primitive) -> (maps, PAIR_RECORD array)."""
+    doc, bin_chunk = read_container(src)
+    glb_out = str(out_final).lower().endswith(".glb")
+    src_dir = os.path.dirname(os.path.abspath(src))
+    out_dir = os.path.dirname(os.path.abspath(out_final))
+    buffers = doc.setdefault("buffers", [])
+    views = doc.setdefault("bufferViews", [])
+    accessors = doc.setdefault("accessors", [])
+    for b in buffers:
+        if isinstance(b, dict) and "uri" in b:
+            b["uri"] = _relocated(b["uri"], src_dir, out_dir)
+    for im in doc.get("images") or []:
+        if isinstance(im, dict) and "uri" in im:
+            im["uri"] = _relocated(im["uri"], src_dir, out_dir)
+    # where the new bytes go: a GLB's binary chunk (buffer 0, which also takes the binary chunk
+    # and every data-URI buffer of the input, so a GLB holds no data URI), or a new buffer
+    uses_bin = bin_chunk is not None and buffers and isinstance(buffers[0], dict) and "uri" not in buffers[0]
+    if glb_out:
+        body, new_index, shift, kept = bytearray(), {}, {}, [{"byteLength": 0}]
+        for i, b in enumerate(buffers):
+            uri = b.get("uri") if isinstance(b, dict) else None
+            if (i == 0 and uses_bin) or (isinstance(uri, str) and uri.startswith("data:")):
+                raw = bin_chunk if uri is None else _data_uri(uri, src)
+                body += b"\0" * ((-len(body)) % 8)
+                new_index[i], shift[i] = 0, len(body)
+                body += raw[:b.get("byteLength", len(raw))] if isinstance(b.get("byteLength"), int) else raw
+            else:
+                new_index[i], shift[i] = len(kept), 0
+                kept.append(b)
+        for v in views:
+            if isinstance(v, dict) and isinstance(v.get("buffer"), int) and v["buffer"] in new_index:
+                k = v["buffer"]
+                v["buffer"] = new_index[k]
+                if shift[k]:
+                    v["byteOffset"] = v.get("byteOffset", 0) + shift[k]
+        buffers[:] = kept
+        bin_chunk = bytes(body)
+        app = _Appender(len(bin_chunk) + (-len(bin_chunk)) % 8)
+        new_buffer = 0
+    else:
+        if uses_bin:  # .glb to .gltf: the binary chunk becomes a data URI
+            buffers[0]["uri"] = "data:application/octet-stream;base64," + base64.b64encode(bin_chunk).decode()
+        app = _Appender(0)
+        new_buffer = len(buffers)
+        buffers.append({"byteLength": 0})
+    # drop earlier micromaps of both extensions (their views stay, unreferenced)
+    root_ext = doc.setdefault("extensions", {})
+    for name in (EXT_OMM, EXT_PAIRS):
+        root_ext.pop(name, None)
+    for m in doc.get("meshes") or []:
+        for p in (m.get("primitives") or []) if isinstance(m, dict) else []:
+            if isinstance(p, dict) and isinstance(p.get("extensions"), dict):
+                for name in (EXT_OMM, EXT_PAIRS):
+                    p["extensions"].pop(name, None)
+                if not p["extensions"]:
+                    del p["extensions"]
+    used = [e for e in doc.get("extensionsUsed") or [] if e not in (EXT_OMM, EXT_PAIRS)]
+    first_view = len(views)
+    if micromaps:
+        items = []
+        for mm in micromaps:
+            item = {"data": first_view + app.add(bytes(mm["data"])),
+                    "triangles": first_view + app.add(np.asarray(mm["triangles"], RECORD).tobytes()),
+                    "usageCounts": [int(c) for c, _, _ in mm["usage"]],
+                    "usageLevels": [int(lv) for _, lv, _ in mm["usage"]],
+                    "usageFormats": [int(f) for _, _, f in mm["usage"]]}
+            if mm.get("extras"):
+                item["extras"] = mm["extras"]
+            items.append(item)
+        root_ext[EXT_OMM] = {"micromaps": items}
+        used.append(EXT_OMM)
+        n_rec = [len(mm["triangles"]) for mm in micromaps]
+        for (mi, pi), (m, values) in sorted(prim_omm.items()):
+            prim = doc["meshes"][mi]["primitives"][pi]
+            if prim.get("mode", 4) != 4:
+                if warn:
+                    warn(f"mesh {mi} primitive {pi} is not TRIANGLES (mode {prim.get('mode')}): "
+                         f"{EXT_OMM} cannot describe it, its micromaps are not written")
+                continue
+            ct = index_component_type(n_rec[m])
+            view = first_view + app.add(encode_indices(values, ct))
+            accessors.append({"bufferView": view, "componentType": ct, "count": int(len(values)), "type": "SCALAR"})
+            prim.setdefault("extensions", {})[EXT_OMM] = {"micromap": int(m), "micromapIndices": len(accessors) - 1}
+    if pair_maps:
+        items = []
+        for pm in pair_maps:
+            item = {"codec": pm["codec"], "blockBytes": int(pm["blockBytes"]), "mapSize": int(pm["mapSize"]),
+                    "blocks": first_view + app.add(bytes(pm["blocks"]))}
+            if pm.get("extras"):
+                item["extras"] = pm["extras"]
+            items.append(item)
+        root_ext[EXT_PAIRS] = {"maps": items}
+        used.append(EXT_PAIRS)
+        for (mi, pi), (k, rec) in sorted(prim_pairs.items()):
+            prim = doc["meshes"][mi]["primitives"][pi]
+            if prim.get("mode", 4) != 4:
+                continue
+            view = first_view + app.add(np.asarray(rec, PAIR_RECORD).tobytes())
+            prim.setdefault("extensions", {})[EXT_PAIRS] = {"maps": int(k), "pairs": view}
+    if not root_ext:
+        del doc["extensions"]
+    if used:
+        doc["extensionsUsed"] = used
+    elif "extensionsUsed" in doc:
+        del doc["extensionsUsed"]
+    for v in app.views:
+        views.append({"buffer": new_buffer, **v})
+    if not app.views and not glb_out:
+        buffers.pop()
+    if glb_out:
+        body = bytes(bin_chunk) + b"\0" * (app.base - len(bin_chunk)) + bytes(app.blob)
+        buffers[0]["byteLength"] = len(body)
+        body += b"\0" * ((-len(body)) % 4)
+        js = json.dumps(doc, separators=(",", ":"), ensure_ascii=False).encode("utf-8")
+        js += b" " * ((-len(js)) % 4)
+        total = 12 + 8 + len(js) + 8 + len(body)
+        with open(out_tmp, "wb") as f:
+            f.write(struct.pack("<III", _GLB_MAGIC, 2, total))
+            f.write(struct.pack("<II", len(js), _JSON_CHUNK) + js)
+            f.write(struct.pack("<II", len(body), _BIN_CHUNK) + body)
+    else:
+        if app.views:
+            buffers[new_buffer]["byteLength"] = len(app.blob)
+            buffers[new_buffer]["uri"] = ("data:application/octet-stream;base64,"
+                                          + base64.b64encode(bytes(app.blob)).decode())
+        with open(out_tmp, "w", encoding="utf-8") as f:
+            json.dump(doc, f, indent=1, ensure_ascii=False)
+            f.write("\n")
