@@ -7,6 +7,9 @@
     CODEC[-VARIANT]      vq2, vq4 or vq4x64; VARIANT: paper (the deck's encoder) or an effort of
                          our encoder (fast, medium, thorough); none: the command's --encoder /
                          --effort, else the codec's defaults
+    omm                  (trace) the EXT_mesh_opacity_micromap micromaps stored in the traced file
+    file:CODEC           (trace) the OMAPS_pair_opacity_maps pair blocks stored in the traced file,
+                         CODEC the codec they were stored with (sqN, vq2, vq4, vq4x64)
 
 A ``Scheme`` says what is stored (its ``kind``: none, texel, micromap or square with its
 ``codec``) and what it costs (``bits_for``: storage bits per pair). The bakers make the maps.
@@ -29,9 +32,9 @@ from .errors import InputError
 
 __all__ = ["Scheme", "get_scheme", "parse_schemes", "DEFAULT_SCHEMES", "KINDS", "EVAL_KINDS", "TRACE_KINDS", "VARIANTS"]
 
-KINDS = ("none", "texel", "micromap", "square")
+KINDS = ("none", "texel", "micromap", "square", "stored")
 EVAL_KINDS = ("texel", "micromap", "square")  # omaps eval
-TRACE_KINDS = ("none", "micromap", "square")  # omaps trace
+TRACE_KINDS = ("none", "micromap", "square", "stored")  # omaps trace ("stored": read from the traced file)
 VARIANTS = ("paper",) + tuple(EFFORTS)
 DEFAULT_SCHEMES = ("sq4", "sq8", "sq16", "sq32", "sq64", "tri2", "tri3", "tri4", "tri5", "texel")
 _TRI = re.compile(r"tri(\d+)")
@@ -41,7 +44,7 @@ _SQ = re.compile(r"sq(\d+)")
 @dataclass(frozen=True)
 class Scheme:
     name: str
-    kind: str  # none | texel | micromap | square
+    kind: str  # none | texel | micromap | square | stored (omm, file:CODEC: maps the traced file holds)
     level: int | None = None  # micromap
     codec: Codec | None = None  # square: raw sqN or a compressed codec
     encoder: str | None = None
@@ -92,6 +95,13 @@ def get_scheme(name: str, encoder: str | None = None, effort: str | None = None)
     key = str(name).strip().lower()
     if key in ("none", "texel"):
         return Scheme(key, key)
+    if key == "omm":
+        return Scheme(key, "stored")
+    if key.startswith("file:"):
+        codec_name = key[len("file:"):]
+        if not (_SQ.fullmatch(codec_name) or codec_name in codec_names()):
+            raise InputError(f"unknown scheme {name!r}: file:CODEC names a codec (sqN, {', '.join(codec_names())})")
+        return Scheme(key, "stored", codec=get_codec(codec_name))
     m = _TRI.fullmatch(key)
     if m:
         from .bake.micromap import check_level
@@ -110,7 +120,7 @@ def get_scheme(name: str, encoder: str | None = None, effort: str | None = None)
             encoder, effort = "best", variant
         enc, eff = codec.options(encoder, effort)
         return Scheme(key, "square", codec=codec, encoder=enc, effort=eff)
-    raise InputError(f"unknown scheme {name!r} (known: none, texel, triL, sqN, "
+    raise InputError(f"unknown scheme {name!r} (known: none, texel, triL, sqN, omm, file:CODEC, "
                      f"{', '.join(c + '[-' + '|'.join(VARIANTS) + ']' for c in codec_names())})")
 
 

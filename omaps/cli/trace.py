@@ -276,8 +276,8 @@ def _trace_two_state(prep, names, modes, cam, w, h, ref) -> dict:
     cache: dict = {}
     for n in names:
         sm = prep.maps[n]
-        if sm.kind != "square":
-            continue
+        if sm.kind != "square" or (sm.scheme is not None and sm.scheme.kind == "stored"):
+            continue  # (a file's stored pair blocks are traced as stored)
         out[n] = {}
         for mode in modes:
             sm2 = two_state_maps(prep, sm, mode, cache=cache)

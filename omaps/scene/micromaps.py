@@ -429,6 +429,14 @@ def write_gltf(src, out_tmp, out_final, micromaps: list[dict], prim_omm: dict, p
                     del p["extensions"]
     used = [e for e in doc.get("extensionsUsed") or [] if e not in (EXT_OMM, EXT_PAIRS)]
     first_view = len(views)
+    if glb_out:  # images stored as data URIs move into the binary chunk (a GLB holds no data URI)
+        for im in doc.get("images") or []:
+            uri = im.get("uri") if isinstance(im, dict) else None
+            if isinstance(uri, str) and uri.startswith("data:"):
+                head = uri[5:].split(",", 1)[0].split(";")[0]
+                im["bufferView"] = first_view + app.add(_data_uri(uri, src))
+                im["mimeType"] = head or im.get("mimeType") or "image/png"
+                del im["uri"]
     if micromaps:
         items = []
         for mm in micromaps:

@@ -16,7 +16,7 @@ from .. import birdcurve, pair, states
 from ..codecs.raw import read_state
 from ..sampling import sample_texture
 from .embree import f64_ptr, i8_ptr, i32_ptr, i64_ptr, u8_ptr, u16_ptr
-from .tables import (T_MAP_DATA, T_MAP_PARAM, T_MAP_ROW, T_MAP_ROW_BYTES, T_MAT_FILTER, T_MAT_H, T_MAT_INCL,
+from .tables import (T_MAP_DATA, T_MAP_LEVEL, T_MAP_OFFSET, T_MAP_PARAM, T_MAP_ROW, T_MAP_ROW_BYTES, T_MAT_FILTER, T_MAT_H, T_MAT_INCL,
                      T_MAT_TEX_START, T_MAT_THR, T_MAT_W, T_MAT_WRAP_U, T_MAT_WRAP_V, T_TEX, T_TRI_CORNER,
                      T_TRI_MAT, T_TRI_UV, T_TRI_VALPHA)
 
@@ -72,6 +72,15 @@ def micro_map_state(table, tri, b1, b2):
     return read_state(u8_ptr(table[T_MAP_DATA]), row * table[T_MAP_ROW_BYTES], k)
 
 
+@njit(cache=True)
+def stored_micromap_state(table, tri, b1, b2):
+    """A micromap stored in the traced file (scheme ``omm``): the triangle's row has its own
+    level and byte offset; 2-bit T/O/C states, micro-triangle from the bird curve."""
+    row = np.int64(i32_ptr(table[T_MAP_ROW])[tri])
+    k = birdcurve.bary_to_index(b1, b2, i32_ptr(table[T_MAP_LEVEL])[row])
+    return read_state(u8_ptr(table[T_MAP_DATA]), i64_ptr(table[T_MAP_OFFSET])[row], k)
+
+
 _CODEC_STATES: dict = {}
 
 
@@ -98,4 +107,6 @@ def state_function(sm):
         return no_map_state
     if sm.kind == "micromap":
         return micro_map_state
+    if sm.kind == "stored_micromap":
+        return stored_micromap_state
     return codec_map_state(sm.codec)

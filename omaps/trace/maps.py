@@ -11,7 +11,7 @@ shared by its instances, as a BLAS shares it.
 from __future__ import annotations
 
 import os
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from tqdm import tqdm
@@ -43,6 +43,7 @@ class SchemeMaps:
     known_fraction: float  # mean over pairs (triangles for micromaps) of the fraction of known regions
     codec: object = None
     scheme: object = None
+    extra: dict = field(default_factory=dict)  # table word -> array the scheme sets itself (trace.tables)
 
 
 def default_jobs(jobs: int | None) -> int:
@@ -117,9 +118,17 @@ def pair_square_states(at: AlphaTriangles, tests: dict, sizes) -> tuple[dict, np
 
 
 def build_scheme_maps(at: AlphaTriangles, tests: dict, schemes, jobs: int = 1,
-                      progress: bool = False) -> dict[str, SchemeMaps]:
+                      progress: bool = False, scene=None) -> dict[str, SchemeMaps]:
     """Bake and store every scheme's maps. ``tests``: material -> ``AlphaTest``; ``schemes``:
-    ``omaps.schemes.Scheme`` objects (kinds none, micromap, square)."""
+    ``omaps.schemes.Scheme`` objects (kinds none, micromap, square, and stored: read from
+    ``scene``'s file by ``trace.stored``)."""
+    stored = [s for s in schemes if s.kind == "stored"]
+    if stored:
+        from .stored import stored_maps
+
+        read = {s.name: stored_maps(at, scene, s) for s in stored}
+        rest = build_scheme_maps(at, tests, [s for s in schemes if s.kind != "stored"], jobs, progress)
+        return {s.name: read[s.name] if s.name in read else rest[s.name] for s in schemes}
     if not at.count:  # nothing alpha-tested: no maps, the filter is never called
         return {s.name: SchemeMaps(s.name, s.kind, s.level if s.kind == "micromap" else (s.map_size or 0),
                                    np.zeros(0, np.int32), np.zeros(1, np.uint8), s.codec.block_bytes if s.codec else 1,

@@ -58,7 +58,7 @@ def prepare(scene, schemes, rules: MaterialRules = MaterialRules(), jobs: int = 
     timings["pair_s"] = time.perf_counter() - t0
     t0 = time.perf_counter()
     tests = {int(m): scene.alpha_test(int(m), rules) for m in np.unique(at.material)}
-    maps_ = build_scheme_maps(at, tests, schemes, jobs, progress)
+    maps_ = build_scheme_maps(at, tests, schemes, jobs, progress, scene)
     timings["bake_encode_s"] = time.perf_counter() - t0
     t0 = time.perf_counter()
     device = embree.Device(embree_config)

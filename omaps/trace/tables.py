@@ -20,7 +20,8 @@ T_PROTO_OF_INST, T_ALPHA_BASE, T_TRI_MAT, T_TRI_UV, T_TRI_CORNER, T_TRI_VALPHA =
 T_MAT_TEX_START, T_MAT_W, T_MAT_H, T_MAT_WRAP_U, T_MAT_WRAP_V, T_MAT_FILTER, T_MAT_THR, T_MAT_INCL = 6, 7, 8, 9, 10, 11, 12, 13
 T_TEX = 14
 T_MAP_ROW, T_MAP_DATA, T_MAP_ROW_BYTES, T_MAP_PARAM = 15, 16, 17, 18
-TABLE_WORDS = 19
+T_MAP_LEVEL, T_MAP_OFFSET = 19, 20  # stored micromaps (scheme omm): per row its level (int32) and byte offset (int64)
+TABLE_WORDS = 21
 
 # ---- a query context: Embree's part, then ours (int64 words) -----------------------------------
 C0 = CONTEXT_BYTES // 8
@@ -100,6 +101,7 @@ def scheme_tables(base: dict, sm) -> TraceTables:
     arrays = dict(base)
     arrays[T_MAP_ROW] = np.ascontiguousarray(sm.rows, dtype=np.int32)
     arrays[T_MAP_DATA] = np.ascontiguousarray(sm.data, dtype=np.uint8)
+    arrays.update(sm.extra)  # words a scheme sets itself (stored micromaps' levels, a file's corner codes)
     table = np.zeros(TABLE_WORDS, np.int64)
     for k, a in arrays.items():
         table[k] = a.ctypes.data
