@@ -300,3 +300,21 @@ def test_khronos_validator(tmp_path, scene, args, suffixes):
         assert rep["numWarnings"] <= ref["numWarnings"], rep["messages"]
         assert [(m["code"], m["pointer"]) for m in rep["messages"] if m["severity"] == 0] == \
             [k for k, m in zip(key, ref["messages"]) if m["severity"] == 0]
+
+
+@pytest.mark.parametrize("args", [["--dynamic", "1", "--max-level", "5"], ["--level", "0", "--no-special"],
+                                  ["--format", "2state"]])
+def test_trace_reads_stored_levels_and_formats(tmp_path, args):
+    """Per-record levels (--dynamic), level 0 and 2-state records, traced:
+    a 4-state file changes no pixel; a 2-state one runs no alpha test at all."""
+    src = quad_scene(tmp_path)
+    out = tmp_path / "q.glb"
+    assert main(["omm", str(src), "-o", str(out), "--quiet", *args]) == 0
+    js = tmp_path / "t.json"
+    rc = main(["trace", str(out), "--schemes", "none,omm", "--size", "48", "--quiet", "--json", str(js)])
+    rep = json.loads(js.read_text())["schemes"]
+    if "2state" in args:
+        assert rep["omm"]["alpha_tests_per_primary_ray"] == 0
+    else:
+        assert rc == 0 and rep["omm"]["differing_pixels"] == 0
+        assert rep["omm"]["alpha_tests_per_primary_ray"] <= rep["none"]["alpha_tests_per_primary_ray"]
