@@ -159,7 +159,34 @@ def cell_flag(values, bounds, period_x, period_y, row, col, poly, k, c, r, grow,
     within the cell of unaddressed index (r, c), stored at (row, col). ``buf_*``: scratch
     (POLY_MAX, 2). See the module docstring for the allowances."""
     a00, a01, a10, a11 = cell_taps(values, period_x, period_y, row, col)
-    mn, mx = region_extremes(poly, k, float(c), float(r), -grow, 1.0 + grow, a00, a01, a10, a11, buf_a, buf_b)
+    # first the region's bounding box within the cell: f's extremes over a box are at its
+    # corners, and a box that is known makes the region inside it known (most regions are)
+    lo = -grow
+    hi = 1.0 + grow
+    x0 = y0 = np.inf
+    x1 = y1 = -np.inf
+    for i in range(k):
+        x0 = min(x0, poly[i, 0] - c)
+        x1 = max(x1, poly[i, 0] - c)
+        y0 = min(y0, poly[i, 1] - r)
+        y1 = max(y1, poly[i, 1] - r)
+    x0 = max(x0, lo)
+    y0 = max(y0, lo)
+    x1 = min(x1, hi)
+    y1 = min(y1, hi)
+    if x0 <= x1 and y0 <= y1:
+        b = a01 - a00
+        cc = a10 - a00
+        d = a00 - a01 - a10 + a11
+        v0 = a00 + b * x0 + cc * y0 + d * x0 * y0
+        v1 = a00 + b * x1 + cc * y0 + d * x1 * y0
+        v2 = a00 + b * x0 + cc * y1 + d * x0 * y1
+        v3 = a00 + b * x1 + cc * y1 + d * x1 * y1
+        f = _classify(min(min(v0, v1), min(v2, v3)), max(max(v0, v1), max(v2, v3)), a00, a01, a10, a11, bounds,
+                      grow)
+        if f != 3:
+            return f
+    mn, mx = region_extremes(poly, k, float(c), float(r), lo, hi, a00, a01, a10, a11, buf_a, buf_b)
     if mn > mx:  # the region misses the cell by rounding: count all of it
         return 3
     return _classify(mn, mx, a00, a01, a10, a11, bounds, grow)
