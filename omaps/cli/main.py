@@ -12,7 +12,7 @@ from .common import show_warning
 
 
 def parser() -> argparse.ArgumentParser:
-    from . import maps, omm, trace
+    from . import batch, maps, omm, trace
 
     p = argparse.ArgumentParser(prog="omaps", description="Bake, compress and evaluate opacity maps "
                                 "for ray tracing alpha-tested geometry.")
@@ -21,6 +21,7 @@ def parser() -> argparse.ArgumentParser:
     maps.add_parsers(sub)
     trace.add_parser(sub)
     omm.add_parser(sub)
+    batch.add_parser(sub)
     return p
 
 

@@ -22,6 +22,11 @@ from .common import add_codec_options, add_state_options, eval_config, print_tab
 
 
 def add_parsers(sub) -> None:
+    add_eval_parser(sub)
+    _add_map_parsers(sub)
+
+
+def add_eval_parser(sub) -> None:
     e = sub.add_parser("eval", help="savings of map schemes over a corpus of alpha textures",
                        description="Savings (fraction of hits needing no any-hit shader) of each scheme "
                                    "on each texture mapped to a triangle pair. With no PATH: the embedded "
@@ -48,6 +53,8 @@ def add_parsers(sub) -> None:
     add_codec_options(e)
     e.set_defaults(func=cmd_eval)
 
+
+def _add_map_parsers(sub) -> None:
     b = sub.add_parser("bake", help="bake one uncompressed map and save its states as .npy",
                        description="Bake a square map (sqN, corpus convention) or per-triangle micromaps "
                                    "(triL) for a texture; with --uvs, micromaps of the given UV triangles.")

@@ -1,0 +1,434 @@
+"""``omaps batch omm|eval|trace``: one command over many inputs, on Dask.
+
+Each input runs through exactly the single command's own function (``cmd_omm``, ``cmd_eval``,
+``cmd_trace``) with the batch's options, its output set to one path under OUTDIR (the same
+layout as the single command: an ``omm`` folder, the ``eval`` / ``trace`` JSON), so its outputs
+are those of ``omaps CMD INPUT -o/--json PATH`` byte for byte (a ``trace`` JSON differs only in
+its timings). Around it:
+
+* inputs: files, folders (searched recursively: images for ``eval``, ``.gltf`` / ``.glb`` for
+  ``omm`` and ``trace``) and globs; output names are paths relative to the folder given
+  (extension dropped; kept where two inputs would share a name);
+* robust: a bad input is a recorded error (its message, exit code 2 of the single command), never
+  a failed batch; outputs are written by the command's own atomic ``Outputs``;
+* resume: after an input's outputs are in place, a completion marker
+  ``OUTDIR/.batch/NAME.json`` (the input's size and mtime, the options, its figures) is written,
+  atomically, last; a re-run skips an input whose marker matches and whose output exists;
+* scheduling: ``none`` (serial, in this process), ``local`` (a ``LocalCluster``: one worker
+  process per core, one thread each) or ``tcp://HOST:PORT`` (an existing Dask cluster); at most
+  ``window`` inputs are in flight (default: twice the workers' threads), so memory stays bounded;
+* the summary: ``OUTDIR/summary.json`` and ``OUTDIR/summary.csv`` (per input its status and
+  figures or its error; totals).
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import csv
+import glob
+import io
+import json
+import os
+import sys
+import time
+import traceback
+import warnings
+
+from . import atomic
+from .errors import InputError
+
+COMMANDS = ("omm", "eval", "trace")
+MARKERS = ".batch"
+SUMMARY = "summary"
+GLTF_EXTENSIONS = (".gltf", ".glb")
+# the single command's positional input and output option (namespace attributes)
+INPUT_DEST = {"omm": "inputs", "eval": "paths", "trace": "scene"}
+OUTPUT_DEST = {"omm": "output", "eval": "json", "trace": "json"}
+# options of the single command a batch sets itself (per input), or refuses
+REFUSED = {"eval": ("csv", "plot", "show"), "omm": ("verify", "expand"), "trace": ("heatmap", "render")}
+# namespace attributes that belong to the batch, not to the command run per input
+BATCH_ONLY = ("func", "batch_command", "batch_output", "scheduler", "window", "command")
+
+
+def single_function(command: str):
+    from .cli import maps, omm, trace
+
+    return {"omm": omm.cmd_omm, "eval": maps.cmd_eval, "trace": trace.cmd_trace}[command]
+
+
+# ---------------------------------------------------------------------------------------------
+# inputs and their outputs
+
+def _has_magic(p: str) -> bool:
+    return glob.has_magic(p)
+
+
+def _wanted(command: str, path: str) -> bool:
+    from .texture import IMAGE_EXTENSIONS
+
+    low = path.lower()
+    return low.endswith(IMAGE_EXTENSIONS) if command == "eval" else low.endswith(GLTF_EXTENSIONS)
+
+
+def find_inputs(command: str, given, outdir: str) -> list[tuple[str, str]]:
+    """(input path, name relative to the folder or glob it came from, extension kept) per input,
+    in the order given, folders and globs sorted; a path that does not exist is kept (its error
+    is recorded when it runs). The output folder is never searched."""
+    out_abs = os.path.abspath(outdir)
+    found: list[tuple[str, str]] = []
+    seen = set()
+
+    def add(path, name):
+        a = os.path.abspath(path)
+        if a in seen or a == out_abs or a.startswith(out_abs + os.sep):
+            return
+        seen.add(a)
+        found.append((path, name))
+
+    for g in given:
+        g = os.fspath(g)
+        if os.path.isdir(g):
+            for root, dirs, files in os.walk(g):
+                dirs.sort()
+                if os.path.abspath(root) == out_abs or os.path.abspath(root).startswith(out_abs + os.sep):
+                    dirs[:] = []
+                    continue
+                for f in sorted(files):
+                    full = os.path.join(root, f)
+                    if _wanted(command, full):
+                        add(full, os.path.relpath(full, g))
+        elif not os.path.lexists(g) and _has_magic(g):
+            matches = sorted(glob.glob(g, recursive=True))
+            if not matches:
+                raise InputError("no file matches this pattern", g)
+            for m in matches:
+                if os.path.isfile(m) and _wanted(command, m):
+                    add(m, os.path.basename(m))
+        else:
+            add(g, os.path.basename(g))
+    if not found:
+        raise InputError("no input found (" + ("images" if command == "eval" else ".gltf / .glb scenes") + ")",
+                         ", ".join(map(os.fspath, given)))
+    return found
+
+
+def output_names(command: str, found) -> list[str]:
+    """The output name of each input: its relative name without the extension, or with it (as
+    ``NAME_EXT``) where two inputs would share one; two inputs still sharing a name are an error."""
+    reserved = {SUMMARY, MARKERS}
+    stems = [os.path.splitext(n)[0] for _, n in found]
+    counts: dict[str, int] = {}
+    for s in stems:
+        counts[s.lower()] = counts.get(s.lower(), 0) + 1
+    names = []
+    for (path, n), s in zip(found, stems):
+        if counts[s.lower()] > 1 or s.lower() in reserved:
+            root, ext = os.path.splitext(n)
+            s = root + "_" + ext.lstrip(".")
+        names.append(s)
+    taken: dict[str, str] = {}
+    for (path, _), s in zip(found, names):
+        if s.lower() in taken:
+            raise InputError(f"has the same output name ({s}) as {taken[s.lower()]}; run them in separate batches",
+                             path)
+        taken[s.lower()] = path
+    return names
+
+
+def output_path(command: str, outdir: str, name: str) -> str:
+    return os.path.join(outdir, name) if command == "omm" else os.path.join(outdir, name + ".json")
+
+
+def marker_path(outdir: str, name: str) -> str:
+    return os.path.join(outdir, MARKERS, name + ".json")
+
+
+def command_options(a) -> dict:
+    """The options of the command run per input (what the marker records)."""
+    d = {k: v for k, v in vars(a).items() if k not in BATCH_ONLY}
+    d.pop(INPUT_DEST[a.batch_command], None)
+    d.pop(OUTPUT_DEST[a.batch_command], None)
+    return d
+
+
+def fingerprint(command: str, path: str, options: dict) -> dict:
+    try:
+        st = os.stat(path)
+        stat = [st.st_size, st.st_mtime_ns]
+    except OSError:
+        stat = None
+    return {"command": command, "input": os.path.abspath(path), "stat": stat, "options": options}
+
+
+def finished(command: str, out: str, marker: str, fp: dict) -> dict | None:
+    """The recorded result of an input done before with the same options (its marker matches
+    and its output is in place), else None."""
+    try:
+        with open(marker, encoding="utf-8") as f:
+            m = json.load(f)
+    except (OSError, ValueError):
+        return None
+    if not isinstance(m, dict) or m.get("fingerprint") != json.loads(json.dumps(fp)):
+        return None
+    rec = m.get("record")
+    if not isinstance(rec, dict):
+        return None
+    if rec.get("status") == "skipped":
+        return rec
+    done = (os.path.isfile(os.path.join(out, "omm.json")) if command == "omm" else os.path.isfile(out))
+    return rec if done else None
+
+
+# ---------------------------------------------------------------------------------------------
+# one input
+
+def figures(command: str, out: str) -> dict:
+    """What the summary keeps of one input's output."""
+    if command == "omm":
+        with open(os.path.join(out, "omm.json"), encoding="utf-8") as f:
+            st = json.load(f)["statistics"]
+        return {k: st[k] for k in ("triangles", "micro_triangles", "transparent", "opaque", "unknown",
+                                   "known_area_fraction", "micromaps", "data_bytes") if k in st}
+    with open(out, encoding="utf-8") as f:
+        r = json.load(f)
+    if command == "eval":
+        t = r["textures"][0]
+        return {"width": t["width"], "height": t["height"],
+                "savings": {s: v["savings"] for s, v in t["schemes"].items()},
+                "bits": {s: v["bits"] for s, v in t["schemes"].items()}}
+    return {"passed": r["passed"], "triangles": r["scene"].get("triangles"),
+            "alpha_tests_per_primary_ray": {s: v["alpha_tests_per_primary_ray"] for s, v in r["schemes"].items()}}
+
+
+def run_one(command: str, options: dict, path: str, name: str, outdir: str, fp: dict) -> dict:
+    """Run the single command on one input, its output at ``output_path``; then write the marker.
+    Returns the input's record: status ok / problems (the command's exit 1) / skipped / error."""
+    from .cli.common import show_warning
+
+    a = argparse.Namespace(**options)
+    setattr(a, INPUT_DEST[command], path if command == "trace" else [path])
+    out = output_path(command, outdir, name)
+    setattr(a, OUTPUT_DEST[command], out)
+    a.quiet = True
+    rec = {"input": path, "output": os.path.relpath(out, outdir), "status": None}
+    t0 = time.perf_counter()
+    stdout, stderr = io.StringIO(), io.StringIO()
+    try:
+        with contextlib.redirect_stdout(stdout), contextlib.redirect_stderr(stderr), warnings.catch_warnings():
+            warnings.showwarning = show_warning
+            warnings.simplefilter("always", UserWarning)
+            rc = single_function(command)(a)
+        rec["status"] = "ok" if rc == 0 else "problems"
+        rec["figures"] = figures(command, out)
+    except InputError as exc:
+        if command == "eval" and exc.problem.startswith("no texture is at least"):
+            rec["status"], rec["reason"] = "skipped", f"smaller than --min-size {options.get('min_size')} px"
+            rec["output"] = None
+        else:
+            rec["status"], rec["error"] = "error", str(exc) if exc.path else f"{path}: {exc.problem}"
+    except OSError as exc:
+        rec["status"], rec["error"] = "error", f"{exc.filename or path}: {exc.strerror or exc}"
+    except Exception as exc:  # a bug on one input must not stop the others: recorded with where it came from
+        tb = traceback.extract_tb(exc.__traceback__)[-1]
+        rec["status"] = "error"
+        rec["error"] = f"{path}: {type(exc).__name__}: {exc} ({os.path.basename(tb.filename)}:{tb.lineno})"
+    rec["seconds"] = round(time.perf_counter() - t0, 3)
+    messages = [ln for ln in stderr.getvalue().splitlines() if ln.startswith("omaps:")]
+    if messages:
+        rec["messages"] = messages
+    if rec["status"] != "error":  # last, atomically: the input is done
+        atomic.write_text(marker_path(outdir, name), json.dumps({"fingerprint": fp, "record": rec}, indent=1) + "\n")
+    return rec
+
+
+# ---------------------------------------------------------------------------------------------
+# scheduling
+
+@contextlib.contextmanager
+def dask_client(scheduler: str):
+    """A distributed Client: ``local`` starts a LocalCluster (one single-threaded worker process
+    per core; workers may start the command's own worker processes), else connects to the address."""
+    import logging
+
+    import dask
+    from distributed import Client, LocalCluster
+
+    if scheduler == "local":
+        n = max(1, os.cpu_count() or 1)
+        with dask.config.set({"distributed.worker.daemon": False}):
+            with LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=None,
+                              silence_logs=logging.CRITICAL) as cluster, Client(cluster) as client:
+                yield client
+    else:
+        try:
+            client = Client(scheduler, timeout="20s")
+        except (OSError, TimeoutError) as exc:
+            raise InputError(f"cannot connect to the Dask scheduler ({exc})", scheduler) from None
+        with client:
+            yield client
+
+
+def run_all(command, jobs, scheduler: str, window: int | None, progress: bool):
+    """Run ``jobs`` (lists of ``run_one``'s arguments) and yield their records as they finish."""
+    from tqdm import tqdm
+
+    bar = tqdm(total=len(jobs), desc=f"batch {command}", unit="input", disable=not progress, leave=False)
+    try:
+        if scheduler == "none":
+            for j in jobs:
+                rec = run_one(*j)
+                bar.update()
+                yield rec
+            return
+        from distributed import as_completed
+
+        with dask_client(scheduler) as client:
+            threads = sum(client.nthreads().values()) or 1
+            limit = window or 2 * threads
+            todo = list(jobs)
+            todo.reverse()
+            pending = as_completed()
+            inputs = {}
+
+            def submit():
+                j = todo.pop()
+                fut = client.submit(run_one, *j, pure=False, key=f"omaps-batch-{command}-{os.urandom(8).hex()}")
+                inputs[fut.key] = j[2]
+                pending.add(fut)
+
+            while todo and pending.count() < limit:
+                submit()
+            for fut in pending:
+                try:
+                    rec = fut.result()
+                except Exception as exc:  # a worker that died (killed, out of memory): recorded, the rest go on
+                    rec = {"input": inputs[fut.key], "status": "error",
+                           "error": f"{inputs[fut.key]}: worker failed: {type(exc).__name__}: {exc}"}
+                inputs.pop(fut.key, None)
+                fut.release()
+                bar.update()
+                yield rec
+                if todo:
+                    submit()
+    finally:
+        bar.close()
+
+
+# ---------------------------------------------------------------------------------------------
+# the summary
+
+def totals(command: str, records: list[dict]) -> dict:
+    t = {"inputs": len(records)}
+    for s in ("ok", "problems", "skipped", "error"):
+        t[s] = sum(r["status"] == s for r in records)
+    t["resumed"] = sum(bool(r.get("resumed")) for r in records)
+    done = [r["figures"] for r in records if r.get("figures")]
+    if command == "eval" and done:
+        schemes = list(done[0]["savings"])
+        t["mean_savings"] = {s: sum(f["savings"][s] for f in done) / len(done) for s in schemes}
+    elif command == "omm":
+        for k in ("triangles", "micro_triangles", "micromaps", "data_bytes"):
+            t[k] = sum(f.get(k, 0) for f in done)
+    elif command == "trace":
+        t["passed"] = sum(bool(f.get("passed")) for f in done)
+    return t
+
+
+def _flat(f: dict) -> dict:
+    out = {}
+    for k, v in (f or {}).items():
+        if isinstance(v, dict):
+            out.update({f"{k}:{s}": x for s, x in v.items()})
+        else:
+            out[k] = v
+    return out
+
+
+def summary_csv(records: list[dict], tot: dict) -> str:
+    rows = [{"input": r["input"], "output": r.get("output") or "", "status": r["status"],
+             "error": r.get("error") or r.get("reason") or "", **_flat(r.get("figures"))} for r in records]
+    total = {"input": "(total)", "output": "", "status": f"{tot['ok']} ok, {tot['problems']} problems, "
+             f"{tot['skipped']} skipped, {tot['error']} errors", "error": ""}
+    kept = {("savings" if k == "mean_savings" else k): v for k, v in tot.items()
+            if k in ("mean_savings", "triangles", "micro_triangles", "micromaps", "data_bytes", "passed")}
+    total.update(_flat(kept))  # the eval row's savings columns hold the means
+    cols = []
+    for r in rows + [total]:
+        cols += [c for c in r if c not in cols]
+    buf = io.StringIO()
+    w = csv.DictWriter(buf, cols, lineterminator="\n")
+    w.writeheader()
+    w.writerows(rows + [total])
+    return buf.getvalue()
+
+
+def batch(a) -> int:
+    """``omaps batch``: see the module docstring. Exit 0 when every input is ok or skipped, 1 when
+    one has an error or problems (all listed in the summary), 2 bad batch options."""
+    from .cli.common import show_progress
+
+    command, outdir = a.batch_command, a.batch_output
+    if not outdir:
+        raise InputError(f"give the output folder with -o OUTDIR (omaps batch {command} INPUTS... -o OUTDIR)")
+    for opt in REFUSED[command]:
+        if getattr(a, opt, None):
+            raise InputError(f"omaps batch {command} writes one output per input under OUTDIR; "
+                             f"--{opt} is not available here")
+    if command != "omm" and getattr(a, "json", None):
+        raise InputError(f"omaps batch {command} writes each input's JSON under OUTDIR; drop --json")
+    if a.scheduler not in ("none", "local") and not a.scheduler.startswith(("tcp://", "tls://", "inproc://")):
+        raise InputError(f"--scheduler must be local, none or tcp://HOST:PORT, got {a.scheduler!r}")
+    if a.window is not None and a.window < 1:
+        raise InputError(f"--window must be >= 1, got {a.window}")
+    if os.path.lexists(outdir) and not os.path.isdir(outdir):
+        raise InputError("exists and is not a folder; -o is the batch's output folder", outdir)
+    atomic.check_file(os.path.join(outdir, SUMMARY + ".json"), "-o")  # OUTDIR can be created and written
+    found = find_inputs(command, getattr(a, INPUT_DEST[command]) or [], outdir)
+    names = output_names(command, found)
+    options = command_options(a)
+    single_function(command)  # importable before any work
+    records: dict[str, dict] = {}
+    jobs = []
+    for (path, _), name in zip(found, names):
+        fp = fingerprint(command, path, options)
+        out = output_path(command, outdir, name)
+        done = finished(command, out, marker_path(outdir, name), fp)
+        if done is not None:
+            records[name] = {**done, "resumed": True}
+            continue
+        if command == "omm" and os.path.isdir(out) and os.listdir(out) and "omm.json" not in os.listdir(out):
+            records[name] = {"input": path, "output": os.path.relpath(out, outdir), "status": "error",
+                             "error": f"{out}: folder is not empty and holds no omm.json (not written by omaps): "
+                                      "not replacing it"}
+            continue
+        jobs.append((command, options, path, name, outdir, fp))
+    t0 = time.perf_counter()
+    print(f"omaps batch {command}: {len(found)} inputs, {len(found) - len(jobs)} already done "
+          f"or refused, {len(jobs)} to run (scheduler {a.scheduler})", file=sys.stderr)
+    by_input = {j[2]: j[3] for j in jobs}
+    for rec in run_all(command, jobs, a.scheduler, a.window, show_progress(a.quiet)):
+        records[by_input.get(rec["input"], rec["input"])] = rec
+    dt = time.perf_counter() - t0
+    ordered = [records[n] for n in names if n in records]
+    ordered += [r for n, r in records.items() if n not in names]
+    tot = totals(command, ordered)
+    tot["seconds"] = round(dt, 3)
+    tot["inputs_per_second"] = round(len(jobs) / dt, 4) if jobs and dt > 0 else None
+    settings = {"command": command, "scheduler": a.scheduler, "options": options}
+    with contextlib.suppress(OSError):
+        os.rmdir(os.path.join(outdir, MARKERS))  # only if empty (nothing done)
+    atomic.write_text(os.path.join(outdir, SUMMARY + ".json"),
+                      json.dumps({"settings": settings, "inputs": ordered, "totals": tot}, indent=1) + "\n")
+    atomic.write_text(os.path.join(outdir, SUMMARY + ".csv"), summary_csv(ordered, tot))
+    for r in ordered:
+        if r["status"] == "error":
+            print(f"omaps: error: {r['error']}", file=sys.stderr)
+        elif r["status"] == "problems":
+            print(f"omaps: {r['input']}: done with problems: " + "; ".join(r.get("messages", [])), file=sys.stderr)
+    print(f"omaps batch {command}: {tot['ok']} ok, {tot['problems']} with problems, {tot['skipped']} skipped, "
+          f"{tot['error']} errors ({tot['resumed']} done before); {dt:.2f} s; summary in "
+          f"{os.path.join(outdir, SUMMARY + '.json')} and .csv")
+    if command == "eval" and "mean_savings" in tot:
+        print("mean savings: " + ", ".join(f"{s} {v:.3f}" for s, v in tot["mean_savings"].items()))
+    return 1 if tot["error"] or tot["problems"] else 0
