@@ -1,0 +1,196 @@
+"""``omaps batch``: per input the single command's outputs byte for byte, the summary, errors
+recorded, resume (a finished input is skipped; a batch killed mid-way is re-run without redoing
+what it finished), and the Dask schedulers (one LocalCluster in this file)."""
+
+from __future__ import annotations
+
+import csv
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+
+import numpy as np
+import pytest
+from PIL import Image
+
+from omaps.cli.main import main
+from conftest import SCENES, TEXTURES, needs_scenes, needs_shared
+
+SCHEMES = "sq16,tri3,vq2"
+
+
+def _textures(folder, n=4, size=64, seed=0):
+    """n RGBA textures with random blobs of alpha (distinct, seeded)."""
+    rng = np.random.default_rng(seed)
+    os.makedirs(folder, exist_ok=True)
+    paths = []
+    for i in range(n):
+        a = (rng.random((size // 8, size // 8)) > 0.5).astype(np.uint8) * 255
+        a = np.kron(a, np.ones((8, 8), np.uint8))
+        rgba = np.dstack([np.full_like(a, 90)] * 3 + [a])
+        p = os.path.join(folder, f"t{i:02d}.png")
+        Image.fromarray(rgba, "RGBA").save(p)
+        paths.append(p)
+    return paths
+
+
+def _summary(outdir):
+    with open(os.path.join(outdir, "summary.json")) as f:
+        s = json.load(f)
+    with open(os.path.join(outdir, "summary.csv")) as f:
+        rows = list(csv.DictReader(f))
+    return s, rows
+
+
+def _single_eval(path, out, *opts):
+    assert main(["eval", str(path), "--json", str(out), "--quiet", *opts]) == 0
+    return open(out, "rb").read()
+
+
+def test_eval_serial_identical_and_corrupt_input_recorded(tmp_path, capsys):
+    src = tmp_path / "tex"
+    paths = _textures(src)
+    (src / "broken.png").write_bytes(b"\x89PNG\r\n\x1a\n not a png at all")
+    out = tmp_path / "out"
+    rc = main(["batch", "eval", str(src), "-o", str(out), "--scheduler", "none", "--schemes", SCHEMES, "--quiet"])
+    assert rc == 1  # one input failed; the others completed
+    s, rows = _summary(out)
+    by = {os.path.basename(r["input"]): r for r in s["inputs"]}
+    assert by["broken.png"]["status"] == "error" and "broken.png" in by["broken.png"]["error"]
+    assert not (out / "broken.json").exists() and not (out / ".batch" / "broken.json").exists()
+    for p in paths:
+        name = os.path.splitext(os.path.basename(p))[0]
+        assert by[os.path.basename(p)]["status"] == "ok"
+        single = _single_eval(p, tmp_path / f"{name}.json", "--schemes", SCHEMES)
+        assert (out / f"{name}.json").read_bytes() == single  # the single command's output, byte for byte
+        savings = json.loads(single)["textures"][0]["schemes"]
+        assert by[os.path.basename(p)]["figures"]["savings"] == {k: v["savings"] for k, v in savings.items()}
+    assert s["totals"]["ok"] == 4 and s["totals"]["error"] == 1 and s["totals"]["inputs"] == 5
+    mean = np.mean([by[os.path.basename(p)]["figures"]["savings"]["sq16"] for p in paths])
+    assert s["totals"]["mean_savings"]["sq16"] == pytest.approx(mean)
+    assert [r["status"] for r in rows][-1].startswith("4 ok") and rows[-1]["input"] == "(total)"
+    assert rows[0]["input"].endswith("broken.png") and rows[0]["status"] == "error"
+    assert float(rows[1]["savings:sq16"]) == by["t00.png"]["figures"]["savings"]["sq16"]
+    assert "broken.png" in capsys.readouterr().err
+    assert not [f for f in os.listdir(out) if f.startswith(".omaps-")]  # no temporary left
+
+
+def test_resume_skips_finished_inputs_and_redoes_changed_ones(tmp_path):
+    src = tmp_path / "tex"
+    _textures(src, n=3)
+    out = tmp_path / "out"
+    args = ["batch", "eval", str(src), "-o", str(out), "--scheduler", "none", "--schemes", "sq16", "--quiet"]
+    assert main(args) == 0
+    before = {f: os.stat(out / f).st_mtime_ns for f in ("t00.json", "t01.json", "t02.json")}
+    time.sleep(0.02)
+    (out / "t01.json").unlink()  # an output gone: that input is done again, the others are skipped
+    assert main(args) == 0
+    s, _ = _summary(out)
+    resumed = {os.path.basename(r["input"]): bool(r.get("resumed")) for r in s["inputs"]}
+    assert resumed == {"t00.png": True, "t01.png": False, "t02.png": True}
+    assert os.stat(out / "t00.json").st_mtime_ns == before["t00.json"]
+    assert os.stat(out / "t01.json").st_mtime_ns != before["t01.json"]
+    assert s["totals"]["ok"] == 3 and s["totals"]["resumed"] == 2
+    # other options: nothing is skipped (the markers record the options)
+    assert main(args[:-3] + ["--schemes", "sq32", "--quiet"]) == 0
+    s, _ = _summary(out)
+    assert s["totals"]["resumed"] == 0 and "sq32" in s["inputs"][0]["figures"]["savings"]
+
+
+def test_killed_batch_resumes_without_redoing_finished_inputs(tmp_path):
+    src = tmp_path / "tex"
+    _textures(src, n=40, size=256, seed=3)
+    out = tmp_path / "out"
+    cmd = [sys.executable, "-m", "omaps", "batch", "eval", str(src), "-o", str(out), "--scheduler", "none",
+           "--schemes", "sq64,tri6,vq4x64,texel", "--quiet"]
+    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    markers = out / ".batch"
+    deadline = time.monotonic() + 120
+    while time.monotonic() < deadline and proc.poll() is None:
+        if markers.is_dir() and len(os.listdir(markers)) >= 2:
+            break
+        time.sleep(0.005)
+    proc.send_signal(signal.SIGKILL)
+    proc.wait()
+    assert proc.returncode == -signal.SIGKILL, "the batch finished before it could be killed"
+    done = sorted(f for f in os.listdir(markers) if f.endswith(".json"))
+    assert 2 <= len(done) < 40 and not (out / "summary.json").exists()
+    for f in done:  # every marked input has its whole output
+        json.loads((out / f).read_text())
+    stamps = {f: os.stat(out / f).st_mtime_ns for f in done}
+    r = subprocess.run(cmd, capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    s, _ = _summary(out)
+    assert s["totals"]["ok"] == 40 and s["totals"]["resumed"] == len(done)
+    assert {f: os.stat(out / f).st_mtime_ns for f in done} == stamps  # not redone
+    assert not [f for f in os.listdir(out) if f.startswith(".omaps-")]  # the killed input left nothing
+
+
+def test_batch_errors_before_work(tmp_path, capsys):
+    src = tmp_path / "tex"
+    _textures(src, n=1)
+    assert main(["batch", "eval", str(src), "-o", str(tmp_path / "o"), "--scheduler", "none",
+                 "--csv", str(tmp_path / "x.csv")]) == 2
+    assert main(["batch", "eval", str(src), "-o", str(tmp_path / "o"), "--scheduler", "bogus"]) == 2
+    assert main(["batch", "eval", str(tmp_path / "nothing*.png"), "-o", str(tmp_path / "o"),
+                 "--scheduler", "none"]) == 2
+    err = capsys.readouterr().err
+    assert "--csv is not available" in err and "--scheduler must be" in err and "no file matches" in err
+    assert not (tmp_path / "o").exists()
+
+
+@needs_scenes
+def test_omm_serial_identical_to_single_runs(tmp_path):
+    """The shared palm and smallpine scenes: one folder per scene, file by file equal to omaps omm."""
+    out = tmp_path / "out"
+    scenes = [str(SCENES / "palm.glb"), str(SCENES / "smallpine" / "scene.gltf")]
+    assert main(["batch", "omm", *scenes, "-o", str(out), "--scheduler", "none", "--quiet"]) == 0
+    for scene, name in zip(scenes, ("palm", "scene")):
+        single = tmp_path / f"single_{name}"
+        assert main(["omm", scene, "-o", str(single), "--quiet"]) == 0
+        files = sorted(os.listdir(single))
+        assert sorted(os.listdir(out / name)) == files and "omm.json" in files
+        for f in files:
+            assert (out / name / f).read_bytes() == (single / f).read_bytes(), f"{name}/{f} differs"
+
+
+@needs_scenes
+def test_trace_serial_matches_single_run(tmp_path):
+    out = tmp_path / "out"
+    opts = ["--schemes", "none,sq16", "--size", "48", "--jobs", "1", "--quiet"]
+    assert main(["batch", "trace", str(SCENES / "palm.glb"), "-o", str(out), "--scheduler", "none", *opts]) == 0
+    assert main(["trace", str(SCENES / "palm.glb"), "--json", str(tmp_path / "single.json"), *opts]) == 0
+    a, b = json.loads((out / "palm.json").read_text()), json.loads((tmp_path / "single.json").read_text())
+    def untimed(d):  # every figure but the timings (seconds, rays per second)
+        if isinstance(d, dict):
+            return {k: untimed(v) for k, v in d.items() if k != "timings" and "per_second" not in k}
+        return d
+
+    assert untimed(a) == untimed(b) and a["passed"]
+    s, _ = _summary(out)
+    assert s["inputs"][0]["figures"]["alpha_tests_per_primary_ray"]["sq16"] == \
+        a["schemes"]["sq16"]["alpha_tests_per_primary_ray"]
+
+
+@needs_shared
+def test_local_cluster_eval_equals_single_eval_on_the_folder(tmp_path):
+    """The one LocalCluster of the tests (subprocess: the CLI as a user runs it)."""
+    out = tmp_path / "out"
+    r = subprocess.run([sys.executable, "-m", "omaps", "batch", "eval", str(TEXTURES), "-o", str(out),
+                        "--scheduler", "local", "--schemes", "sq16,tri3", "--min-size", "64", "--quiet"],
+                       capture_output=True, text=True)
+    assert r.returncode in (0, 1), r.stderr
+    assert main(["eval", str(TEXTURES), "--schemes", "sq16,tri3", "--min-size", "64", "--quiet",
+                 "--json", str(tmp_path / "all.json")]) in (0, 1)
+    whole = {t["name"]: t["schemes"] for t in json.loads((tmp_path / "all.json").read_text())["textures"]}
+    s, _ = _summary(out)
+    ok = [x for x in s["inputs"] if x["status"] == "ok"]
+    assert len(ok) == len(whole) >= 40
+    for x in ok:
+        name = json.loads((out / x["output"]).read_text())["textures"][0]["name"]
+        assert x["figures"]["savings"] == {k: v["savings"] for k, v in whole[name].items()}
+    assert all(x["status"] in ("ok", "skipped") for x in s["inputs"]) or s["totals"]["error"] > 0
+    assert s["totals"]["skipped"] == len(s["inputs"]) - len(ok) - s["totals"]["error"]
