@@ -161,6 +161,16 @@ def fingerprint(command: str, path: str, options: dict) -> dict:
     return {"command": command, "input": os.path.abspath(path), "stat": stat, "options": options}
 
 
+def remove_stale_temporaries(outdir: str) -> None:
+    """Remove what a killed batch left under OUTDIR: only omaps' own hidden temporary names
+    (``.omaps-…``, never a finished output); one batch per OUTDIR at a time."""
+    for root, dirs, files in os.walk(outdir):
+        for n in list(dirs) + files:
+            if n.startswith(atomic.TEMP_PREFIX):
+                atomic._remove(os.path.join(root, n))
+        dirs[:] = [d for d in dirs if not d.startswith(atomic.TEMP_PREFIX)]
+
+
 def finished(command: str, out: str, marker: str, fp: dict) -> dict | None:
     """The recorded result of an input done before with the same options (its marker matches
     and its output is in place), else None."""
@@ -224,7 +234,6 @@ def run_one(command: str, options: dict, path: str, name: str, outdir: str, fp: 
     except InputError as exc:
         if command == "eval" and exc.problem.startswith("no texture is at least"):
             rec["status"], rec["reason"] = "skipped", f"smaller than --min-size {options.get('min_size')} px"
-            rec["output"] = None
         else:
             rec["status"], rec["error"] = "error", str(exc) if exc.path else f"{path}: {exc.problem}"
     except OSError as exc:
@@ -237,7 +246,9 @@ def run_one(command: str, options: dict, path: str, name: str, outdir: str, fp: 
     messages = [ln for ln in stderr.getvalue().splitlines() if ln.startswith("omaps:")]
     if messages:
         rec["messages"] = messages
-    if rec["status"] != "error":  # last, atomically: the input is done
+    if rec["status"] in ("error", "skipped"):  # no output
+        rec["output"] = None
+    if rec["status"] != "error":  # last, atomically: the input is done (an error is tried again next time)
         atomic.write_text(marker_path(outdir, name), json.dumps({"fingerprint": fp, "record": rec}, indent=1) + "\n")
     return rec
 
@@ -385,6 +396,7 @@ def batch(a) -> int:
         raise InputError("exists and is not a folder; -o is the batch's output folder", outdir)
     atomic.check_file(os.path.join(outdir, SUMMARY + ".json"), "-o")  # OUTDIR can be created and written
     found = find_inputs(command, getattr(a, INPUT_DEST[command]) or [], outdir)
+    remove_stale_temporaries(outdir)
     names = output_names(command, found)
     options = command_options(a)
     single_function(command)  # importable before any work

@@ -60,6 +60,7 @@ def test_eval_serial_identical_and_corrupt_input_recorded(tmp_path, capsys):
     s, rows = _summary(out)
     by = {os.path.basename(r["input"]): r for r in s["inputs"]}
     assert by["broken.png"]["status"] == "error" and "broken.png" in by["broken.png"]["error"]
+    assert by["broken.png"]["output"] is None
     assert not (out / "broken.json").exists() and not (out / ".batch" / "broken.json").exists()
     for p in paths:
         name = os.path.splitext(os.path.basename(p))[0]
@@ -121,6 +122,7 @@ def test_killed_batch_resumes_without_redoing_finished_inputs(tmp_path):
     for f in done:  # every marked input has its whole output
         json.loads((out / f).read_text())
     stamps = {f: os.stat(out / f).st_mtime_ns for f in done}
+    (out / ".omaps-0123456789ab.json").write_text("{")  # what a kill while writing leaves
     r = subprocess.run(cmd, capture_output=True, text=True)
     assert r.returncode == 0, r.stderr
     s, _ = _summary(out)
