@@ -374,6 +374,32 @@ def summary_csv(records: list[dict], tot: dict) -> str:
     return buf.getvalue()
 
 
+def precheck(command: str, a) -> None:
+    """The command's own option checks, once before any work (else every input would fail alike)."""
+    from .cli import common, omm, trace
+    from .schemes import EVAL_KINDS, TRACE_KINDS, parse_schemes
+
+    if command == "eval":
+        config = common.eval_config(a)
+        parse_schemes(a.schemes, EVAL_KINDS, config.encoder, config.effort, "omaps eval")
+        if a.min_size < 0:
+            raise InputError(f"--min-size must be >= 0, got {a.min_size}")
+        common.check_jobs(a.jobs)
+    elif command == "trace":
+        parse_schemes(a.schemes, TRACE_KINDS, a.encoder, a.effort, "omaps trace")
+        trace.parse_size(a.size)
+        trace.parse_two_state(a.two_state)
+        common.check_jobs(a.jobs)
+        if a.shadows:
+            trace.parse_light(a.light)
+        if a.camera:
+            trace.parse_camera(a.camera)
+    else:
+        omm._settings(a)
+        if a.threads is not None and a.threads < 1:
+            raise InputError(f"--threads must be >= 1, got {a.threads}")
+
+
 def batch(a) -> int:
     """``omaps batch``: see the module docstring. Exit 0 when every input is ok or skipped, 1 when
     one has an error or problems (all listed in the summary), 2 bad batch options."""
@@ -390,6 +416,7 @@ def batch(a) -> int:
         raise InputError(f"omaps batch {command} writes each input's JSON under OUTDIR; drop --json")
     if a.scheduler not in ("none", "local") and not a.scheduler.startswith(("tcp://", "tls://", "inproc://")):
         raise InputError(f"--scheduler must be local, none or tcp://HOST:PORT, got {a.scheduler!r}")
+    precheck(command, a)
     if a.window is not None and a.window < 1:
         raise InputError(f"--window must be >= 1, got {a.window}")
     if os.path.lexists(outdir) and not os.path.isdir(outdir):

@@ -80,6 +80,8 @@ def bind_camera_value(argv: list[str]) -> list[str]:
     (``--camera=VALUE``) before parsing. Nothing after ``--`` is touched."""
     argv = list(argv)
     words = [k for k, a in enumerate(argv) if not a.startswith("-")]  # omaps' own options take no values
+    if words[:1] and argv[words[0]] == "batch" and len(words) > 1:
+        words = words[1:]  # omaps batch trace: the same options
     if not words or argv[words[0]] != "trace":
         return argv
     start = words[0] + 1
