@@ -136,8 +136,10 @@ def output_names(command: str, found) -> list[str]:
     return names
 
 
-def output_path(command: str, outdir: str, name: str) -> str:
-    return os.path.join(outdir, name) if command == "omm" else os.path.join(outdir, name + ".json")
+def output_path(command: str, outdir: str, name: str, options: dict | None = None) -> str:
+    if command == "omm":
+        return os.path.join(outdir, name + ".glb") if (options or {}).get("glb") else os.path.join(outdir, name)
+    return os.path.join(outdir, name + ".json")
 
 
 def marker_path(outdir: str, name: str) -> str:
@@ -186,7 +188,8 @@ def finished(command: str, out: str, marker: str, fp: dict) -> dict | None:
         return None
     if rec.get("status") == "skipped":
         return rec
-    done = (os.path.isfile(os.path.join(out, "omm.json")) if command == "omm" else os.path.isfile(out))
+    done = (os.path.isfile(os.path.join(out, "omm.json")) if command == "omm" and not out.endswith(".glb")
+            else os.path.isfile(out))
     return rec if done else None
 
 
@@ -196,8 +199,13 @@ def finished(command: str, out: str, marker: str, fp: dict) -> dict | None:
 def figures(command: str, out: str) -> dict:
     """What the summary keeps of one input's output."""
     if command == "omm":
-        with open(os.path.join(out, "omm.json"), encoding="utf-8") as f:
-            st = json.load(f)["statistics"]
+        if out.endswith(".glb"):
+            from .omm import gltf_io
+
+            st = gltf_io.read_gltf(out).summary["statistics"]
+        else:
+            with open(os.path.join(out, "omm.json"), encoding="utf-8") as f:
+                st = json.load(f)["statistics"]
         return {k: st[k] for k in ("triangles", "micro_triangles", "transparent", "opaque", "unknown",
                                    "known_area_fraction", "micromaps", "data_bytes") if k in st}
     with open(out, encoding="utf-8") as f:
@@ -218,7 +226,7 @@ def run_one(command: str, options: dict, path: str, name: str, outdir: str, fp: 
 
     a = argparse.Namespace(**options)
     setattr(a, INPUT_DEST[command], path if command == "trace" else [path])
-    out = output_path(command, outdir, name)
+    out = output_path(command, outdir, name, options)
     setattr(a, OUTPUT_DEST[command], out)
     a.quiet = True
     rec = {"input": path, "output": os.path.relpath(out, outdir), "status": None}
@@ -431,7 +439,7 @@ def batch(a) -> int:
     jobs = []
     for (path, _), name in zip(found, names):
         fp = fingerprint(command, path, options)
-        out = output_path(command, outdir, name)
+        out = output_path(command, outdir, name, options)
         done = finished(command, out, marker_path(outdir, name), fp)
         if done is not None:
             records[name] = {**done, "resumed": True}

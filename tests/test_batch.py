@@ -163,6 +163,12 @@ def test_omm_serial_identical_to_single_runs(tmp_path):
         assert sorted(os.listdir(out / name)) == files and "omm.json" in files
         for f in files:
             assert (out / name / f).read_bytes() == (single / f).read_bytes(), f"{name}/{f} differs"
+    # --glb: the scene with EXT_mesh_opacity_micromap, as omaps omm SCENE -o NAME.glb writes it
+    assert main(["batch", "omm", scenes[0], "-o", str(out / "glb"), "--glb", "--scheduler", "none", "--quiet"]) == 0
+    assert main(["omm", scenes[0], "-o", str(tmp_path / "single.glb"), "--quiet"]) == 0
+    assert (out / "glb" / "palm.glb").read_bytes() == (tmp_path / "single.glb").read_bytes()
+    s, _ = _summary(out / "glb")
+    assert s["inputs"][0]["figures"]["triangles"] == 3840 and s["inputs"][0]["output"] == "palm.glb"
 
 
 @needs_scenes

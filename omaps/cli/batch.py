@@ -34,6 +34,10 @@ def add_parser(sub) -> None:
             p.add_argument("-o", "--output", dest="batch_output", metavar="OUTDIR",
                            help="one JSON per input (OUTDIR/NAME.json), summary.json, summary.csv")
         g = p.add_argument_group("batch")
+        if name == "omm":
+            g.add_argument("--glb", action="store_true",
+                           help="write OUTDIR/NAME.glb (each glTF scene with EXT_mesh_opacity_micromap, as "
+                                "omaps omm SCENE -o NAME.glb) instead of an OMM folder")
         g.add_argument("--scheduler", default="local", metavar="local|none|tcp://HOST:PORT",
                        help="local: a Dask LocalCluster sized to this machine (default); none: serial, in this "
                             "process; tcp://HOST:PORT: an existing Dask scheduler")
