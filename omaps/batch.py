@@ -30,7 +30,6 @@ import glob
 import io
 import json
 import os
-import sys
 import time
 import traceback
 import warnings
@@ -406,76 +405,3 @@ def precheck(command: str, a) -> None:
         omm._settings(a)
         if a.threads is not None and a.threads < 1:
             raise InputError(f"--threads must be >= 1, got {a.threads}")
-
-
-def batch(a) -> int:
-    """``omaps batch``: see the module docstring. Exit 0 when every input is ok or skipped, 1 when
-    one has an error or problems (all listed in the summary), 2 bad batch options."""
-    from .cli.common import show_progress
-
-    command, outdir = a.batch_command, a.batch_output
-    if not outdir:
-        raise InputError(f"give the output folder with -o OUTDIR (omaps batch {command} INPUTS... -o OUTDIR)")
-    for opt in REFUSED[command]:
-        if getattr(a, opt, None):
-            raise InputError(f"omaps batch {command} writes one output per input under OUTDIR; "
-                             f"--{opt} is not available here")
-    if command != "omm" and getattr(a, "json", None):
-        raise InputError(f"omaps batch {command} writes each input's JSON under OUTDIR; drop --json")
-    if a.scheduler not in ("none", "local") and not a.scheduler.startswith(("tcp://", "tls://", "inproc://")):
-        raise InputError(f"--scheduler must be local, none or tcp://HOST:PORT, got {a.scheduler!r}")
-    precheck(command, a)
-    if a.window is not None and a.window < 1:
-        raise InputError(f"--window must be >= 1, got {a.window}")
-    if os.path.lexists(outdir) and not os.path.isdir(outdir):
-        raise InputError("exists and is not a folder; -o is the batch's output folder", outdir)
-    atomic.check_file(os.path.join(outdir, SUMMARY + ".json"), "-o")  # OUTDIR can be created and written
-    found = find_inputs(command, getattr(a, INPUT_DEST[command]) or [], outdir)
-    remove_stale_temporaries(outdir)
-    names = output_names(command, found)
-    options = command_options(a)
-    single_function(command)  # importable before any work
-    records: dict[str, dict] = {}
-    jobs = []
-    for (path, _), name in zip(found, names):
-        fp = fingerprint(command, path, options)
-        out = output_path(command, outdir, name, options)
-        done = finished(command, out, marker_path(outdir, name), fp)
-        if done is not None:
-            records[name] = {**done, "resumed": True}
-            continue
-        if command == "omm" and os.path.isdir(out) and os.listdir(out) and "omm.json" not in os.listdir(out):
-            records[name] = {"input": path, "output": os.path.relpath(out, outdir), "status": "error",
-                             "error": f"{out}: folder is not empty and holds no omm.json (not written by omaps): "
-                                      "not replacing it"}
-            continue
-        jobs.append((command, options, path, name, outdir, fp))
-    t0 = time.perf_counter()
-    print(f"omaps batch {command}: {len(found)} inputs, {len(found) - len(jobs)} already done "
-          f"or refused, {len(jobs)} to run (scheduler {a.scheduler})", file=sys.stderr)
-    by_input = {j[2]: j[3] for j in jobs}
-    for rec in run_all(command, jobs, a.scheduler, a.window, show_progress(a.quiet)):
-        records[by_input.get(rec["input"], rec["input"])] = rec
-    dt = time.perf_counter() - t0
-    ordered = [records[n] for n in names if n in records]
-    ordered += [r for n, r in records.items() if n not in names]
-    tot = totals(command, ordered)
-    tot["seconds"] = round(dt, 3)
-    tot["inputs_per_second"] = round(len(jobs) / dt, 4) if jobs and dt > 0 else None
-    settings = {"command": command, "scheduler": a.scheduler, "options": options}
-    with contextlib.suppress(OSError):
-        os.rmdir(os.path.join(outdir, MARKERS))  # only if empty (nothing done)
-    atomic.write_text(os.path.join(outdir, SUMMARY + ".json"),
-                      json.dumps({"settings": settings, "inputs": ordered, "totals": tot}, indent=1) + "\n")
-    atomic.write_text(os.path.join(outdir, SUMMARY + ".csv"), summary_csv(ordered, tot))
-    for r in ordered:
-        if r["status"] == "error":
-            print(f"omaps: error: {r['error']}", file=sys.stderr)
-        elif r["status"] == "problems":
-            print(f"omaps: {r['input']}: done with problems: " + "; ".join(r.get("messages", [])), file=sys.stderr)
-    print(f"omaps batch {command}: {tot['ok']} ok, {tot['problems']} with problems, {tot['skipped']} skipped, "
-          f"{tot['error']} errors ({tot['resumed']} done before); {dt:.2f} s; summary in "
-          f"{os.path.join(outdir, SUMMARY + '.json')} and .csv")
-    if command == "eval" and "mean_savings" in tot:
-        print("mean savings: " + ", ".join(f"{s} {v:.3f}" for s, v in tot["mean_savings"].items()))
-    return 1 if tot["error"] or tot["problems"] else 0
