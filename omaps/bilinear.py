@@ -53,23 +53,28 @@ POLY_MAX = 24  # vertices of a region clipped to a cell: at most the region's (<
 
 
 @njit(cache=True, inline="always")
+def _tap_pair(i, n, period):
+    """The two taps (i - 1, i) of stored cell index i on an axis of n texels: periodic (the
+    taps of cell 0 wrap to period - 1) or clamped into [0, n)."""
+    if period:
+        return (i - 1 if i > 0 else period - 1), i
+    return max(i - 1, 0), min(i, n - 1)
+
+
+@njit(cache=True, inline="always")
 def cell_taps(values, period_x, period_y, row, col):
     """The taps (a00, a01, a10, a11) of stored cell (row, col): rows row-1, row and columns
     col-1, col of ``values`` (extended like the flags), periodic or clamped."""
     h, w = values.shape
-    if period_y:
-        ya = row - 1 if row > 0 else period_y - 1
-        yb = row
-    else:
-        ya = max(row - 1, 0)
-        yb = min(row, h - 1)
-    if period_x:
-        xa = col - 1 if col > 0 else period_x - 1
-        xb = col
-    else:
-        xa = max(col - 1, 0)
-        xb = min(col, w - 1)
+    ya, yb = _tap_pair(row, h, period_y)
+    xa, xb = _tap_pair(col, w, period_x)
     return values[ya, xa], values[ya, xb], values[yb, xa], values[yb, xb]
+
+
+@njit(cache=True, inline="always")
+def _at(a00, b, c, d, x, y):
+    """The cell's bilinear f = a00 + b x + c y + d x y at local (x, y)."""
+    return a00 + b * x + c * y + d * x * y
 
 
 @njit(cache=True, inline="always")
@@ -135,7 +140,7 @@ def region_extremes(poly, k, ox, oy, lo, hi, a00, a01, a10, a11, buf_a, buf_b):
     for i in range(k):
         px = buf_a[i, 0]
         py = buf_a[i, 1]
-        v = a00 + b * px + c * py + d * px * py
+        v = _at(a00, b, c, d, px, py)
         mn = min(mn, v)
         mx = max(mx, v)
         dx = buf_a[(i + 1) % k, 0] - px
@@ -145,9 +150,7 @@ def region_extremes(poly, k, ox, oy, lo, hi, a00, a01, a10, a11, buf_a, buf_b):
             q1 = b * dx + c * dy + d * (px * dy + py * dx)
             s = -q1 / (2.0 * q2)
             if 0.0 < s < 1.0:
-                x = px + s * dx
-                y = py + s * dy
-                v = a00 + b * x + c * y + d * x * y
+                v = _at(a00, b, c, d, px + s * dx, py + s * dy)
                 mn = min(mn, v)
                 mx = max(mx, v)
     return mn, mx
@@ -178,10 +181,10 @@ def cell_flag(values, bounds, period_x, period_y, row, col, poly, k, c, r, grow,
         b = a01 - a00
         cc = a10 - a00
         d = a00 - a01 - a10 + a11
-        v0 = a00 + b * x0 + cc * y0 + d * x0 * y0
-        v1 = a00 + b * x1 + cc * y0 + d * x1 * y0
-        v2 = a00 + b * x0 + cc * y1 + d * x0 * y1
-        v3 = a00 + b * x1 + cc * y1 + d * x1 * y1
+        v0 = _at(a00, b, cc, d, x0, y0)
+        v1 = _at(a00, b, cc, d, x1, y0)
+        v2 = _at(a00, b, cc, d, x0, y1)
+        v3 = _at(a00, b, cc, d, x1, y1)
         f = _classify(min(min(v0, v1), min(v2, v3)), max(max(v0, v1), max(v2, v3)), a00, a01, a10, a11, bounds,
                       grow)
         if f != 3:
@@ -226,7 +229,5 @@ def point_flag(flags, mixed, values, bounds, period_x, period_y, x, y, grow):
     if not mixed[row, col]:
         return flags[row, col]
     a00, a01, a10, a11 = cell_taps(values, period_x, period_y, row, col)
-    lx = x - c
-    ly = y - r
-    v = a00 + (a01 - a00) * lx + (a10 - a00) * ly + (a00 - a01 - a10 + a11) * lx * ly
+    v = _at(a00, a01 - a00, a10 - a00, a00 - a01 - a10 + a11, x - c, y - r)
     return _classify(v, v, a00, a01, a10, a11, bounds, grow)

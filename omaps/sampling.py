@@ -119,7 +119,7 @@ class FootprintGrid:
     # exact bilinear (empty when absent): 1 where a cell's taps disagree, the texel values the
     # cells' taps read (extended like the flags: mirror doubled), and the alpha test's bounds
     # (O iff min > bounds[0], or >= when bounds[1]; T iff max < bounds[2], or <= when bounds[3])
-    mixed: np.ndarray = field(default_factory=lambda: np.zeros((1, 1), np.uint8))
+    mixed: np.ndarray = field(default_factory=lambda: np.zeros((0, 0), np.uint8))
     values: np.ndarray = field(default_factory=lambda: np.zeros((0, 0), np.float64))
     bounds: np.ndarray = field(default_factory=lambda: np.zeros(4, np.float64))
 

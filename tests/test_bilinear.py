@@ -20,7 +20,7 @@ from omaps import birdcurve, states
 from omaps.alpha_test import AlphaTest, StateRule, material_test
 from omaps.bake import bake_micromap_rows, bake_pair_squares, bake_square
 from omaps.bake.micromap import GROW_TEXEL
-from omaps.pair import PAIR_CORNER_UV
+from omaps.pair import pair_weights
 from omaps.sampling import footprint_grid, sample_texture, wrap_code
 from omaps.texture import AlphaTexture, load_alpha
 
@@ -108,7 +108,6 @@ def test_pair_squares_of_any_uvs_are_conservative_under_sampling(alpha8, uv, wra
     h, w = alpha8.shape
     mu = mv = wrap_code(wrap)
     k = np.linspace(0, 1, 9)
-    from omaps.pair import pair_weights
     for j in range(n):
         for i in range(n):
             if got[j, i] == states.C:

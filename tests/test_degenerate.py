@@ -14,8 +14,10 @@ from gltf_files import write_quad_gltf
 from omaps import states
 from omaps.alpha_test import StateRule
 from omaps.bake import GROW_TEXEL, bake_micromap_rows, bake_pair_squares
+from omaps.birdcurve import uv_micro_triangles
 from omaps.cli.main import main
 from omaps.codecs import get_codec
+from omaps.pair import pair_weights
 from omaps.sampling import sample_texture, wrap_code
 from omaps.texture import AlphaTexture
 
@@ -130,8 +132,6 @@ def test_degenerate_micromaps_agree_with_the_shader_along_them(alpha8, tri, leve
     reads something, and a known one agrees with the shader's fetch at points all along it."""
     test = StateRule("cutoff").alpha_test(AlphaTexture("t", alpha8, 255), filt, wrap)
     got = bake_micromap_rows(test.grid(), tri[None], level, GROW_TEXEL)[0]
-    from omaps.birdcurve import uv_micro_triangles
-
     micro = uv_micro_triangles(tri, level)
     ws = np.array([[1, 0, 0], [0, 1, 0], [0, 0, 1], [1 / 3, 1 / 3, 1 / 3], [0.5, 0.5, 0], [0, 0.5, 0.5],
                    [0.5, 0, 0.5], [0.9, 0.05, 0.05], [0.05, 0.9, 0.05], [0.05, 0.05, 0.9]])
@@ -154,8 +154,6 @@ def test_degenerate_pairs_through_every_codec_are_conservative(ta, tb, codec, fi
     sq = bake_pair_squares(test.grid(), corner, np.array([True]), n, GROW_TEXEL)
     _, dec = c.encode_many(sq)  # checked conservative inside too
     assert states.is_conservative(sq, dec)
-    from omaps.pair import pair_weights
-
     for j in range(0, n, max(1, n // 8)):
         for i in range(0, n, max(1, n // 8)):
             for a in (0.0, 0.5, 1.0):

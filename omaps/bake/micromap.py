@@ -82,7 +82,7 @@ def flag_table(grid: FootprintGrid) -> np.ndarray:
     """Summed-area table (Hc+1, Wc+1, 3) int32 of the T bit (plane 0), the O bit (plane 1) and
     mixed cells (plane 2, ``FootprintGrid.mixed``; none unless the grid is exact): ``sat[y, x, k]``
     counts the cells above row y and left of column x with bit k."""
-    return _flag_table(grid.flags, grid.mixed if grid.exact else np.zeros((0, 0), np.uint8))
+    return _flag_table(grid.flags, grid.mixed)
 
 
 @njit(cache=True)
@@ -163,6 +163,7 @@ def _leaf_flag(sat, grid, x0, y0, x1, y1, x2, y2, grow, scratch):
     cells. ``grid``: ``FootprintGrid.kernel_args()``; ``scratch`` (2 * POLY_MAX + 3, 2)."""
     flags, mixed, values, bounds, period_x, period_y = grid
     points_done = False
+    tri = scratch[2 * POLY_MAX:]
     ymin = min(y0, min(y1, y2))
     ymax = max(y0, max(y1, y2))
     acc = 0
@@ -195,13 +196,12 @@ def _leaf_flag(sat, grid, x0, y0, x1, y1, x2, y2, grow, scratch):
                 acc |= point_flag(flags, mixed, values, bounds, period_x, period_y, x2, y2, grow)
                 if acc == 3:
                     return 3
-            tri = scratch[2 * POLY_MAX:]
-            tri[0, 0] = x0
-            tri[0, 1] = y0
-            tri[1, 0] = x1
-            tri[1, 1] = y1
-            tri[2, 0] = x2
-            tri[2, 1] = y2
+                tri[0, 0] = x0  # the triangle as the polygon ``bilinear.cell_flag`` clips
+                tri[0, 1] = y0
+                tri[1, 0] = x1
+                tri[1, 1] = y1
+                tri[2, 0] = x2
+                tri[2, 1] = y2
             hc, wc = flags.shape
             row = cell_index(r, hc, period_y)
             for c in range(c0, c1):
