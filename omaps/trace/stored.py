@@ -18,7 +18,7 @@ from __future__ import annotations
 import numpy as np
 
 from .. import states
-from ..codecs.raw import pack_states, unpack_states
+from ..codecs.raw import pack_states, row_bytes, unpack_states
 from ..errors import InputError
 from .maps import SchemeMaps
 from .tables import T_MAP_LEVEL, T_MAP_OFFSET, T_TRI_CORNER
@@ -75,7 +75,7 @@ def _omm_maps(at, scene, stored, scheme) -> SchemeMaps:
             lv, fmt, off = int(rec["level"]), int(rec["format"]), int(rec["data_offset"])
             n = 4 ** lv
             bits = 1 if fmt == 1 else 2
-            packed = arr.data[off:off + max(1, (n * bits + 7) // 8)]
+            packed = arr.data[off:off + row_bytes(n, bits)]
             code = unpack_states(packed[None, :], n, bits).ravel()
             add_row(_OMM_TO_STATE[code], lv)
     special_row = {v: add_row(np.array([s], np.uint8), 0) for v, s in _SPECIAL_STATE.items()}
