@@ -27,9 +27,14 @@ import re
 import numpy as np
 from numba import njit
 
+from . import states
 from .errors import InputError
 
-__all__ = ["allocate", "upper_hull", "parse_bytes"]
+__all__ = ["allocate", "upper_hull", "parse_bytes", "triangle_weights", "half_known", "PAIR_OPTIONS", "pair_option_bytes"]
+
+# What a pair may store under a budget, in the order of the tracer's per-pair format code
+# (``trace.lookups.mixed_map_state``): no map (all C), a raw N x N square, or a codec block.
+PAIR_OPTIONS = ("none", "sq1", "sq2", "sq4", "sq8", "sq16", "sq32", "sq64", "vq2", "vq4", "vq4x64")
 
 _UNITS = {"": 1, "b": 1, "kib": 1024, "mib": 1024 ** 2, "gib": 1024 ** 3, "kb": 1000, "mb": 1000 ** 2,
           "gb": 1000 ** 3}
@@ -128,3 +133,39 @@ def allocate(nbytes, value, budget: int) -> np.ndarray:
     order = np.lexsort((item, -gain))  # falling value per byte; ties by item, for determinism
     choice, _ = _take(item, src, dst, cost, order, start, int(budget), base)
     return choice
+
+
+def pair_option_bytes(options=PAIR_OPTIONS) -> np.ndarray:
+    """Bytes each pair option stores (int64 (K,)): 0 for none, the codec's block otherwise."""
+    from .codecs import get_codec
+
+    return np.array([0 if o == "none" else get_codec(o).block_bytes for o in options], np.int64)
+
+
+def triangle_weights(scene, at) -> np.ndarray:
+    """Expected candidate hits of every alpha triangle (rows of ``scene.alpha.AlphaTriangles``)
+    for rays spread uniformly over the scene: its world-space area summed over the instances of
+    its prototype. A triangle with non-finite positions weighs 0."""
+    w = np.zeros(at.count)
+    for mi, m in scene.instances:
+        a, b = int(at.base[mi]), int(at.base[mi + 1])
+        if b == a:
+            continue
+        mg = scene.meshes[mi].merged
+        tri = mg["triangles"][at.mesh_tri[a:b]]
+        p = np.asarray(mg["positions"], np.float64) @ np.asarray(m, np.float64)[:3, :3].T  # translation: no area
+        area = 0.5 * np.linalg.norm(np.cross(p[tri[:, 1]] - p[tri[:, 0]], p[tri[:, 2]] - p[tri[:, 0]]), axis=1)
+        w[a:b] += np.nan_to_num(area, nan=0.0, posinf=0.0)
+    return w
+
+
+def half_known(maps) -> np.ndarray:
+    """Known (T or O) fraction of each half of square maps (P, N, N): column 0 triangle A (v <=
+    u, cells below the diagonal), column 1 triangle B; a diagonal cell counts half to each, so
+    each half's cells weigh N*N/2 in all -- the share of its triangle's area they cover."""
+    m = np.asarray(maps)
+    n = m.shape[-1]
+    i = np.arange(n)
+    wa = (i[None, :] > i[:, None]) + 0.5 * (i[None, :] == i[:, None])  # [j, i]: cell (i, j) in A's half
+    known = (m != states.C).reshape(len(m), n * n).astype(np.float64)
+    return np.stack([known @ wa.ravel(), known @ wa.T.ravel()], axis=1) / (0.5 * n * n)

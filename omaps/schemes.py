@@ -10,6 +10,8 @@
     omm                  (trace) the EXT_mesh_opacity_micromap micromaps stored in the traced file
     file:CODEC           (trace) the OMAPS_pair_opacity_maps pair blocks stored in the traced file,
                          CODEC the codec they were stored with (sqN, vq2, vq4, vq4x64)
+    budget:BYTES         (trace) per pair the option (none, sqN up to 64, vq2, vq4, vq4x64) that saves
+                         the most alpha tests per byte, all pairs within BYTES (1263936, 1.2MiB, 800KiB)
 
 A ``Scheme`` says what is stored (its ``kind``: none, texel, micromap or square with its
 ``codec``) and what it costs (``bits_for``: storage bits per pair). The bakers make the maps.
@@ -32,9 +34,9 @@ from .errors import InputError
 
 __all__ = ["Scheme", "get_scheme", "parse_schemes", "DEFAULT_SCHEMES", "KINDS", "EVAL_KINDS", "TRACE_KINDS", "VARIANTS"]
 
-KINDS = ("none", "texel", "micromap", "square", "stored")
+KINDS = ("none", "texel", "micromap", "square", "stored", "budget")
 EVAL_KINDS = ("texel", "micromap", "square")  # omaps eval
-TRACE_KINDS = ("none", "micromap", "square", "stored")  # omaps trace ("stored": read from the traced file)
+TRACE_KINDS = ("none", "micromap", "square", "stored", "budget")  # omaps trace ("stored": read from the traced file)
 VARIANTS = ("paper",) + tuple(EFFORTS)
 DEFAULT_SCHEMES = ("sq4", "sq8", "sq16", "sq32", "sq64", "tri2", "tri3", "tri4", "tri5", "texel")
 _TRI = re.compile(r"tri(\d+)")
@@ -44,11 +46,12 @@ _SQ = re.compile(r"sq(\d+)")
 @dataclass(frozen=True)
 class Scheme:
     name: str
-    kind: str  # none | texel | micromap | square | stored (omm, file:CODEC: maps the traced file holds)
+    kind: str  # none | texel | micromap | square | stored (omm, file:CODEC: maps the traced file holds) | budget
     level: int | None = None  # micromap
     codec: Codec | None = None  # square: raw sqN or a compressed codec
     encoder: str | None = None
     effort: str | None = None
+    budget: int | None = None  # budget: the scene's map bytes
 
     @property
     def family(self) -> str:
@@ -81,6 +84,8 @@ class Scheme:
         out = {"kind": self.kind}
         if self.level is not None:
             out["level"] = self.level
+        if self.budget is not None:
+            out.update(budget_bytes=self.budget, encoder=self.encoder, effort=self.effort)
         if self.codec is not None:
             out.update(codec=self.codec.name, map_size=self.codec.map_size, bits=self.codec.bits)
             if self.codec.compressed:
@@ -97,6 +102,12 @@ def get_scheme(name: str, encoder: str | None = None, effort: str | None = None)
         return Scheme(key, key)
     if key == "omm":
         return Scheme(key, "stored")
+    if key.startswith("budget:"):
+        from .budget import parse_bytes
+
+        nbytes = parse_bytes(key[len("budget:"):])
+        enc, eff = get_codec("vq4").options(encoder, effort)  # the codecs' options (every codec shares them)
+        return Scheme(f"budget:{nbytes}", "budget", encoder=enc, effort=eff, budget=nbytes)
     if key.startswith("file:"):
         codec_name = key[len("file:"):]
         if not (_SQ.fullmatch(codec_name) or codec_name in codec_names()):
@@ -120,7 +131,7 @@ def get_scheme(name: str, encoder: str | None = None, effort: str | None = None)
             encoder, effort = "best", variant
         enc, eff = codec.options(encoder, effort)
         return Scheme(key, "square", codec=codec, encoder=enc, effort=eff)
-    raise InputError(f"unknown scheme {name!r} (known: none, texel, triL, sqN, omm, file:CODEC, "
+    raise InputError(f"unknown scheme {name!r} (known: none, texel, triL, sqN, omm, file:CODEC, budget:BYTES, "
                      f"{', '.join(c + '[-' + '|'.join(VARIANTS) + ']' for c in codec_names())})")
 
 

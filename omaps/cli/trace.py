@@ -48,7 +48,16 @@ def add_parser(sub) -> None:
     t.add_argument("scene", metavar="SCENE", help=".gltf or .glb file")
     t.add_argument("--schemes", default=DEFAULT_SCHEMES,
                    help="comma-separated: none, triL, sqN, or a codec (vq2, vq4, vq4x64, also with -paper, -fast, "
-                        "-medium or -thorough) (default: %(default)s)")
+                        "-medium or -thorough), omm or file:CODEC (the maps the traced file stores), or "
+                        "budget:BYTES (per pair the map -- none, sqN up to 64, vq2, vq4 or vq4x64 -- that saves the "
+                        "most alpha tests per byte, every pair together within BYTES: 1263936, 1.2MiB, 800KiB) "
+                        "(default: %(default)s)")
+    t.add_argument("--weights", choices=("area", "view"), default="area",
+                   help="budget schemes: a pair's expected candidate hits are its triangles' world area times "
+                        "instances (area: rays uniform over the scene), or their candidate hits in a trace of "
+                        "this view at half the resolution (view) (default: %(default)s)")
+    t.add_argument("--plot-budget", metavar="FILE.png",
+                   help="alpha tests per primary ray against map bytes, every traced scheme on one chart")
     t.add_argument("--camera", metavar="X,Y,Z:TX,TY,TZ:FOV[:UX,UY,UZ] | gltf[:N]",
                    help="eye, target, vertical field of view in degrees and optionally the up direction "
                         "(default +Y); or 'gltf:N', the file's camera N (default 0) placed by its node, with "
@@ -166,7 +175,7 @@ def cmd_trace(a) -> int:
     from .. import trace
     from ..scene import load_scene
     from ..trace.maps import default_jobs
-    from ..trace.pictures import heatmap, render
+    from ..trace.pictures import budget_plot, heatmap, render
 
     schemes = parse_schemes(a.schemes, TRACE_KINDS, a.encoder, a.effort, "omaps trace")
     names = [s.name for s in schemes]
@@ -180,6 +189,7 @@ def cmd_trace(a) -> int:
     outputs.file(a.json, "--json")
     outputs.file(a.heatmap, "--heatmap", (".png",))
     outputs.file(a.render, "--render", (".png",))
+    outputs.file(a.plot_budget, "--plot-budget", (".png",))
     progress = show_progress(a.quiet)
     t_start = time.perf_counter()
     scene = load_scene(a.scene)
@@ -201,6 +211,16 @@ def cmd_trace(a) -> int:
     else:
         camera = cam_given
     cam = camera.basis(w, h)
+    budgets = [s for s in schemes if s.kind == "budget"]
+    if budgets:
+        from ..budget import triangle_weights
+        from ..trace.budget import budget_maps, view_weights
+
+        t0 = time.perf_counter()
+        weights = view_weights(prep, cam, w, h) if a.weights == "view" else triangle_weights(scene, prep.alpha)
+        for s in budgets:
+            prep.maps[s.name] = budget_maps(prep.alpha, prep.tests, s, weights, default_jobs(a.jobs), progress)
+        prep.timings["budget_s"] = time.perf_counter() - t0
     diag = float(np.linalg.norm(bounds[1] - bounds[0]))
     tnear = trace.SHADOW_TNEAR * diag
     trace.trace_scheme(prep, None, cam, 2, 2, light, tnear, deferred=a.shadows)  # compile the ray loops
@@ -219,7 +239,7 @@ def cmd_trace(a) -> int:
                   "warnings": list(scene.warnings), "skipped_primitives": scene.skipped},
         "settings": {"materials": rules.settings(), "schemes": {s.name: s.settings() for s in schemes},
                      "two_state": modes, "shadows": bool(a.shadows), "encoder": a.encoder, "effort": a.effort,
-                     "jobs": a.jobs},
+                     "jobs": a.jobs, "weights": a.weights if budgets else None},
         "camera": {**camera.to_json(), "width": w, "height": h, "view": cam_info},
         "light": None if light is None else light.tolist(),
         "embree": prep.device.version_text,
@@ -249,6 +269,8 @@ def cmd_trace(a) -> int:
             heatmap(outputs.path(a.heatmap), runs, names, a.shadows)
         if a.render:
             render(outputs.path(a.render), prep, runs["none"], cam, light)
+        if a.plot_budget:
+            budget_plot(outputs.path(a.plot_budget), report)
     if any(bad.values()):
         print("omaps: error: a scheme changed the visible result: " +
               ", ".join(f"{n} ({v})" for n, v in bad.items() if v), file=sys.stderr)

@@ -13,14 +13,15 @@ import numpy as np
 from numba import carray, njit
 
 from .. import birdcurve, pair, states
+from ..codecs import vq2_block, vq4_block
 from ..codecs.raw import read_state
 from ..sampling import sample_texture
 from .embree import f64_ptr, i8_ptr, i32_ptr, i64_ptr, u8_ptr, u16_ptr
-from .tables import (T_MAP_DATA, T_MAP_LEVEL, T_MAP_OFFSET, T_MAP_PARAM, T_MAP_ROW, T_MAP_ROW_BYTES, T_MAT_FILTER, T_MAT_H, T_MAT_INCL,
+from .tables import (T_COUNT, T_MAP_DATA, T_MAP_FORMAT, T_MAP_LEVEL, T_MAP_OFFSET, T_MAP_PARAM, T_MAP_ROW, T_MAP_ROW_BYTES, T_MAT_FILTER, T_MAT_H, T_MAT_INCL,
                      T_MAT_TEX_START, T_MAT_THR, T_MAT_W, T_MAT_WRAP_U, T_MAT_WRAP_V, T_TEX, T_TRI_CORNER,
                      T_TRI_MAT, T_TRI_UV, T_TRI_VALPHA)
 
-__all__ = ["clamp_bary", "shader_alpha_test", "no_map_state", "micro_map_state", "codec_map_state", "state_function"]
+__all__ = ["clamp_bary", "shader_alpha_test", "no_map_state", "micro_map_state", "codec_map_state", "mixed_map_state", "state_function"]
 
 
 @njit(cache=True, inline="always")
@@ -81,6 +82,40 @@ def stored_micromap_state(table, tri, b1, b2):
     return read_state(u8_ptr(table[T_MAP_DATA]), i64_ptr(table[T_MAP_OFFSET])[row], k)
 
 
+@njit(cache=True)
+def counting_state(table, tri, b1, b2):
+    """No map (every candidate C), counting each triangle's candidate hits: ``trace.budget``'s
+    view weights. Run on one thread: the counts are plain increments."""
+    c = i64_ptr(table[T_COUNT])
+    c[tri] += 1
+    return states.C
+
+
+@njit(cache=True)
+def mixed_map_state(table, tri, b1, b2):
+    """A budget's maps (``trace.budget``): the pair's row has a format code (the index in
+    ``budget.PAIR_OPTIONS``: 0 none, 1..7 raw sq1..sq64, 8 vq2, 9 vq4, 10 vq4x64) and the byte
+    offset of its block; the hit's cell is read with that format's random-access lookup."""
+    row = np.int64(i32_ptr(table[T_MAP_ROW])[tri])
+    fmt = i32_ptr(table[T_MAP_FORMAT])[row]
+    if fmt == 0:
+        return states.C
+    s, t = pair.hit_st(i8_ptr(table[T_TRI_CORNER]), tri, b1, b2)
+    off = i64_ptr(table[T_MAP_OFFSET])[row]
+    if fmt <= 7:
+        n = 1 << (fmt - 1)
+        i, j = pair.uv_to_cell(s, t, n)
+        return read_state(u8_ptr(table[T_MAP_DATA]), off, j * n + i)
+    if fmt == 8:
+        i, j = pair.uv_to_cell(s, t, vq2_block.SIZE)
+        return vq2_block.lookup(carray(u8_ptr(table[T_MAP_DATA] + off), vq2_block.BLOCK_BYTES), i, j)
+    if fmt == 9:
+        i, j = pair.uv_to_cell(s, t, vq4_block.SIZE)
+        return vq4_block.lookup(carray(u8_ptr(table[T_MAP_DATA] + off), vq4_block.BLOCK_BYTES), i, j)
+    i, j = pair.uv_to_cell(s, t, vq4_block.X64_SIZE)
+    return vq4_block.lookup_x64(carray(u8_ptr(table[T_MAP_DATA] + off), vq4_block.X64_BYTES), i, j)
+
+
 _CODEC_STATES: dict = {}
 
 
@@ -109,4 +144,8 @@ def state_function(sm):
         return micro_map_state
     if sm.kind == "stored_micromap":
         return stored_micromap_state
+    if sm.kind == "count":
+        return counting_state
+    if sm.kind == "mixed":
+        return mixed_map_state
     return codec_map_state(sm.codec)

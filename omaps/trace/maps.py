@@ -30,7 +30,8 @@ __all__ = ["SchemeMaps", "build_scheme_maps", "default_jobs", "dedupe_maps"]
 class SchemeMaps:
     """One scheme's maps as the tracer reads them: alpha triangle t uses row ``rows[t]`` of
     ``data`` (``row_bytes`` each). kind: "none" (no maps), "micromap" (raw 2-bit micromap per
-    triangle, param L), "square" (a pair's stored square map through ``codec``, param N)."""
+    triangle, param L), "square" (a pair's stored square map through ``codec``, param N), "mixed"
+    (a budget: per row a format code and byte offset, ``trace.budget``)."""
 
     name: str
     kind: str
@@ -44,6 +45,7 @@ class SchemeMaps:
     codec: object = None
     scheme: object = None
     extra: dict = field(default_factory=dict)  # table word -> array the scheme sets itself (trace.tables)
+    info: dict = field(default_factory=dict)  # what the scheme reports besides (a budget's choices)
 
 
 def default_jobs(jobs: int | None) -> int:
@@ -122,6 +124,7 @@ def build_scheme_maps(at: AlphaTriangles, tests: dict, schemes, jobs: int = 1,
     """Bake and store every scheme's maps. ``tests``: material -> ``AlphaTest``; ``schemes``:
     ``omaps.schemes.Scheme`` objects (kinds none, micromap, square, and stored: read from
     ``scene``'s file by ``trace.stored``)."""
+    schemes = [s for s in schemes if s.kind != "budget"]  # built once weights are known (trace.budget)
     stored = [s for s in schemes if s.kind == "stored"]
     if stored:
         from .stored import stored_maps

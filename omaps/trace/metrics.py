@@ -47,6 +47,7 @@ def summary(run: SchemeRun, ref: SchemeRun, sm, w: int, h: int) -> dict:
         out["map_bytes"] = int(sm.map_bytes)
         out["distinct_maps"] = int(sm.distinct_maps)
         out["known_fraction"] = sm.known_fraction
+        out.update(sm.info)
     return out
 
 

@@ -9,7 +9,7 @@ import numpy as np
 
 from ..atomic import atomic_path
 
-__all__ = ["heatmap", "render"]
+__all__ = ["heatmap", "render", "budget_plot"]
 
 
 def _tests_image(run, shadows: bool) -> np.ndarray:
@@ -107,3 +107,54 @@ def render(path: str, prep, run, cam: np.ndarray, light) -> None:
     out = (np.clip(img, 0, 1) ** (1 / 1.6) * 255 + 0.5).astype(np.uint8)
     with atomic_path(path, suffix=".png") as tmp:
         Image.fromarray(out).save(tmp, format="PNG")
+
+
+def _plot_family(name: str, settings: dict) -> str:
+    kind = settings.get("kind")
+    if kind == "micromap":
+        return "triL (per-triangle micromaps)"
+    if kind == "square" and settings.get("codec", "").startswith("sq"):
+        return "sqN (raw square maps)"
+    if kind == "budget":
+        return "budget (per-pair choice)"
+    if kind == "square":
+        return "codecs"
+    return name
+
+
+def budget_plot(path: str, report: dict) -> None:
+    """Alpha tests per primary ray against map bytes of every traced scheme (``omaps trace``'s
+    report), a line per family: uniform sqN, triL, the codecs, the budgets; 'none' as a level."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(7.5, 4.8), dpi=120)
+    families: dict[str, list] = {}
+    for n, r in report["schemes"].items():
+        if n == "none" or not r.get("map_bytes"):
+            continue
+        fam = _plot_family(n, report["settings"]["schemes"].get(n, {}))
+        families.setdefault(fam, []).append((r["map_bytes"], r["alpha_tests_per_primary_ray"], n))
+    for fam, pts in families.items():
+        pts.sort()
+        xs, ys, labels = zip(*pts)
+        ax.plot(xs, ys, marker="o", label=fam, ls="-" if len(pts) > 1 else "none")
+        for x, y, lab in pts:
+            ax.annotate(lab, (x, y), textcoords="offset points", xytext=(4, 5), fontsize=7)
+    none = report["schemes"].get("none")
+    if none is not None:
+        ax.axhline(none["alpha_tests_per_primary_ray"], color="grey", ls="--", lw=1,
+                   label=f"none ({none['alpha_tests_per_primary_ray']:.2f})")
+    ax.set_xscale("log", base=2)
+    ax.set_xlabel("map bytes (every prototype pair or triangle)")
+    ax.set_ylabel("alpha tests per primary ray")
+    ax.set_ylim(bottom=0)
+    ax.grid(True, which="both", alpha=0.3)
+    cam = report["camera"]
+    ax.set_title(f"{report['scene']['file']} at {cam['width']}x{cam['height']}", fontsize=9)
+    ax.legend(loc="upper right", fontsize=8)
+    fig.tight_layout()
+    with atomic_path(path, suffix=".png") as tmp:
+        fig.savefig(tmp, dpi=110, format="png")
+    plt.close(fig)

@@ -21,7 +21,9 @@ T_MAT_TEX_START, T_MAT_W, T_MAT_H, T_MAT_WRAP_U, T_MAT_WRAP_V, T_MAT_FILTER, T_M
 T_TEX = 14
 T_MAP_ROW, T_MAP_DATA, T_MAP_ROW_BYTES, T_MAP_PARAM = 15, 16, 17, 18
 T_MAP_LEVEL, T_MAP_OFFSET = 19, 20  # stored micromaps (scheme omm): per row its level (int32) and byte offset (int64)
-TABLE_WORDS = 21
+T_MAP_FORMAT = 21  # a budget's maps: per row the format code (int32, ``budget.PAIR_OPTIONS``); offsets in T_MAP_OFFSET
+T_COUNT = 22  # view weights: candidate hits per alpha triangle (int64), counted by lookups.counting_state
+TABLE_WORDS = 23
 
 # ---- a query context: Embree's part, then ours (int64 words) -----------------------------------
 C0 = CONTEXT_BYTES // 8
