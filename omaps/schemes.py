@@ -4,7 +4,8 @@
     texel                the per-texel limit of an infinitely fine map (eval)
     triL                 two per-triangle micromaps of 4^L micro-triangles, L = 0..12
     sqN                  the raw N x N square map over a pair, N a power of two up to 128
-    CODEC[-VARIANT]      vq2, vq4 or vq4x64; VARIANT: paper (the deck's encoder) or an effort of
+    CODEC[-VARIANT]      vq2, vq4, vq4x64, vq4-synth or wavelet3; VARIANT: paper (the deck's
+                         encoder; vq2, vq4, vq4x64) or an effort of
                          our encoder (fast, medium, thorough); none: the command's --encoder /
                          --effort, else the codec's defaults
     omm                  (trace) the EXT_mesh_opacity_micromap micromaps stored in the traced file
@@ -120,7 +121,7 @@ def get_scheme(name: str, encoder: str | None = None, effort: str | None = None)
         return Scheme(key, "micromap", level=check_level(int(m.group(1)), "triL level"))
     if _SQ.fullmatch(key):
         return Scheme(key, "square", codec=get_codec(key))
-    base, _, variant = key.partition("-")
+    base, _, variant = (key, "", "") if key in codec_names() else key.rpartition("-")
     if base in codec_names():
         codec = get_codec(base)
         if variant == "paper":

@@ -145,7 +145,21 @@ def _vq(name: str) -> Codec:
                  block.decode_x64 if x64 else block.decode, block.lookup_x64 if x64 else block.lookup)
 
 
-_COMPRESSED = ("vq2", "vq4", "vq4x64")
+def _synth(name: str) -> Codec:
+    """vq4-synth (32x32, synthesised vectors) and wavelet3 (64x64, three levels): 512 bits each."""
+    if name == "vq4-synth":
+        from . import vq4_synth_block as block, vq4_synth_encode as encoder
+    else:
+        from . import wavelet3_block as block, wavelet3_encode as encoder
+
+    def enc(maps, e, f):
+        return np.stack([np.frombuffer(b.pack(), np.uint8) for b in encoder.encode_many(maps, e, f)])
+
+    return Codec(name, block.SIZE, 8 * block.BLOCK_BYTES, block.BLOCK_BYTES, encoder.ENCODERS, tuple(EFFORTS),
+                 "best", "medium", enc, block.decode, block.lookup)
+
+
+_COMPRESSED = ("vq2", "vq4", "vq4x64", "vq4-synth", "wavelet3")
 _CACHE: dict[str, Codec] = {}
 _RAW = re.compile(r"sq(\d+)")
 
@@ -156,12 +170,15 @@ def codec_names() -> list[str]:
 
 
 def get_codec(name: str) -> Codec:
-    """A codec by name: ``sqN`` (raw 2-bit map), ``vq2``, ``vq4`` or ``vq4x64``."""
+    """A codec by name: ``sqN`` (raw 2-bit map), ``vq2``, ``vq4``, ``vq4x64``, ``vq4-synth`` or
+    ``wavelet3``."""
     key = str(name).strip().lower()
     if key not in _CACHE:
         m = _RAW.fullmatch(key)
         if m:
             _CACHE[key] = _raw(int(m.group(1)))
+        elif key in ("vq4-synth", "wavelet3"):
+            _CACHE[key] = _synth(key)
         elif key in _COMPRESSED:
             _CACHE[key] = _vq(key)
         else:
