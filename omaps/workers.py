@@ -11,6 +11,8 @@ import signal
 import threading
 from concurrent.futures import ProcessPoolExecutor
 
+import numpy as np
+
 
 _SIGINT = {signal.SIGINT}
 _MASKS = hasattr(signal, "pthread_sigmask")
@@ -59,3 +61,32 @@ def process_pool(jobs: int):
         raise
     else:
         pool.shutdown(wait=True)
+
+
+def _encode_chunk(args):
+    from .codecs import get_codec
+
+    name, maps_, encoder, effort = args
+    return get_codec(name).encode_many(maps_, encoder, effort)
+
+
+def encode_maps(codec, maps_: np.ndarray, encoder, effort, jobs: int = 1, progress=None):
+    """``codec.encode_many`` spread over ``jobs`` worker processes, in chunks (8 per worker, so
+    that uneven maps balance): (blocks (P, bytes), decoded (P, N, N)), the same as one process
+    gives. ``progress(n)``, if given, is called as each chunk finishes (``n`` chunks in all via
+    ``progress(None, total)`` first). Every command that encodes many maps (trace, omm --from)
+    encodes through here; eval spreads whole textures instead."""
+    if len(maps_) == 0 or not codec.compressed or jobs <= 1 or len(maps_) < 16:
+        return codec.encode_many(maps_, encoder, effort)
+    first = codec.encode_many(maps_[:1], encoder, effort)  # compiled (and cached) before the workers start
+    edges = np.linspace(1, len(maps_), 8 * jobs + 1).astype(int)
+    args = [(codec.name, maps_[a:b], encoder, effort) for a, b in zip(edges[:-1], edges[1:]) if b > a]
+    if progress is not None:
+        progress(None, len(args))
+    out = [first]
+    with process_pool(jobs) as pool:
+        for r in pool.map(_encode_chunk, args):
+            out.append(r)
+            if progress is not None:
+                progress(1)
+    return np.concatenate([o[0] for o in out]), np.concatenate([o[1] for o in out])

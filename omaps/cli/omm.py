@@ -15,7 +15,7 @@ from ..omm import format as omm_format
 from ..omm.pipeline import OmmSettings, build
 from ..omm.verify import verify
 from ..promotion import PROMOTIONS
-from .common import add_codec_options, add_material_options, material_rules, show_progress
+from .common import add_codec_options, check_jobs, add_material_options, material_rules, show_progress
 
 GLTF_EXTENSIONS = (".gltf", ".glb")
 
@@ -61,6 +61,8 @@ def add_parser(sub) -> None:
                         "stored, decoded, expanded. Pairs: the tracer's (shared edges) in a glTF scene, triangles "
                         "2k and 2k+1 with a UV array")
     o.add_argument("--threads", type=int, default=None, help="baking threads (default: all cores)")
+    o.add_argument("--jobs", type=int, default=1, metavar="N",
+                   help="worker processes encoding the --from codec's maps (default 1)")
     o.add_argument("--quiet", action="store_true", help="no progress bar")
     add_material_options(o)
     add_codec_options(o, "--from codecs named without a variant")
@@ -83,11 +85,12 @@ def _spec(a) -> dict:
 def _settings(a) -> OmmSettings:
     if a.level is not None and a.dynamic is not None:
         raise InputError("--level and --dynamic exclude each other")
+    check_jobs(a.jobs)
     if a.level is not None and a.source != "texture":
         raise InputError("--from fixes the level to log2 N of the square map; drop --level")
     return OmmSettings(format=a.format, level=4 if a.level is None else a.level, dynamic_scale=a.dynamic,
                        max_level=a.max_level, promotion=a.promote, special=not a.no_special, dedup=not a.no_dedup,
-                       source=a.source, encoder=a.encoder, effort=a.effort, seed=a.seed)
+                       source=a.source, encoder=a.encoder, effort=a.effort, seed=a.seed, jobs=a.jobs)
 
 
 def cmd_omm(a) -> int:

@@ -35,6 +35,7 @@ from ..errors import InputError
 from ..pair import corner_uvs
 from ..promotion import PROMOTIONS
 from ..schemes import get_scheme
+from ..workers import encode_maps
 from . import format as omm_format
 from . import pairs, resolve
 
@@ -84,6 +85,7 @@ class OmmSettings:
     encoder: str | None = None  # codec encoder and effort (None: the codec's defaults)
     effort: str | None = None
     seed: int = 0  # of the hashed promotion
+    jobs: int = 1  # worker processes encoding --from maps (the output does not depend on it)
 
     def __post_init__(self):
         if self.format not in omm_format.FORMAT_NAMES:
@@ -209,7 +211,7 @@ def _texel_area(test: AlphaTest, tris: np.ndarray) -> np.ndarray:
     return 0.5 * np.abs(e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0])
 
 
-def _pair_states(g: Geometry, grid, tris: np.ndarray, scheme) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def _pair_states(g: Geometry, grid, tris: np.ndarray, scheme, jobs: int = 1) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """T/O/C micromaps (flat) at level log2 N of every triangle from its pair's square map, stored
     and decoded by the scheme's codec; the blocks (P, bytes) and the pairing records."""
     pair_of, corners, prs = g.pairing()
@@ -219,7 +221,7 @@ def _pair_states(g: Geometry, grid, tris: np.ndarray, scheme) -> tuple[np.ndarra
         unknown = np.zeros(len(prs), bool)
         np.logical_or.at(unknown, pair_of, np.asarray(g.unknown, bool))
         squares[unknown] = states.C
-    blocks, decoded = scheme.codec.encode_many(squares, scheme.encoder, scheme.effort)
+    blocks, decoded = encode_maps(scheme.codec, squares, scheme.encoder, scheme.effort, jobs)
     rec = np.zeros(len(tris), dtype=omm_format.PAIR_RECORD)
     rec["pair"] = pair_of
     rec["corners"] = corners
@@ -257,7 +259,7 @@ def build(geometries: list[Geometry], settings: OmmSettings = OmmSettings()) -> 
         idx = np.empty(len(tris), dtype=np.int32)
         n_blocks = 0
         if n_map is not None:
-            s3_all, blk, rec = _pair_states(g, grid, tris, scheme)
+            s3_all, blk, rec = _pair_states(g, grid, tris, scheme, settings.jobs)
             starts_all = micro_starts(levels)
             rec["pair"] += n_blocks_total
             blocks_all.append(blk)

@@ -21,7 +21,7 @@ from ..bake import GROW_TEXEL, bake_micromaps, bake_pair_flags, or_downsample
 from ..bake.square import flags_to_states
 from ..codecs.raw import pack_states
 from ..scene.alpha import AlphaTriangles, distinct_rows, pair_corner_uvs
-from ..workers import process_pool
+from ..workers import encode_maps as parallel_encode
 
 __all__ = ["SchemeMaps", "build_scheme_maps", "default_jobs", "dedupe_maps"]
 
@@ -58,31 +58,20 @@ def dedupe_maps(m: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return uniq.reshape((len(uniq),) + m.shape[1:]), inverse.ravel()
 
 
-def _encode_chunk(args):
-    from ..codecs import get_codec
-
-    name, maps_, encoder, effort = args
-    blocks, decoded = get_codec(name).encode_many(maps_, encoder, effort)
-    return blocks, decoded
-
-
 def encode_maps(codec, maps_: np.ndarray, encoder, effort, jobs: int = 1, progress: bool = False):
-    """``codec.encode_many`` over worker processes: (blocks (P, bytes), decoded (P, N, N))."""
-    if len(maps_) == 0 or not codec.compressed or jobs <= 1 or len(maps_) < 16:
-        return codec.encode_many(maps_, encoder, effort)
-    first = codec.encode_many(maps_[:1], encoder, effort)  # compiled (and cached) before the workers start
-    edges = np.linspace(1, len(maps_), 8 * jobs + 1).astype(int)
-    args = [(codec.name, maps_[a:b], encoder, effort) for a, b in zip(edges[:-1], edges[1:]) if b > a]
-    bar = tqdm(total=len(args), desc=f"encode {codec.name}", unit="chunk", disable=not progress, leave=False)
-    out = [first]
+    """``codec.encode_many`` over worker processes (``workers.encode_maps``), with a progress bar."""
+    bar = tqdm(desc=f"encode {codec.name}", unit="chunk", disable=not progress, leave=False)
+
+    def tick(n, total=None):
+        if n is None:
+            bar.reset(total=total)
+        else:
+            bar.update(n)
+
     try:
-        with process_pool(jobs) as pool:
-            for r in pool.map(_encode_chunk, args):
-                out.append(r)
-                bar.update()
+        return parallel_encode(codec, maps_, encoder, effort, jobs, tick)
     finally:
         bar.close()
-    return np.concatenate([o[0] for o in out]), np.concatenate([o[1] for o in out])
 
 
 def _pair_flags(at: AlphaTriangles, tests: dict, n: int):
