@@ -17,11 +17,12 @@ from ..codecs import vq2_block, vq4_block
 from ..codecs.raw import read_state
 from ..sampling import sample_texture
 from .embree import f64_ptr, i8_ptr, i32_ptr, i64_ptr, u8_ptr, u16_ptr
-from .tables import (T_COUNT, T_MAP_DATA, T_MAP_FORMAT, T_MAP_LEVEL, T_MAP_OFFSET, T_MAP_PARAM, T_MAP_ROW, T_MAP_ROW_BYTES, T_MAT_FILTER, T_MAT_H, T_MAT_INCL,
+from .tables import (T_COUNT, T_MAP_CODEC, T_MAP_DATA, T_MAP_FORMAT, T_MAP_LEVEL, T_MAP_OFFSET, T_MAP_PARAM, T_MAP_ROW, T_MAP_ROW_BYTES, T_MAT_FILTER, T_MAT_H, T_MAT_INCL,
                      T_MAT_TEX_START, T_MAT_THR, T_MAT_W, T_MAT_WRAP_U, T_MAT_WRAP_V, T_TEX, T_TRI_CORNER,
                      T_TRI_MAT, T_TRI_UV, T_TRI_VALPHA)
 
-__all__ = ["clamp_bary", "shader_alpha_test", "no_map_state", "micro_map_state", "codec_map_state", "mixed_map_state", "state_function"]
+__all__ = ["clamp_bary", "shader_alpha_test", "no_map_state", "micro_map_state", "codec_map_state", "mixed_map_state", "pair_map_state",
+           "codec_format", "state_function"]
 
 
 @njit(cache=True, inline="always")
@@ -91,17 +92,14 @@ def counting_state(table, tri, b1, b2):
     return states.C
 
 
-@njit(cache=True)
-def mixed_map_state(table, tri, b1, b2):
-    """A budget's maps (``trace.budget``): the pair's row has a format code (the index in
-    ``budget.PAIR_OPTIONS``: 0 none, 1..7 raw sq1..sq64, 8 vq2, 9 vq4, 10 vq4x64) and the byte
-    offset of its block; the hit's cell is read with that format's random-access lookup."""
-    row = np.int64(i32_ptr(table[T_MAP_ROW])[tri])
-    fmt = i32_ptr(table[T_MAP_FORMAT])[row]
+@njit(cache=True, inline="always")
+def _pair_block_state(table, tri, b1, b2, fmt, off):
+    """The hit's state in a pair's block of format ``fmt`` (the index in ``budget.PAIR_OPTIONS``:
+    0 none, 1..7 raw sq1..sq64, 8 vq2, 9 vq4, 10 vq4x64) at byte ``off`` of the map data, read
+    with that format's random-access lookup."""
     if fmt == 0:
         return states.C
     s, t = pair.hit_st(i8_ptr(table[T_TRI_CORNER]), tri, b1, b2)
-    off = i64_ptr(table[T_MAP_OFFSET])[row]
     if fmt <= 7:
         n = 1 << (fmt - 1)
         i, j = pair.uv_to_cell(s, t, n)
@@ -114,6 +112,33 @@ def mixed_map_state(table, tri, b1, b2):
         return vq4_block.lookup(carray(u8_ptr(table[T_MAP_DATA] + off), vq4_block.BLOCK_BYTES), i, j)
     i, j = pair.uv_to_cell(s, t, vq4_block.X64_SIZE)
     return vq4_block.lookup_x64(carray(u8_ptr(table[T_MAP_DATA] + off), vq4_block.X64_BYTES), i, j)
+
+
+@njit(cache=True)
+def mixed_map_state(table, tri, b1, b2):
+    """A budget's maps (``trace.budget``): the pair's row has a format code (the index in
+    ``budget.PAIR_OPTIONS``: 0 none, 1..7 raw sq1..sq64, 8 vq2, 9 vq4, 10 vq4x64) and the byte
+    offset of its block; the hit's cell is read with that format's random-access lookup."""
+    row = np.int64(i32_ptr(table[T_MAP_ROW])[tri])
+    return _pair_block_state(table, tri, b1, b2, i32_ptr(table[T_MAP_FORMAT])[row], i64_ptr(table[T_MAP_OFFSET])[row])
+
+
+@njit(cache=True)
+def pair_map_state(table, tri, b1, b2):
+    """One codec's square maps (``sqN`` up to 64, vq2, vq4, vq4x64), format code in the table's
+    ``T_MAP_CODEC`` word: the pair's row of ``T_MAP_ROW_BYTES`` bytes read with the codec's lookup.
+    A module-level function (unlike ``codec_map_state``'s), so its filter is compiled once and cached."""
+    row = np.int64(i32_ptr(table[T_MAP_ROW])[tri])
+    return _pair_block_state(table, tri, b1, b2, table[T_MAP_CODEC], row * table[T_MAP_ROW_BYTES])
+
+
+def codec_format(codec) -> int:
+    """The codec's format code in ``budget.PAIR_OPTIONS`` (read by ``pair_map_state``), or -1 for
+    a codec it does not list (traced through ``codec_map_state``)."""
+    from ..budget import PAIR_OPTIONS
+
+    name = getattr(codec, "name", None)
+    return PAIR_OPTIONS.index(name) if name in PAIR_OPTIONS and name != "none" else -1
 
 
 _CODEC_STATES: dict = {}
@@ -148,4 +173,6 @@ def state_function(sm):
         return counting_state
     if sm.kind == "mixed":
         return mixed_map_state
+    if codec_format(sm.codec) > 0:
+        return pair_map_state
     return codec_map_state(sm.codec)

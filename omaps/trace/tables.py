@@ -23,7 +23,8 @@ T_MAP_ROW, T_MAP_DATA, T_MAP_ROW_BYTES, T_MAP_PARAM = 15, 16, 17, 18
 T_MAP_LEVEL, T_MAP_OFFSET = 19, 20  # stored micromaps (scheme omm): per row its level (int32) and byte offset (int64)
 T_MAP_FORMAT = 21  # a budget's maps: per row the format code (int32, ``budget.PAIR_OPTIONS``); offsets in T_MAP_OFFSET
 T_COUNT = 22  # view weights: candidate hits per alpha triangle (int64), counted by lookups.counting_state
-TABLE_WORDS = 23
+T_MAP_CODEC = 23  # square maps of one codec: its format code (``budget.PAIR_OPTIONS``; lookups.pair_map_state)
+TABLE_WORDS = 24
 
 # ---- a query context: Embree's part, then ours (int64 words) -----------------------------------
 C0 = CONTEXT_BYTES // 8
@@ -109,4 +110,8 @@ def scheme_tables(base: dict, sm) -> TraceTables:
         table[k] = a.ctypes.data
     table[T_MAP_ROW_BYTES] = sm.row_bytes
     table[T_MAP_PARAM] = sm.param
+    if sm.codec is not None:
+        from .lookups import codec_format
+
+        table[T_MAP_CODEC] = codec_format(sm.codec)
     return TraceTables(arrays, table)
