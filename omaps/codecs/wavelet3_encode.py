@@ -21,7 +21,7 @@ from numba import njit
 from .. import states
 from .options import check_maps, check_options
 from .vec4 import FULL, GENERAL, entry_code, popcount16
-from .vq4_synth_encode import distinct_items, greedy_codebook, vector_masks
+from .vec4_search import distinct_items, greedy_codebook, vector_masks
 from .wavelet3_block import BLOCK_BITS, ENTRY_BITS, L2_BITS, L2_POS, L3_BITS, MAX_ENTRIES, R, SIZE, Wavelet3Block
 
 __all__ = ["encode", "encode_many"]
