@@ -30,8 +30,8 @@ from . import birdcurve
 from .alpha_test import AlphaTest, sample_passes
 from .pair import pair_weights
 
-__all__ = ["micro_fractions", "cell_fractions", "micro_vertices", "SAMPLES_PER_TEXEL", "MAX_SAMPLE_LEVEL",
-           "CELL_SAMPLES"]
+__all__ = ["micro_fractions", "cell_fractions", "micro_vertices", "micro_corners", "micro_hits", "SAMPLES_PER_TEXEL",
+           "MAX_SAMPLE_LEVEL", "CELL_SAMPLES"]
 
 SAMPLES_PER_TEXEL = 16
 MAX_SAMPLE_LEVEL = 3
@@ -71,10 +71,8 @@ def micro_vertices(index, level):
 
 
 @njit(cache=True)
-def micro_fraction(value, threshold, inclusive, filt, mode_u, mode_v, tri_texel, index, level, samples, k):
-    """Fraction of the sample points of micro-triangle ``index`` where the alpha test passes,
-    and the micro-triangle's centroid (texel coordinates). The points are the centroids of its
-    level-``k`` sub-triangles, ``samples[(4**k - 1) // 3:][:4**k]``."""
+def micro_corners(tri_texel, index, level):
+    """Texel coordinates (ax, ay, bx, by, cx, cy) of micro-triangle ``index``'s vertices."""
     a1, a2, b1, b2, c1, c2 = _micro_vertices(index, level)
     t = tri_texel
     qax = (1.0 - a1 - a2) * t[0, 0] + a1 * t[1, 0] + a2 * t[2, 0]
@@ -83,6 +81,17 @@ def micro_fraction(value, threshold, inclusive, filt, mode_u, mode_v, tri_texel,
     qby = (1.0 - b1 - b2) * t[0, 1] + b1 * t[1, 1] + b2 * t[2, 1]
     qcx = (1.0 - c1 - c2) * t[0, 0] + c1 * t[1, 0] + c2 * t[2, 0]
     qcy = (1.0 - c1 - c2) * t[0, 1] + c1 * t[1, 1] + c2 * t[2, 1]
+    return qax, qay, qbx, qby, qcx, qcy
+
+
+@njit(cache=True)
+def micro_hits(value, threshold, inclusive, filt, mode_u, mode_v, corners, samples, k, need):
+    """Sample points of a micro-triangle (``micro_corners``) where the alpha test passes, of
+    its 4**k points (the centroids of its level-``k`` sub-triangles,
+    ``samples[(4**k - 1) // 3:][:4**k]``), counted until the count can no longer end on the
+    other side of ``need``: the result is >= need exactly when the full count is (``need`` >
+    4**k counts them all)."""
+    qax, qay, qbx, qby, qcx, qcy = corners
     first = ((1 << (2 * k)) - 1) // 3
     n = 1 << (2 * k)
     hits = 0
@@ -93,7 +102,22 @@ def micro_fraction(value, threshold, inclusive, filt, mode_u, mode_v, tri_texel,
         if sample_passes(value, threshold, inclusive, filt, mode_u, mode_v,
                          w0 * qax + w1 * qbx + w2 * qcx, w0 * qay + w1 * qby + w2 * qcy):
             hits += 1
-    return hits / n, (qax + qbx + qcx) / 3.0, (qay + qby + qcy) / 3.0
+            if hits == need:
+                break
+        elif need <= n and hits + (first + n - 1 - s) < need:
+            break
+    return hits
+
+
+@njit(cache=True)
+def micro_fraction(value, threshold, inclusive, filt, mode_u, mode_v, tri_texel, index, level, samples, k):
+    """Fraction of the sample points of micro-triangle ``index`` where the alpha test passes,
+    and the micro-triangle's centroid (texel coordinates). The points are the centroids of its
+    level-``k`` sub-triangles, ``samples[(4**k - 1) // 3:][:4**k]``."""
+    q = micro_corners(tri_texel, index, level)
+    n = 1 << (2 * k)
+    hits = micro_hits(value, threshold, inclusive, filt, mode_u, mode_v, q, samples, k, n + 1)
+    return hits / n, (q[0] + q[2] + q[4]) / 3.0, (q[1] + q[3] + q[5]) / 3.0
 
 
 def sample_points() -> np.ndarray:

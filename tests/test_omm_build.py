@@ -93,6 +93,28 @@ def test_special_indices_and_reuse(rng):
     assert (r2.index[0], r3.index[0]) == (-4, -3)
 
 
+@pytest.mark.parametrize("chunk", [None, 150])
+def test_reuse_survives_hash_collisions(rng, monkeypatch, chunk):
+    """Reuse finds identical micromaps by a 64-bit hash and then compares their bytes: with every
+    hash forced equal (all collide) the buffers are those of a byte-keyed reuse, and every stored
+    micromap is distinct."""
+    from omaps.omm import pipeline
+
+    tex = _alpha(rng, 32, 32)
+    tris = np.concatenate([_tris(rng, 20)] * 3)  # each triangle three times
+    test = _cutoff(tex, 0.5, "linear", "wrap")
+    if chunk:
+        monkeypatch.setattr(pipeline, "CHUNK_MICRO_TRIANGLES", chunk)
+    whole = build([Geometry("g", test, tris)], OmmSettings(level=3))
+    monkeypatch.setattr(omm_format, "row_hashes", lambda packed: np.zeros(len(packed), np.uint64))
+    clash = build([Geometry("g", test, tris)], OmmSettings(level=3))
+    for k in ("data", "triangles", "index"):
+        np.testing.assert_array_equal(getattr(clash, k), getattr(whole, k))
+    stored = [clash.micromap_states(i).tobytes() for i in range(len(clash.triangles))]
+    assert len(set(stored)) == len(stored) and 1 < len(stored) <= 20  # hashes did collide
+    np.testing.assert_array_equal(whole.index[:20], whole.index[20:40])
+
+
 # ---- promotion -----------------------------------------------------------------------------
 
 def test_fractions_agree_with_known_states(rng):

@@ -15,6 +15,7 @@ its facts live. docs/FORMAT.md, section "Standard opacity micromaps (OMM)", stat
 from __future__ import annotations
 
 import numpy as np
+from numba import njit
 
 from ..birdcurve import MAX_LEVEL  # noqa: F401 (the APIs' largest subdivision level)
 from ..codecs.raw import pack_states, row_bytes, unpack_states
@@ -83,3 +84,39 @@ def usage_histograms(levels: np.ndarray, formats: np.ndarray, index: np.ndarray)
 def _count_pairs(a, b) -> dict:
     keys, counts = np.unique(np.stack([a, b], axis=1).reshape(-1, 2), axis=0, return_counts=True)
     return {(int(k[0]), int(k[1])): int(c) for k, c in zip(keys, counts)}
+
+
+@njit(cache=True)
+def _uniform_rows(rows):
+    out = np.empty(rows.shape[0], dtype=np.bool_)
+    for i in range(rows.shape[0]):
+        s = rows[i, 0]
+        u = True
+        for k in range(1, rows.shape[1]):
+            if rows[i, k] != s:
+                u = False
+                break
+        out[i] = u
+    return out
+
+
+def uniform_rows(omm_states: np.ndarray) -> np.ndarray:
+    """Per micromap (M, K), whether all its micro-triangles share one state (a special index)."""
+    return _uniform_rows(np.ascontiguousarray(omm_states, dtype=np.uint8))
+
+
+@njit(cache=True)
+def _row_hashes(packed):
+    out = np.empty(packed.shape[0], dtype=np.uint64)
+    for i in range(packed.shape[0]):
+        h = np.uint64(0xCBF29CE484222325)  # FNV-1a, 64 bits
+        for k in range(packed.shape[1]):
+            h = (h ^ np.uint64(packed[i, k])) * np.uint64(0x100000001B3)
+        out[i] = h
+    return out
+
+
+def row_hashes(packed: np.ndarray) -> np.ndarray:
+    """A 64-bit hash (FNV-1a) of each packed micromap (M, bytes): equal rows, equal hashes (the
+    packer's reuse compares the rows themselves where hashes agree)."""
+    return _row_hashes(np.ascontiguousarray(packed, dtype=np.uint8))

@@ -141,14 +141,15 @@ class OmmResult:
 
 
 class _Packer:
-    """Collects micromaps, turning uniform ones into special indices and sharing duplicates."""
+    """Collects micromaps, turning uniform ones into special indices and sharing duplicates
+    (found by a 64-bit hash of the packed rows, then compared byte for byte)."""
 
     def __init__(self, settings: OmmSettings):
         self.s = settings
         self.chunks: list[bytes] = []
         self.size = 0
         self.records: list[tuple[int, int, int]] = []
-        self.seen: dict[tuple[int, bytes], int] = {}
+        self.stored: dict[tuple[int, int], tuple[np.ndarray, np.ndarray, np.ndarray]] = {}  # sorted hashes, rows, ids
         self.needing = 0  # micromaps before reuse of identical ones
 
     def add(self, omm_states: np.ndarray, level: int) -> np.ndarray:
@@ -157,7 +158,7 @@ class _Packer:
         idx = np.empty(len(omm_states), dtype=np.int32)
         need = np.ones(len(omm_states), dtype=bool)
         if self.s.special:
-            uniform = (omm_states == omm_states[:, :1]).all(axis=1)
+            uniform = omm_format.uniform_rows(omm_states)
             idx[uniform] = omm_format.SPECIAL_INDEX[omm_states[uniform, 0]]
             need = ~uniform
         rows = np.flatnonzero(need)
@@ -165,21 +166,56 @@ class _Packer:
         if len(rows) == 0:
             return idx
         packed = omm_format.pack(omm_states[rows], fmt)
-        if self.s.dedup:
-            void = np.ascontiguousarray(packed).view(np.dtype((np.void, packed.shape[1]))).ravel()
-            _, first, inverse = np.unique(void, return_index=True, return_inverse=True)
-            ids = np.empty(len(first), dtype=np.int32)
-            for u in np.argsort(first):  # in order of first use
-                key = (level, packed[first[u]].tobytes())
-                got = self.seen.get(key)
-                if got is None:
-                    got = self._new(key[1], level, fmt)
-                    self.seen[key] = got
-                ids[u] = got
-            idx[rows] = ids[inverse.ravel()]
-        else:
+        if not self.s.dedup:
             for r, row in zip(rows, packed):
                 idx[r] = self._new(row.tobytes(), level, fmt)
+            return idx
+        hashes = omm_format.row_hashes(packed)
+        uniq, first, inverse = np.unique(hashes, return_index=True, return_inverse=True)
+        inverse = inverse.ravel()
+        if not np.array_equal(packed[first][inverse], packed):  # two rows share a hash: compare bytes
+            return self._add_exact(idx, rows, packed, level, fmt)
+        order = np.argsort(first)  # the distinct rows in order of first use
+        h_new, r_new = uniq[order], packed[first[order]]
+        s_h, s_rows, s_ids = self.stored.get((level, fmt), (np.zeros(0, np.uint64), packed[:0], np.zeros(0, np.int32)))
+        pos = np.minimum(np.searchsorted(s_h, h_new), max(len(s_h) - 1, 0))
+        found = (s_h[pos] == h_new) if len(s_h) else np.zeros(len(h_new), bool)
+        if not np.array_equal(s_rows[pos[found]], r_new[found]):
+            return self._add_exact(idx, rows, packed, level, fmt)
+        ids = np.empty(len(h_new), dtype=np.int32)
+        ids[found] = s_ids[pos[found]]
+        fresh = np.flatnonzero(~found)
+        nbytes = packed.shape[1]
+        if len(fresh):
+            if self.size + len(fresh) * nbytes > 0xFFFFFFFF:
+                raise InputError("micromap data exceeds the 4 GiB a 32-bit data offset can address; lower the level")
+            ids[fresh] = len(self.records) + np.arange(len(fresh))
+            self.records.extend((self.size + i * nbytes, level, fmt) for i in range(len(fresh)))
+            self.chunks.append(r_new[fresh].tobytes())
+            self.size += len(fresh) * nbytes
+            h_all = np.concatenate([s_h, h_new[fresh]])
+            keep = np.argsort(h_all, kind="stable")
+            self.stored[(level, fmt)] = (h_all[keep], np.concatenate([s_rows, r_new[fresh]])[keep],
+                                         np.concatenate([s_ids, ids[fresh]])[keep])
+        per_unique = np.empty(len(first), dtype=np.int32)
+        per_unique[order] = ids
+        idx[rows] = per_unique[inverse]
+        return idx
+
+    def _add_exact(self, idx, rows, packed, level, fmt) -> np.ndarray:
+        """``add``'s reuse by the rows' bytes (when 64-bit hashes collide)."""
+        s_h, s_rows, s_ids = self.stored.pop((level, fmt), (np.zeros(0, np.uint64), packed[:0], np.zeros(0, np.int32)))
+        seen = {r.tobytes(): int(i) for r, i in zip(s_rows, s_ids)}
+        for r, row in zip(rows, packed):
+            key = row.tobytes()
+            if key not in seen:
+                seen[key] = self._new(key, level, fmt)
+            idx[r] = seen[key]
+        ids = np.fromiter(seen.values(), np.int32, len(seen))
+        stored = np.array([np.frombuffer(k, np.uint8) for k in seen], dtype=np.uint8).reshape(len(seen), -1)
+        h = omm_format.row_hashes(stored)
+        keep = np.argsort(h, kind="stable")
+        self.stored[(level, fmt)] = (h[keep], stored[keep], ids[keep])
         return idx
 
     def _new(self, raw: bytes, level: int, fmt: int) -> int:
@@ -275,11 +311,12 @@ def build(geometries: list[Geometry], settings: OmmSettings = OmmSettings()) -> 
             if g.unknown is not None:
                 for i in np.flatnonzero(g.unknown[a:b]):
                     s3[starts[i]:starts[i + 1]] = states.C
-            omm = resolve.resolve(s3, starts, lv, g.test, tris[a:b], fmt, settings.promotion, settings.seed)
-            counts3 += np.bincount(s3, minlength=3)[:3]
-            promoted += np.bincount(omm[s3 == states.C], minlength=4)[:4]
+            omm, tri_counts = resolve.resolve_counted(s3, starts, lv, g.test, tris[a:b], fmt, settings.promotion,
+                                                      settings.seed)
+            counts3 += tri_counts[:, :3].sum(axis=0)
+            promoted += tri_counts[:, 3:].sum(axis=0)
             micro_total += len(s3)
-            per_tri_known = np.add.reduceat((s3 != states.C).astype(np.int64), starts[:-1]) if len(s3) else np.zeros(0)
+            per_tri_known = tri_counts[:, 0] + tri_counts[:, 1]
             known_area += float(np.sum(area[a:b] * per_tri_known / np.left_shift(1, 2 * lv)))
             total_area += float(np.sum(area[a:b]))
             for lvl in np.unique(lv):

@@ -8,50 +8,68 @@ output has no unknown: C becomes O or T outright (no longer conservative). The c
 
 from __future__ import annotations
 
+import math
+
 import numba
 import numpy as np
 from numba import njit, prange
 
 from ..alpha_test import AlphaTest
-from ..coverage import micro_fraction, sample_levels, sample_points, texel_triangles
-from ..promotion import hashed_threshold, promote, promotion_code
+from ..coverage import micro_corners, micro_hits, sample_levels, sample_points, texel_triangles
+from ..promotion import hashed_threshold, promotion_code
 from . import format as omm_format
 
-__all__ = ["resolve"]
+__all__ = ["resolve", "resolve_counted"]
 
 
 @njit(cache=True, parallel=True)
 def _resolve(states3, starts, levels, two_state, mode, seed, value, thr, inclusive, filt, mu, mv, tris,
-             samples, sample_k, out):
+             samples, sample_k, out, counts):
     for t in prange(tris.shape[0]):
         base = starts[t]
+        n_s = 1 << (2 * sample_k[t])
+        for j in range(7):
+            counts[t, j] = 0
         for k in range(starts[t + 1] - base):
             s = states3[base + k]
             if s < 2:
                 out[base + k] = s
+                counts[t, s] += 1
                 continue
+            counts[t, 2] += 1
             if mode == 1 or mode == 2:
                 opaque = mode == 1
-            else:
-                f, cx, cy = micro_fraction(value, thr, inclusive, filt, mu, mv, tris[t], k, levels[t], samples,
-                                           sample_k[t])
-                opaque = promote(f, mode, hashed_threshold(cx, cy, seed) if mode == 3 else 0.5)
+            else:  # O iff the opaque fraction hits / n_s > cut, i.e. hits >= floor(cut * n_s) + 1
+                q = micro_corners(tris[t], k, levels[t])
+                cut = 0.5 if mode == 0 else hashed_threshold((q[0] + q[2] + q[4]) / 3.0, (q[1] + q[3] + q[5]) / 3.0,
+                                                             seed)
+                need = int(math.floor(cut * n_s)) + 1
+                opaque = micro_hits(value, thr, inclusive, filt, mu, mv, q, samples, sample_k[t], need) >= need
             if two_state:
                 out[base + k] = 1 if opaque else 0
             else:
                 out[base + k] = 3 if opaque else 2
+            counts[t, 3 + out[base + k]] += 1
+
+
+def resolve_counted(states3: np.ndarray, starts: np.ndarray, levels, test: AlphaTest, tris_uv, fmt: int,
+                    promotion: str = "nearest", seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
+    """``resolve``, and per triangle (T, 7) int64 counts: its T, O and C micro-triangles
+    (``states3``), then how many C ones became OMM state 0, 1, 2, 3."""
+    mode = promotion_code(promotion)
+    tris = texel_triangles(test, tris_uv)
+    lv = np.ascontiguousarray(np.broadcast_to(np.asarray(levels), (len(tris),)), dtype=np.int64)
+    out = np.empty_like(states3)
+    counts = np.empty((len(tris), 7), dtype=np.int64)
+    filt, mu, mv = test.codes()
+    with numba.parallel_chunksize(16):  # triangles differ a lot in cost: hand them out dynamically
+        _resolve(states3, np.asarray(starts, dtype=np.int64), lv, fmt == omm_format.FORMAT_2_STATE, mode, int(seed),
+                 test.value, float(test.threshold), bool(test.inclusive), filt, mu, mv, tris, sample_points(),
+                 sample_levels(tris, lv), out, counts)
+    return out, counts
 
 
 def resolve(states3: np.ndarray, starts: np.ndarray, levels, test: AlphaTest, tris_uv, fmt: int,
             promotion: str = "nearest", seed: int = 0) -> np.ndarray:
     """OMM states (flat, like ``states3``) of baked T/O/C states: 0/1 in 2-state, 0..3 in 4-state."""
-    mode = promotion_code(promotion)
-    tris = texel_triangles(test, tris_uv)
-    lv = np.ascontiguousarray(np.broadcast_to(np.asarray(levels), (len(tris),)), dtype=np.int64)
-    out = np.empty_like(states3)
-    filt, mu, mv = test.codes()
-    with numba.parallel_chunksize(16):  # triangles differ a lot in cost: hand them out dynamically
-        _resolve(states3, np.asarray(starts, dtype=np.int64), lv, fmt == omm_format.FORMAT_2_STATE, mode, int(seed),
-                 test.value, float(test.threshold), bool(test.inclusive), filt, mu, mv, tris, sample_points(),
-                 sample_levels(tris, lv), out)
-    return out
+    return resolve_counted(states3, starts, levels, test, tris_uv, fmt, promotion, seed)[0]
