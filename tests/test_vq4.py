@@ -282,3 +282,34 @@ def test_cli_encode_decode(tmp_path, capsys, codec, size, nbytes):
     assert main(["decode", str(tmp_path / "ring.png"), "--codec", codec]) == 2
     assert f"a {codec} block is {nbytes} bytes" in capsys.readouterr().err
     assert main(["eval", str(tmp_path / "ring.png"), "--schemes", f"{codec}-fast,{codec}-paper", "--quiet"]) == 0
+
+
+def test_parallel_encoding_equals_one_process(tmp_path):
+    """``workers.encode_maps`` (trace and omm --from) gives one process's blocks with 2 workers,
+    and ``omm --from vq4 --jobs 2`` writes the same files as ``--jobs 1``."""
+    from PIL import Image
+
+    from omaps.codecs import get_codec
+    from omaps.workers import encode_maps
+
+    rng = np.random.default_rng(5)
+    maps = np.stack([np.kron(rng.integers(0, 3, (8, 8)), np.ones((4, 4), np.uint8)) for _ in range(40)]).astype(np.uint8)
+    codec = get_codec("vq4")
+    one = codec.encode_many(maps, "best", "fast")
+    two = encode_maps(codec, maps, "best", "fast", jobs=2)
+    np.testing.assert_array_equal(one[0], two[0])
+    np.testing.assert_array_equal(one[1], two[1])
+
+    y, x = np.mgrid[0:128, 0:128]
+    a = np.clip(255 - 8 * np.abs(np.hypot(x - 60, y - 68) - 40), 0, 255).astype(np.uint8)
+    Image.fromarray(a).save(tmp_path / "ring.png")
+    np.save(tmp_path / "uvs.npy", rng.random((64, 3, 2)))
+    outs = []
+    for jobs in ("1", "2"):
+        out = tmp_path / f"omm{jobs}"
+        assert main(["omm", str(tmp_path / "ring.png"), str(tmp_path / "uvs.npy"), "-o", str(out), "--from",
+                     "vq4-fast", "--jobs", jobs, "--quiet"]) == 0
+        outs.append({p.name: p.read_bytes() for p in sorted(out.iterdir()) if p.suffix == ".bin"})
+    assert outs[0] == outs[1] and "pair_blocks.bin" in outs[0]
+    assert main(["omm", str(tmp_path / "ring.png"), str(tmp_path / "uvs.npy"), "-o", str(tmp_path / "bad"),
+                 "--from", "vq4", "--jobs", "0"]) == 2
