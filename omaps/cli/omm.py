@@ -42,7 +42,12 @@ def add_parser(sub) -> None:
     lv.add_argument("--level", type=int, default=None, help="one subdivision level for all, 0..12 (default 4)")
     lv.add_argument("--dynamic", type=float, default=None, metavar="SCALE",
                     help="per-triangle level: the smallest whose micro-triangles cover at most SCALE^2 texels")
-    lv.add_argument("--max-level", type=int, default=8, help="cap of --dynamic (default 8)")
+    lv.add_argument("--max-level", type=int, default=8, help="cap of --dynamic and --budget (default 8)")
+    lv.add_argument("--budget", metavar="BYTES", default=None,
+                    help="per triangle the level (and 2-state where its micromap has no unknown, else 4-state) "
+                         "that saves the most expected any-hit calls per byte of micromap data + records, every "
+                         "triangle within BYTES (1263936, 1.2MiB, 800KiB); weights: world area x instances "
+                         "(a scene), texel area (a texture)")
     f = o.add_argument_group("states")
     f.add_argument("--format", choices=list(omm_format.FORMAT_NAMES), default="4state",
                    help="4state (conservative, unknown runs the any-hit shader) or 2state (default 4state)")
@@ -83,14 +88,20 @@ def _spec(a) -> dict:
 
 
 def _settings(a) -> OmmSettings:
-    if a.level is not None and a.dynamic is not None:
-        raise InputError("--level and --dynamic exclude each other")
+    if sum(x is not None for x in (a.level, a.dynamic, a.budget)) > 1:
+        raise InputError("--level, --dynamic and --budget exclude each other")
+    budget = None
+    if a.budget is not None:
+        from ..budget import parse_bytes
+
+        budget = parse_bytes(a.budget)
     check_jobs(a.jobs)
     if a.level is not None and a.source != "texture":
         raise InputError("--from fixes the level to log2 N of the square map; drop --level")
     return OmmSettings(format=a.format, level=4 if a.level is None else a.level, dynamic_scale=a.dynamic,
                        max_level=a.max_level, promotion=a.promote, special=not a.no_special, dedup=not a.no_dedup,
-                       source=a.source, encoder=a.encoder, effort=a.effort, seed=a.seed, jobs=a.jobs)
+                       source=a.source, encoder=a.encoder, effort=a.effort, seed=a.seed, jobs=a.jobs,
+                       budget=budget)
 
 
 def cmd_omm(a) -> int:

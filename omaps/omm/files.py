@@ -74,7 +74,7 @@ def _json(folder, name) -> dict:
 # omm.json's settings: the Python types each may have (None: may be null)
 _SETTING_TYPES = {"source": (str,), "level": (int, None), "dynamic_scale": (float, None), "max_level": (int,),
                   "promotion": (str,), "special": (bool,), "dedup": (bool,), "seed": (int,), "encoder": (str, None),
-                  "effort": (str, None)}
+                  "effort": (str, None), "budget": (int, None)}
 
 
 def _is(value, kind) -> bool:
@@ -107,7 +107,7 @@ def settings_from_summary(summary: dict, path=None) -> OmmSettings:
         return OmmSettings(format=fmt, level=s["level"] if s["level"] is not None else 4,
                            dynamic_scale=s["dynamic_scale"], max_level=s["max_level"], promotion=s["promotion"],
                            special=s["special"], dedup=s["dedup"], source=s["source"], encoder=s["encoder"],
-                           effort=s["effort"], seed=s["seed"])
+                           effort=s["effort"], seed=s["seed"], budget=s["budget"])
     except InputError as exc:
         raise InputError(f"settings: {exc.problem}", path) from None
 

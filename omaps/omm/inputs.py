@@ -97,12 +97,14 @@ def load_geometries(spec: dict) -> tuple[list[Geometry], list[dict], list[str]]:
 
 
 def _gltf_geometries(spec):
+    from ..budget import triangle_weights
     from ..scene import alpha_triangles, load_scene
 
     rules = MaterialRules(spec.get("cutoff"), spec.get("filter"), spec.get("wrap"), spec.get("blend", "levels"),
                           spec.get("blend_cutoff", 0.5))
     scene = load_scene(spec["path"])
     at = alpha_triangles(scene, rules)
+    weight = triangle_weights(scene, at)  # --budget's: world area x instances
     tested = scene.alpha_tested(rules)
     skipped = list(scene.skipped)
     geoms = []
@@ -129,7 +131,7 @@ def _gltf_geometries(spec):
                 info["problem"] = tex.problem
             geoms.append(Geometry(f"{mesh.name} (mesh {p.mesh}, primitive {p.index})", test, at.uv[rows],
                                   area=p.areas[at.local[rows]], unknown=at.unknown[rows], info=info,
-                                  pair_of=pair_of.ravel(), corners=at.corners[rows]))
+                                  pair_of=pair_of.ravel(), corners=at.corners[rows], weight=weight[rows]))
     if not geoms:
         raise InputError("no alpha-tested primitive in the scene "
                          f"({len(skipped)} skipped: {', '.join(sorted({s['reason'] for s in skipped})) or 'none'})",
