@@ -34,7 +34,8 @@ def add_eval_parser(sub) -> None:
     e.add_argument("paths", nargs="*", metavar="PATH", help="image files or folders (searched recursively)")
     e.add_argument("--schemes", default=",".join(DEFAULT_SCHEMES),
                    help="comma-separated: sqN (N = 1..128, power of two), triL (L = 0..12), texel, vq2, vq4, "
-                        "vq4x64, each codec also with -paper, -fast, -medium or -thorough (default: %(default)s)")
+                        "vq4x64, vq4-synth, wavelet3, each codec also with -fast, -medium or -thorough, the vq "
+                        "codecs also -paper (default: %(default)s)")
     e.add_argument("--min-size", type=int, default=0, metavar="PX",
                    help="skip textures whose smaller side is below PX")
     e.add_argument("--json", metavar="FILE", help="write settings, per-texture and mean results, and unreadable "
@@ -70,7 +71,7 @@ def _add_map_parsers(sub) -> None:
                         description="Bake the codec's square map of a texture (corpus convention) and "
                                     "write the block.")
     en.add_argument("texture")
-    en.add_argument("--codec", required=True, help="sqN, vq2, vq4 or vq4x64")
+    en.add_argument("--codec", required=True, help="sqN, vq2, vq4, vq4x64, vq4-synth or wavelet3")
     en.add_argument("-o", "--output", required=True, metavar="FILE", help="block bytes (replaced if it exists)")
     add_state_options(en, "levels")
     add_codec_options(en, "the codec")
@@ -78,7 +79,7 @@ def _add_map_parsers(sub) -> None:
 
     de = sub.add_parser("decode", help="decode a codec block and print or draw its map")
     de.add_argument("block", metavar="FILE")
-    de.add_argument("--codec", required=True, help="sqN, vq2, vq4 or vq4x64")
+    de.add_argument("--codec", required=True, help="sqN, vq2, vq4, vq4x64, vq4-synth or wavelet3")
     de.add_argument("--show", metavar="OUT.png", help="draw the map in the deck's colours")
     de.add_argument("--json", action="store_true", help="print the map (and its settings) as JSON")
     de.set_defaults(func=cmd_decode)
