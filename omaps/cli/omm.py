@@ -62,7 +62,8 @@ def add_parser(sub) -> None:
     r.add_argument("--no-dedup", action="store_true", help="no sharing of identical micromaps")
     r.add_argument("--from", dest="source", default="texture", metavar="SCHEME",
                    help="texture (default), or a square scheme: sqN (the pair's N x N map, expanded to level "
-                        "log2 N) or a codec (vq2, vq4, vq4x64, vq4-synth, wavelet3, also -paper, -fast, -medium, -thorough): square maps "
+                        "log2 N) or a codec (vq2, vq4, vq4x64, vq4-synth, wavelet3, also -paper, -fast, -medium, "
+                        "-thorough): square maps "
                         "stored, decoded, expanded. Pairs: the tracer's (shared edges) in a glTF scene, triangles "
                         "2k and 2k+1 with a UV array")
     o.add_argument("--threads", type=int, default=None, help="baking threads (default: all cores)")

@@ -123,7 +123,8 @@ class Wavelet3Block:
         if len(self.level2) != int((self.level1 == R).sum()) or len(self.level3) != int((self.level2 == R).sum()):
             raise ValueError("one level-2 row per R cell of level 1, one level-3 index per R child")
         if self.level1.max() > 3 or self.level2.max(initial=0) > 3 or self.level3.max(initial=0) > 15 \
-                or len(self.entries) > MAX_ENTRIES or np.any(self.entries < 0) or np.any(self.entries >= 1 << ENTRY_BITS):
+                or len(self.entries) > MAX_ENTRIES or np.any(self.entries < 0) \
+                or np.any(self.entries >= 1 << ENTRY_BITS):
             raise ValueError("field out of range")
         if self.bits > BLOCK_BITS:
             raise ValueError(f"the fields need {self.bits} bits, more than {BLOCK_BITS}")
