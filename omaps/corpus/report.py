@@ -56,7 +56,9 @@ FAMILY_LABELS = {"sq": "square map per pair (sqN, 2 bits/cell)",
                  "vq2": "VQ2: 16x16 in 256 bits (our encoder)",
                  "vq2-paper": "VQ2, the deck's naive encoder",
                  "vq4": "VQ4: 32x32 in 512 bits, 64x64 in 4 blocks (our encoder)",
-                 "vq4-paper": "VQ4, the deck's top-down encoder"}
+                 "vq4-paper": "VQ4, the deck's top-down encoder",
+                 "vq4-synth": "VQ4-synth: 32x32 in 512 bits, a synthesised 14th vector",
+                 "wavelet3": "wavelet3: 64x64 in 512 bits, three levels"}
 
 
 def plot_savings(path, results, scheme_names, title="Shader invocation savings") -> None:
@@ -72,16 +74,16 @@ def plot_savings(path, results, scheme_names, title="Shader invocation savings")
         if name == "texel":
             continue
         families.setdefault(family_of(name), []).append((m["bits"], m["savings"], name))
-    stacked: dict[float, int] = {}
+    placed: dict[float, list[float]] = {}  # heights of the lone labels at each x
     for fam, pts in families.items():
         pts.sort()
         xs, ys, labels = zip(*pts)
         ax.plot(xs, ys, marker="o", label=FAMILY_LABELS.get(fam, fam))
         for x, y, lab in pts:
-            if len(pts) == 1:  # a lone point: label above-left, stacked with others at this x
-                k = stacked.get(x, 0)
-                stacked[x] = k + 1
-                ax.annotate(lab, (x, y), textcoords="offset points", xytext=(-48, 8 + 10 * k), fontsize=7)
+            if len(pts) == 1:  # a lone point: label left of it, lower than the lone labels above
+                y_text = min([y] + [u - 0.03 for u in placed.get(x, []) if u - 0.03 < y + 0.03])
+                placed.setdefault(x, []).append(y_text)
+                ax.annotate(lab, (x, y), xytext=(x / 1.06, y_text - 0.008), ha="right", fontsize=7)
             else:  # below the line; a family's other encoders above (they sit close)
                 above = fam not in ("sq", "tri") and not fam.endswith("-paper")
                 ax.annotate(lab, (x, y), textcoords="offset points", xytext=(-14, 7) if above else (4, -11),
