@@ -30,14 +30,21 @@ def main(argv=None) -> int:
     trace: a scheme changed the visible result; omm --verify: a check failed) or a system error
     while writing (nothing written); 2 bad input or options (nothing written); 130 interrupted
     (nothing written)."""
+    from . import precompile
     from .trace import bind_camera_value
 
+    ahead = None
     try:
         args = parser().parse_args(bind_camera_value(sys.argv[1:] if argv is None else argv))
+        precompile.announce(args)
+        ahead = precompile.start_ahead(args)
         with warnings.catch_warnings():
             warnings.showwarning = show_warning
             warnings.simplefilter("always", UserWarning)
-            return args.func(args)
+            rc = args.func(args)
+        precompile.finish_ahead(ahead)
+        ahead = None
+        return rc
     except InputError as exc:
         print(f"omaps: error: {exc}", file=sys.stderr)
         return 2
@@ -47,6 +54,8 @@ def main(argv=None) -> int:
     except KeyboardInterrupt:
         print("omaps: interrupted", file=sys.stderr)
         return 130
+    finally:
+        precompile.stop_ahead(ahead)
 
 
 if __name__ == "__main__":

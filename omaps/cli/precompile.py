@@ -1,0 +1,255 @@
+"""Numba kernels before their first use: which a command needs, whether numba's on-disk cache
+holds them, the one line that announces a compile, and the ahead-of-time compile that the
+README's first command (``omaps eval`` on the embedded corpus) runs beside its evaluation.
+
+Kernels are compiled with ``cache=True``: once per machine (and per change of their source), then
+loaded in about a second. A *family* is the set of modules one kind of work compiles; a module
+counts as cached when numba's index of at least one of its kernels matches the module's current
+source (what numba itself checks before loading).
+
+The ahead-of-time compile runs the real commands on tiny inputs written to a temporary folder
+(``python -m omaps.cli.precompile FAMILY...``), so it compiles exactly the specialisations the
+commands use. ``python bench/bench_cold.py`` measures what it saves.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import importlib
+import io
+import os
+import re
+import subprocess
+import sys
+import tempfile
+import time
+
+__all__ = ["FAMILIES", "uncached", "families_for", "announce", "start_ahead", "finish_ahead", "stop_ahead",
+           "warm"]
+
+# family: (modules whose kernels it compiles, seconds to compile them with an empty cache on one
+# core of the 2-core reference machine: numba's compile events, summed per family, of the palm
+# trace command and of omaps eval)
+FAMILIES = {
+    "square": (("omaps.raster", "omaps.bake.square"), 10),
+    "micromap": (("omaps.bake.micromap",), 6),
+    "trace": (("omaps.trace.rays", "omaps.scene.pairing"), 10),
+    "vq2": (("omaps.codecs.vq2_encode",), 12),
+    "vq4": (("omaps.codecs.vq4_encode",), 45),
+    "omm": (("omaps.omm.resolve",), 6),
+}
+# what the README's first command compiles ahead, beside its own evaluation (which compiles
+# "square" and "micromap"): two processes, the longest family alone
+AHEAD = (("vq4",), ("trace", "vq2", "omm"))
+
+
+def _module_cached(name: str) -> bool:
+    from numba.core.caching import NullCache
+    from numba.core.dispatcher import Dispatcher
+
+    try:
+        mod = importlib.import_module(name)
+    except Exception:  # noqa: BLE001 - a module that cannot be imported compiles nothing here
+        return True
+    for obj in vars(mod).values():
+        if not isinstance(obj, Dispatcher) or getattr(obj.py_func, "__module__", None) != name:
+            continue
+        cache = getattr(obj, "_cache", None)
+        if cache is None or isinstance(cache, NullCache):
+            continue
+        try:
+            if cache._cache_file._load_index():  # empty when absent or stale (source changed)
+                return True
+        except Exception:  # noqa: BLE001 - an unreadable index: numba compiles
+            pass
+    return False
+
+
+def uncached(families) -> list[str]:
+    """The families (names in ``FAMILIES``) whose kernels numba's cache does not hold."""
+    return [f for f in dict.fromkeys(families) if not all(_module_cached(m) for m in FAMILIES[f][0])]
+
+
+def _scheme_families(text) -> list[str]:
+    """The families that baking and encoding these comma-separated schemes compiles."""
+    out = []
+    for name in str(text or "").lower().split(","):
+        name = name.strip()
+        if name.startswith("budget:"):
+            out += ["square", "vq2", "vq4"]
+        elif re.match(r"sq\d+$", name):
+            out.append("square")
+        elif re.match(r"tri\d+$", name):
+            out.append("micromap")
+        elif re.match(r"vq2(-|$)", name):
+            out += ["square", "vq2"]
+        elif re.match(r"vq4(x64)?(-|$)", name):
+            out += ["square", "vq4"]
+    return out
+
+
+def families_for(args) -> list[str]:
+    """The families a parsed ``omaps`` command line compiles, in order, without repeats."""
+    cmd = getattr(args, "command", None)
+    out = []
+    if cmd == "eval":
+        out = _scheme_families(args.schemes)
+    elif cmd == "trace":
+        out = ["trace"] + _scheme_families(args.schemes)
+    elif cmd == "omm" and getattr(args, "inputs", None) and not getattr(args, "expand", False):
+        out = ["micromap", "omm"] + _scheme_families(getattr(args, "source", ""))
+    elif cmd == "encode":
+        out = _scheme_families(args.codec)
+    elif cmd == "bake":
+        out = _scheme_families(args.scheme)
+    return list(dict.fromkeys(out))
+
+
+def _wanted() -> bool:
+    forced = os.environ.get("OMAPS_PROGRESS", "").strip()
+    if forced in ("0", "1"):
+        return forced == "1"
+    return sys.stderr.isatty()
+
+
+def _seconds(families) -> int:
+    return sum(FAMILIES[f][1] for f in families)
+
+
+def announce(args) -> None:
+    """One line on stderr (a terminal, or OMAPS_PROGRESS=1) when the command's kernels are not in
+    numba's cache yet."""
+    if not _wanted():
+        return
+    missing = uncached(families_for(args))
+    if missing:
+        print(f"omaps: compiling numba kernels for first use: {', '.join(missing)} (once; about "
+              f"{_seconds(missing)} s on one core)", file=sys.stderr, flush=True)
+
+
+def start_ahead(args):
+    """For ``omaps eval`` on the embedded corpus (the README's first command): compile the other
+    commands' uncached kernels in background processes while it evaluates. Returns what
+    ``finish_ahead`` waits for (None when everything is cached or OMAPS_PRECOMPILE=0)."""
+    if getattr(args, "command", None) != "eval" or args.paths or os.environ.get("OMAPS_PRECOMPILE") == "0":
+        return None
+    groups = [[f for f in group if f in uncached(group)] for group in AHEAD]
+    groups = [g for g in groups if g]
+    if not groups:
+        return None
+    names = [f for g in groups for f in g]
+    print(f"omaps: compiling the numba kernels of {', '.join(names)} ahead of first use, beside this "
+          f"evaluation (once; about {max(_seconds(g) for g in groups)} s)", file=sys.stderr, flush=True)
+    procs = [(g, subprocess.Popen([sys.executable, "-m", "omaps.cli.precompile", *g], stdin=subprocess.DEVNULL,
+                                  stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)) for g in groups]
+    return procs, time.perf_counter()
+
+
+def finish_ahead(started) -> None:
+    """Wait for ``start_ahead``'s processes; a failure is reported (those kernels compile on first
+    use instead) and changes no exit code."""
+    if not started:
+        return
+    procs, t0 = started
+    try:
+        for g, p in procs:
+            _, err = p.communicate()
+            if p.returncode:
+                last = (err or b"").decode(errors="replace").strip().splitlines()[-1:] or ["?"]
+                print(f"omaps: compiling {', '.join(g)} ahead failed ({last[0]}); they compile on first use",
+                      file=sys.stderr)
+    finally:
+        for _, p in procs:
+            if p.poll() is None:
+                p.kill()
+                p.wait()
+    print(f"omaps: kernels compiled ahead in {time.perf_counter() - t0:.0f} s", file=sys.stderr)
+
+
+def stop_ahead(started) -> None:
+    """Stop ``start_ahead``'s processes (the command failed or was interrupted)."""
+    for _, p in (started or ((), None))[0]:
+        if p.poll() is None:
+            p.kill()
+            p.wait()
+
+
+def _quad_scene(folder: str) -> str:
+    """A unit quad (two triangles) with a 16 x 16 alpha-tested texture, as a .gltf file."""
+    import base64
+    import json
+
+    import numpy as np
+    from PIL import Image
+
+    yy, xx = np.mgrid[0:16, 0:16]
+    rgba = np.zeros((16, 16, 4), np.uint8)
+    rgba[..., 1] = 160
+    rgba[..., 3] = np.where((xx - 7.5) ** 2 + (yy - 7.5) ** 2 < 40, 255, 0) + np.where(xx == 3, 100, 0)
+    png = io.BytesIO()
+    Image.fromarray(rgba, "RGBA").save(png, format="PNG")
+    pos = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], np.float32)
+    uv = np.array([[0, 1], [1, 1], [1, 0], [0, 0]], np.float32)
+    idx = np.array([0, 1, 2, 0, 2, 3], np.uint16)
+    blob = pos.tobytes() + uv.tobytes() + idx.tobytes() + b"\0\0\0\0"
+    doc = {
+        "asset": {"version": "2.0"}, "scene": 0, "scenes": [{"nodes": [0]}], "nodes": [{"mesh": 0}],
+        "meshes": [{"primitives": [{"attributes": {"POSITION": 0, "TEXCOORD_0": 1}, "indices": 2, "material": 0}]}],
+        "materials": [{"alphaMode": "MASK", "alphaCutoff": 0.5, "doubleSided": True,
+                       "pbrMetallicRoughness": {"baseColorTexture": {"index": 0}}}],
+        "textures": [{"source": 0}],
+        "images": [{"uri": "data:image/png;base64," + base64.b64encode(png.getvalue()).decode()}],
+        "buffers": [{"byteLength": len(blob), "uri": "data:application/octet-stream;base64,"
+                     + base64.b64encode(blob).decode()}],
+        "bufferViews": [{"buffer": 0, "byteOffset": 0, "byteLength": 48},
+                        {"buffer": 0, "byteOffset": 48, "byteLength": 32},
+                        {"buffer": 0, "byteOffset": 80, "byteLength": 12}],
+        "accessors": [{"bufferView": 0, "componentType": 5126, "count": 4, "type": "VEC3",
+                       "min": [0, 0, 0], "max": [1, 1, 0]},
+                      {"bufferView": 1, "componentType": 5126, "count": 4, "type": "VEC2"},
+                      {"bufferView": 2, "componentType": 5123, "count": 6, "type": "SCALAR"}],
+    }
+    path = os.path.join(folder, "quad.gltf")
+    with open(path, "w") as f:
+        json.dump(doc, f)
+    Image.fromarray(rgba, "RGBA").save(os.path.join(folder, "leaf.png"))
+    return path
+
+
+def warm(families) -> None:
+    """Compile the families' kernels by running the commands that use them on tiny inputs."""
+    from .main import main
+
+    with tempfile.TemporaryDirectory(prefix="omaps-precompile-") as tmp:
+        scene = _quad_scene(tmp)
+        leaf = os.path.join(tmp, "leaf.png")
+        trace = ["trace", scene, "--size", "16", "--camera", "0.5,0.5,2:0.5,0.5,0:60", "--quiet", "--jobs", "1"]
+        runs = {
+            "square": [["eval", leaf, "--quiet", "--jobs", "1", "--schemes", "sq4,sq16"]],
+            "micromap": [["eval", leaf, "--quiet", "--jobs", "1", "--schemes", "tri2,tri3"]],
+            "trace": [trace + ["--schemes", "none,tri3,sq16", "--shadows"]],
+            "vq2": [trace + ["--schemes", "none,vq2"], ["eval", leaf, "--quiet", "--jobs", "1", "--schemes", "vq2"]],
+            "vq4": [trace + ["--schemes", "none,vq4,vq4x64"],
+                    ["eval", leaf, "--quiet", "--jobs", "1", "--schemes", "vq4,vq4x64"]],
+            "omm": [["omm", scene, "-o", os.path.join(tmp, "omm"), "--quiet", "--threads", "1"]],
+        }
+        failed = []
+        for f in families:  # one family failing (no Embree, say) leaves the others compiled
+            for argv in runs[f]:
+                with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(io.StringIO()) as err:
+                    try:
+                        rc = main(argv)
+                    except Exception as exc:  # noqa: BLE001 - reported below, the next family goes on
+                        rc = repr(exc)
+                if rc not in (0, 1):
+                    failed.append(f"{f}: omaps {argv[0]} exited {rc}: {err.getvalue().strip()[-200:]}")
+                    break
+        if failed:
+            raise RuntimeError("; ".join(failed))
+
+
+if __name__ == "__main__":
+    unknown = [f for f in sys.argv[1:] if f not in FAMILIES]
+    if unknown:
+        sys.exit(f"unknown families: {', '.join(unknown)} (known: {', '.join(FAMILIES)})")
+    warm(sys.argv[1:] or list(FAMILIES))

@@ -1,0 +1,55 @@
+"""First use of numba kernels: which a command compiles, the cache check behind the one-line
+announcement, and the ahead-of-time compile (``omaps.cli.precompile``)."""
+
+import os
+import subprocess
+import sys
+from types import SimpleNamespace
+
+import numpy as np
+from gltf_files import write_quad_gltf
+
+from omaps.cli.precompile import FAMILIES, families_for
+
+
+def test_families_of_commands():
+    def ns(**kw):
+        return SimpleNamespace(**kw)
+
+    assert families_for(ns(command="eval", schemes="sq16,tri3,texel")) == ["square", "micromap"]
+    assert families_for(ns(command="eval", schemes="vq2-paper,vq4x64-fast")) == ["square", "vq2", "vq4"]
+    assert families_for(ns(command="trace", schemes="none,vq4")) == ["trace", "square", "vq4"]
+    assert families_for(ns(command="trace", schemes="none,file:vq4,omm")) == ["trace"]
+    assert families_for(ns(command="trace", schemes="budget:1MiB")) == ["trace", "square", "vq2", "vq4"]
+    assert families_for(ns(command="omm", inputs=["a.glb"], expand=False, source="texture")) == ["micromap", "omm"]
+    assert families_for(ns(command="omm", inputs=["a.glb"], expand=False, source="vq2")) == [
+        "micromap", "omm", "square", "vq2"]
+    assert families_for(ns(command="omm", inputs=[], expand=False, source="texture")) == []  # --verify
+    assert families_for(ns(command="encode", codec="vq4x64")) == ["square", "vq4"]
+    assert families_for(ns(command="bake", scheme="tri4")) == ["micromap"]
+    assert families_for(ns(command="decode", codec="vq4")) == []
+    assert all(f in FAMILIES for f in ["square", "micromap", "trace", "vq2", "vq4", "omm"])
+
+
+def test_empty_cache_is_announced_once_and_compiled_kernels_are_found(tmp_path):
+    """With an empty private cache every family is uncached; a command announces its compile
+    (one line) the first time only, and afterwards its families count as cached while the
+    others still do not."""
+    scene = write_quad_gltf(tmp_path / "quad.gltf", np.where(np.arange(64).reshape(8, 8) % 3 == 0, 255, 0))
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / "cache"), OMAPS_PROGRESS="1", OMAPS_PRECOMPILE="0")
+    check = [sys.executable, "-c", "from omaps.cli.precompile import FAMILIES, uncached; "
+             "print(','.join(uncached(list(FAMILIES))))"]
+
+    def run(argv):
+        return subprocess.run(argv, env=env, capture_output=True, text=True, cwd=tmp_path)
+
+    assert run(check).stdout.strip() == ",".join(FAMILIES)
+    cmd = [sys.executable, "-m", "omaps", "omm", str(scene), "-o", str(tmp_path / "omm"), "--quiet"]
+    first = run(cmd)
+    assert first.returncode == 0, first.stderr
+    notes = [ln for ln in first.stderr.splitlines() if "compiling numba kernels for first use" in ln]
+    assert len(notes) == 1 and notes[0].endswith(")") and "omm" in notes[0], first.stderr
+    second = run(cmd)
+    assert second.returncode == 0 and "compiling" not in second.stderr, second.stderr
+    still = run(check).stdout.strip().split(",")
+    assert "omm" not in still and "micromap" not in still and "vq4" in still and "trace" in still
