@@ -50,6 +50,7 @@ def _options(g, settings, budget: int):
     nbytes = np.zeros((len(reps), max_level + 1), np.int64)
     frac = np.zeros((len(reps), max_level + 1))
     ids = np.full((len(reps), max_level + 1), -1, np.int64)
+    eff = np.zeros((len(reps), max_level + 1), np.int64)  # the level an option really bakes
     grid = g.test.grid()
     sat = flag_table(grid)
     for lvl in range(max_level + 1):
@@ -71,35 +72,43 @@ def _options(g, settings, budget: int):
             _, content = np.unique(np.ascontiguousarray(stored).view(np.dtype((np.void, stored.shape[1]))).ravel(),
                                    return_inverse=True)
             ids[sel, lvl] = np.where(nbytes[sel, lvl] > 0, content.ravel(), -1)
+            eff[sel, lvl] = lvl
         rest = np.setdiff1d(np.arange(len(reps)), sel)  # not offered: as the level below
         if lvl and len(rest):
             nbytes[rest, lvl] = nbytes[rest, lvl - 1]
             frac[rest, lvl] = frac[rest, lvl - 1]
             ids[rest, lvl] = ids[rest, lvl - 1]
+            eff[rest, lvl] = eff[rest, lvl - 1]
         elif len(rest):
             nbytes[rest, 0] = 0  # level 0 of an unknown triangle: a special index
-    return inv, nbytes, frac, wsum, ids
+    return inv, nbytes, frac, wsum, ids, eff
 
 
-def _groups(nbytes, ids) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Per (item, level) its group -- the items storing the same micromap at that level, or the
-    level's free options (special indices) -- with each group's level and bytes."""
+def _groups(nbytes, ids, eff=None) -> tuple[np.ndarray, np.ndarray]:
+    """Per (item, option) its group -- the items storing the same micromap at that option's
+    level (``eff``, default the option's index), or the level's free options (special
+    indices) -- with each group's bytes."""
     n_items, n_levels = nbytes.shape
-    lv = np.broadcast_to(np.arange(n_levels), nbytes.shape)
+    lv = np.broadcast_to(np.arange(n_levels), nbytes.shape) if eff is None else eff
     key = np.stack([lv.ravel(), np.where(nbytes > 0, ids, -1).ravel()], axis=1)
     keys, gid = np.unique(key, axis=0, return_inverse=True)
     gid = gid.reshape(n_items, n_levels)
     gbytes = np.zeros(len(keys), np.int64)
     gbytes[gid.ravel()] = nbytes.ravel()
-    return gid, keys[:, 0], gbytes
+    return gid, gbytes
 
 
-def _adopt(value, gid, glevel, gbytes, budget: int) -> tuple[np.ndarray, int]:
+def _stored(gid, gbytes, level) -> int:
+    ref = np.bincount(gid[np.arange(len(level)), level], minlength=len(gbytes))
+    return int(gbytes[ref > 0].sum())
+
+
+def _adopt(value, gid, gbytes, budget: int, start=None) -> tuple[np.ndarray, int]:
     """Greedy over groups: repeatedly raise every item of the group with the most value per new
     byte (a group already stored, or free, first) to the group's level, while the bytes stored
     -- each group with a member once -- stay within the budget."""
     n_items = len(value)
-    level = np.zeros(n_items, np.int64)
+    level = np.zeros(n_items, np.int64) if start is None else np.array(start, np.int64)
     col = np.arange(value.shape[1])[None, :]
     rows = np.arange(n_items)
     while True:
@@ -116,7 +125,8 @@ def _adopt(value, gid, glevel, gbytes, budget: int) -> tuple[np.ndarray, int]:
         score = np.where(free, gsum, -np.inf) if free.any() else np.where(ok, gsum / np.maximum(cost, 1), -np.inf)
         g = int(np.argmax(score))
         movers = up & (gid == g)
-        level[movers.any(axis=1)] = glevel[g]
+        moved = movers.any(axis=1)
+        level[moved] = value.shape[1] - 1 - np.argmax(movers[moved, ::-1], axis=1)  # its last option in g
 
 
 def budget_levels(geometries, settings, budget: int) -> tuple[list[np.ndarray], dict]:
@@ -133,11 +143,20 @@ def budget_levels(geometries, settings, budget: int) -> tuple[list[np.ndarray], 
     for p in parts:
         ids.append(np.where(p[4] >= 0, p[4] + off, -1))
         off += int(p[4].max(initial=-1)) + 1
-    gid, glevel, gbytes = _groups(nbytes, np.concatenate(ids))
-    choice, stored = _adopt(value, gid, glevel, gbytes, int(budget))
+    eff = np.concatenate([p[5] for p in parts])
+    gid, gbytes = _groups(nbytes, np.concatenate(ids), eff)
+    choice, stored = _adopt(value, gid, gbytes, int(budget))
+    # also from the finest uniform level that fits: the greedy never ends below a uniform bake
+    rows = np.arange(len(value))
+    fits = [lvl for lvl in range(value.shape[1]) if _stored(gid, gbytes, np.full(len(value), lvl)) <= budget]
+    if fits:
+        c2, s2 = _adopt(value, gid, gbytes, int(budget), np.full(len(value), max(fits)))
+        if value[rows, c2].sum() > value[rows, choice].sum():
+            choice, stored = c2, s2
+    level = eff[np.arange(len(choice)), choice]
     out, k = [], 0
     for p in parts:
-        out.append(choice[k:k + len(p[1])][p[0]].astype(np.int64))
+        out.append(level[k:k + len(p[1])][p[0]].astype(np.int64))
         k += len(p[1])
     total = float(sum(p[3].sum() for p in parts))
     return out, {"budget_bytes": int(budget), "stored_bytes": stored, "items": int(len(choice)),

@@ -1,0 +1,174 @@
+"""A byte budget over a scene: the weights, the per-half known fractions, the tracer's mixed maps
+read back against each chosen codec's own decoder, and the OMM budget's bytes and states."""
+
+import json
+
+import numpy as np
+import pytest
+from conftest import SCENES, needs_scenes
+from gltf_files import QUAD_POS, write_quad_gltf
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from omaps import states
+from omaps.alpha_test import MaterialRules
+from omaps.budget import PAIR_OPTIONS, half_known, pair_option_bytes, triangle_weights
+from omaps.cli import main
+from omaps.codecs import get_codec
+from omaps.omm import budget as omm_budget
+from omaps.pair import CORNERS
+from omaps.scene import alpha_triangles, load_scene
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.sampled_from([1, 2, 4, 8]), st.data())
+def test_half_known_against_sub_cell_counting(n, data):
+    m = np.array(data.draw(st.lists(st.integers(0, 2), min_size=n * n, max_size=n * n)), np.uint8).reshape(1, n, n)
+    k = 8  # sub-cells per cell side: centres on the diagonal count half to each triangle
+    c = (np.arange(n * k) + 0.5) / (n * k)
+    u, v = np.meshgrid(c, c)  # [row v, column u]
+    cell = m[0][(v * n).astype(int), (u * n).astype(int)]
+    known = cell != states.C
+    wa = (v < u) + 0.5 * (v == u)
+    expect = [(known * wa).sum() / wa.sum(), (known * (1 - wa)).sum() / (1 - wa).sum()]
+    np.testing.assert_allclose(half_known(m)[0], expect, rtol=1e-12)
+
+
+def test_pair_option_bytes_are_the_codecs_blocks():
+    b = pair_option_bytes()
+    assert b[0] == 0 and list(b[1:]) == [get_codec(o).block_bytes for o in PAIR_OPTIONS[1:]]
+    assert dict(zip(PAIR_OPTIONS, b))["sq64"] == 64 * 64 // 4 and dict(zip(PAIR_OPTIONS, b))["vq4x64"] == 256
+
+
+def test_triangle_weights_sum_world_area_over_instances(tmp_path):
+    path = tmp_path / "two.gltf"
+    alpha = np.zeros((8, 8), np.uint8)
+    alpha[:, 4:] = 255
+    write_quad_gltf(path, alpha, nodes=[{}, {"scale": [2.0, 3.0, 1.0], "translation": [5, 0, 0]}])
+    scene = load_scene(str(path))
+    at = alpha_triangles(scene, MaterialRules())
+    w = triangle_weights(scene, at)
+    quad_tri_area = 0.5 * float(np.prod(QUAD_POS.max(axis=0)[:2] - QUAD_POS.min(axis=0)[:2]))
+    np.testing.assert_allclose(w, quad_tri_area * (1 + 2 * 3), rtol=1e-6)
+
+
+@needs_scenes
+def test_trace_budget_reads_each_pair_through_its_own_codec():
+    from omaps.schemes import get_scheme
+    from omaps.trace import prepare
+    from omaps.trace.budget import budget_maps
+    from omaps.trace.lookups import mixed_map_state
+    from omaps.trace.tables import T_MAP_FORMAT, T_MAP_OFFSET, scheme_tables
+
+    scene = load_scene(str(SCENES / "palm.glb"))
+    prep = prepare(scene, [get_scheme("none")])
+    at = prep.alpha
+    budget = 48 * len(at.pair_first)  # between uniform vq2 and vq4: several options must be chosen
+    sm = budget_maps(at, prep.tests, get_scheme(f"budget:{budget}", None, "fast"), triangle_weights(scene, at))
+    assert sm.map_bytes <= budget and sum(sm.info["choices"].values()) == len(at.pair_first)
+    assert len(sm.info["choices"]) >= 2
+    table = scheme_tables(prep.base, sm).table
+    fmt, off = sm.extra[T_MAP_FORMAT], sm.extra[T_MAP_OFFSET]
+    rng = np.random.default_rng(3)
+    decoded = {}
+    for tri in rng.choice(at.count, 300, replace=False):
+        b1, b2 = rng.random(2)
+        if b1 + b2 > 1:
+            b1, b2 = 1 - b1, 1 - b2
+        row = sm.rows[tri]
+        option = PAIR_OPTIONS[fmt[row]]
+        if option == "none":
+            expect = states.C
+        else:
+            codec = get_codec(option)
+            if row not in decoded:
+                decoded[row] = codec.decode(sm.data[off[row]:off[row] + codec.block_bytes].tobytes())
+            w = np.array([1 - b1 - b2, b1, b2])
+            s, t = w @ CORNERS[at.corners[tri]].astype(float)  # the hit in its pair's square
+            n = codec.map_size
+            expect = decoded[row][min(int(t * n), n - 1), min(int(s * n), n - 1)]
+        assert mixed_map_state(table, tri, b1, b2) == expect
+
+
+@needs_scenes
+def test_trace_budget_changes_no_pixel_and_stays_within_bytes(tmp_path):
+    out = tmp_path / "t.json"
+    pairs = 1920
+    assert main(["trace", str(SCENES / "palm.glb"), "--schemes", f"none,vq4,budget:{64 * pairs},budget:0",
+                 "--effort", "fast", "--size", "48", "--quiet", "--json", str(out),
+                 "--plot-budget", str(tmp_path / "b.png")]) == 0
+    r = json.loads(out.read_text())["schemes"]
+    assert r["vq4"]["map_bytes"] == 64 * pairs
+    b = r[f"budget:{64 * pairs}"]
+    assert b["differing_pixels"] == 0 and 0 < b["map_bytes"] <= 64 * pairs
+    assert sum(b["choices"].values()) == pairs
+    zero = r["budget:0"]
+    assert zero["map_bytes"] == 0 and zero["choices"] == {"none": pairs}
+    assert zero["alpha_tests_per_primary_ray"] == r["none"]["alpha_tests_per_primary_ray"]
+    assert (tmp_path / "b.png").stat().st_size > 0
+
+
+def test_budget_scheme_names():
+    from omaps.errors import InputError
+    from omaps.schemes import get_scheme
+
+    assert get_scheme("budget:1.5KiB").budget == 1536
+    with pytest.raises(InputError):
+        get_scheme("budget:lots")
+
+
+@settings(max_examples=80, deadline=None)
+@given(st.integers(1, 6), st.integers(1, 4), st.integers(0, 400), st.integers(0, 2 ** 31))
+def test_adopt_stays_within_the_bytes_it_stores(n_items, n_levels, budget, seed):
+    rng = np.random.default_rng(seed)
+    nbytes = np.sort(rng.integers(0, 90, (n_items, n_levels)), axis=1)
+    nbytes[:, 0] = 0
+    value = np.sort(rng.random((n_items, n_levels)), axis=1)
+    ids = np.where(nbytes > 0, rng.integers(0, 3, (n_items, n_levels)), -1)
+    # items sharing an id at a level store one micromap: make their bytes agree, as contents do
+    for lvl in range(n_levels):
+        for c in np.unique(ids[:, lvl][ids[:, lvl] >= 0]):
+            nbytes[ids[:, lvl] == c, lvl] = nbytes[ids[:, lvl] == c, lvl].max()
+    gid, gbytes = omm_budget._groups(nbytes, ids)
+    level, stored = omm_budget._adopt(value, gid, gbytes, budget)
+    held = {(int(lvl), int(ids[i, lvl])): int(nbytes[i, lvl]) for i, lvl in enumerate(level) if nbytes[i, lvl] > 0}
+    assert stored == sum(held.values()) <= budget
+    # nothing free is left: every option whose micromap is already stored (or costs nothing) and
+    # gains has been taken
+    for i, lvl in enumerate(level):
+        for up in range(lvl + 1, n_levels):
+            if value[i, up] > value[i, lvl] and (nbytes[i, up] == 0 or (up, int(ids[i, up])) in held):
+                pytest.fail(f"item {i} left a free gain at level {up}")
+
+
+def test_omm_budget_texture_input(tmp_path):
+    from PIL import Image
+
+    _, alpha = _leaf()
+
+    Image.fromarray(alpha).save(tmp_path / "leaf.png")
+    rng = np.random.default_rng(5)
+    centre = rng.random((40, 1, 2)) * 0.8 + 0.1
+    uvs = centre + (rng.random((40, 3, 2)) - 0.5) * 0.25
+    np.save(tmp_path / "uvs.npy", uvs)
+    assert main(["omm", str(tmp_path / "leaf.png"), str(tmp_path / "uvs.npy"), "-o", str(tmp_path / "l3"),
+                 "--level", "3", "--quiet"]) == 0
+    l3 = json.loads((tmp_path / "l3" / "omm.json").read_text())["statistics"]
+    budget = l3["data_and_record_bytes"]
+    assert main(["omm", str(tmp_path / "leaf.png"), str(tmp_path / "uvs.npy"), "-o", str(tmp_path / "b"),
+                 "--budget", str(budget), "--quiet"]) == 0
+    summary = json.loads((tmp_path / "b" / "omm.json").read_text())
+    st_b = summary["statistics"]
+    assert st_b["data_and_record_bytes"] == summary["budget"]["stored_bytes"] <= budget
+    assert st_b["known_area_fraction"] >= l3["known_area_fraction"]  # the uniform bake is one of its choices
+    assert main(["omm", "--verify", str(tmp_path / "b")]) == 0  # re-bake, and known states against the test
+    assert main(["omm", str(tmp_path / "leaf.png"), str(tmp_path / "uvs.npy"), "-o", str(tmp_path / "x"),
+                 "--budget", str(budget), "--level", "2"]) == 2
+
+
+def _leaf():
+    n = 64
+    y, x = np.mgrid[0:n, 0:n] / n
+    alpha = (((x - 0.5) / 0.42) ** 2 + ((y - 0.5) / 0.3) ** 2 < 1).astype(np.uint8) * 255
+    alpha[(np.abs(y - 0.5) < 0.02)] = 0  # a vein cut through it
+    return "leaf", alpha
