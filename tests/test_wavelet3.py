@@ -30,35 +30,51 @@ def reference_decode(block: bytes) -> np.ndarray:
 
     n_e = field(128, 4)
     limit = 512 - 20 * n_e
+
+    def vector(pos):  # a 4-bit index at pos -> 4x4 states (uniform C if it does not fit or is >= E)
+        out = np.full((4, 4), C, dtype=np.uint8)
+        if pos + 4 > limit or field(pos, 4) >= n_e:
+            return out
+        e = field(512 - 20 * (field(pos, 4) + 1), 20)
+        for ey in range(4):
+            for ex in range(4):
+                code = e >> (5 * (2 * (ey // 2) + ex // 2)) & 31  # four VQ2 codes
+                cf, pal = code >> (1 + 2 * (ey % 2) + ex % 2) & 1, code & 1
+                out[ey, ex] = C if cf else (O if pal else T)
+        return out
+
     l1 = [field(2 * c, 2) for c in range(64)]
     m1 = l1.count(3)
+    modes = [field(132 + r, 1) if 132 + r + 1 <= limit else 0 for r in range(m1)]
+    f0 = 132 + m1
+    z_all = modes.count(0)
+    coarse0, fine0 = f0 + 8 * z_all, f0 + 8 * z_all + 4 * (m1 - z_all)
     out = np.full((64, 64), C, dtype=np.uint8)
-    r = j = 0
+    r = z = j = 0
     for c in range(64):
         y0, x0 = 8 * (c // 8), 8 * (c % 8)
         if l1[c] < 3:
             out[y0:y0 + 8, x0:x0 + 8] = l1[c]
             continue
-        p2 = 132 + 8 * r
         r += 1
+        if 132 + r > limit:
+            continue  # no room for its mode bit: C
+        if modes[r - 1] == 1:  # one 32x32 vector, elements of 2x2 cells
+            v = vector(coarse0 + 4 * (r - 1 - z))
+            out[y0:y0 + 8, x0:x0 + 8] = v.repeat(2, 0).repeat(2, 1)
+            continue
+        p2 = f0 + 8 * z
+        z += 1
         if p2 + 8 > limit:
-            continue  # stays C
+            continue
         for k in range(4):
             y1, x1 = y0 + 4 * (k // 2), x0 + 4 * (k % 2)
             s = field(p2 + 2 * k, 2)
             if s < 3:
                 out[y1:y1 + 4, x1:x1 + 4] = s
-                continue
-            p3 = 132 + 8 * m1 + 4 * j
-            j += 1
-            if p3 + 4 > limit or field(p3, 4) >= n_e:
-                continue
-            e = field(512 - 20 * (field(p3, 4) + 1), 20)
-            for ey in range(4):
-                for ex in range(4):
-                    code = e >> (5 * (2 * (ey // 2) + ex // 2)) & 31  # four VQ2 codes
-                    cf, pal = code >> (1 + 2 * (ey % 2) + ex % 2) & 1, code & 1
-                    out[y1 + ey, x1 + ex] = C if cf else (O if pal else T)
+            else:
+                out[y1:y1 + 4, x1:x1 + 4] = vector(fine0 + 4 * j)
+                j += 1
     return out
 
 
@@ -89,14 +105,15 @@ def test_decoder_is_total_and_agrees(data):
 
 
 def test_structured_blocks_reach_level_3():
-    """Blocks with one R cell and a codebook reach level 3: an entry's elements show."""
+    """Blocks with one R block refined at 64x64 and a codebook reach level 3: an entry's
+    elements show."""
     found = 0
     for seed in range(50):
         rng = np.random.default_rng(seed)
         b = rng.integers(0, 256, 64).astype(np.uint8)
         b[:16] = 0
-        b[0] = 3  # one R cell
-        b[16] = (b[16] & 0xF0) | 4  # E = 4
+        b[0] = 3  # one R block ...
+        b[16] = (b[16] & 0xE0) | 4  # ... E = 4, its mode bit (bit 132) 0: children at bit 133
         d = wb.decode(b.tobytes())
         found += bool(((d[:8, :8] != C) & (d[:8, :8] != d[0, 0])).any())
         np.testing.assert_array_equal(d, reference_decode(b.tobytes()))
@@ -139,7 +156,7 @@ def test_lossless_where_it_fits(rng):
         m = np.full((64, 64), s, np.uint8)
         np.testing.assert_array_equal(wb.decode(we.encode(m).pack()), m)
     # blocks of 8x8 cells in any states, a few refined to 4x4 children, a few children refined
-    # with at most 15 distinct general-kind vectors: everything fits in 512 bits
+    # with at most 6 distinct general-kind vectors: everything fits in 512 bits
     for _ in range(5):
         m = np.kron(rng.integers(0, 3, (8, 8)), np.ones((8, 8), np.uint8)).astype(np.uint8)
         vecs = [np.kron(rng.choice([T, O], (2, 2)), np.ones((2, 2), np.uint8)) for _ in range(6)]
@@ -149,6 +166,22 @@ def test_lossless_where_it_fits(rng):
             m[y0:y0 + 4, x0:x0 + 4] = vecs[rng.integers(0, 6)]
         blk = we.encode(m)
         np.testing.assert_array_equal(wb.decode(blk.pack()), m)
+
+
+def test_32x32_mode_keeps_an_upsampled_map(rng):
+    """Every block mixed and shown by one of three 32x32 vectors (elements of 2x2 cells): too many
+    bits at 64x64, lossless at 32x32 (64 blocks x 7 bits + 3 entries fit)."""
+    vecs = []
+    while len(vecs) < 3:
+        v = np.kron(rng.choice([T, O, C], (2, 2)), np.ones((2, 2), np.uint8))
+        v[rng.random((4, 4)) < 0.2] = C
+        if len(np.unique(v)) > 1 and not any(np.array_equal(v, u) for u in vecs):
+            vecs.append(v)
+    m32 = np.block([[vecs[rng.integers(0, 3)] for _ in range(8)] for _ in range(8)]).astype(np.uint8)
+    m = m32.repeat(2, 0).repeat(2, 1)
+    blk = we.encode(m)
+    assert blk.mode.sum() > 0
+    np.testing.assert_array_equal(wb.decode(blk.pack()), m)
 
 
 def test_registered():

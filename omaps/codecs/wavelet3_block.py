@@ -1,27 +1,35 @@
 """wavelet3: a 64x64 map in one 512-bit block as a three-level hierarchy -- physical layout,
 symbolic block, decoder and random-access lookup.
 
-A Haar-like decomposition on the three-state lattice: a parent is T or O when all its cells are,
+A Haar-like decomposition on the three-state lattice: a node is T or O when all its cells are,
 C when it keeps nothing worth its bits, and R (*refine*) otherwise; only R nodes carry detail.
+An R block of level 1 refines either at 64x64 (its four 4x4-cell children, then the mixed
+children through the codebook) or, when that costs more than it keeps, at 32x32 in one step
+(one codebook vector whose elements are 2x2 cells):
 
-    level 1  8x8 cells of 8x8 map cells: 2 bits each (0 T, 1 O, 2 C, 3 R)
-    level 2  each R cell of level 1: its 2x2 children of 4x4 map cells, 2 bits each (T, O, C, R)
-    level 3  each R child of level 2: a 4-bit index into a per-block codebook of E 4x4 vectors
-             (``vec4`` general entries, 20 bits); an index >= E is uniform C
+    level 1  8x8 blocks of 8x8 map cells: 2 bits each (0 T, 1 O, 2 C, 3 R)
+    mode     one bit per R block: 0 refine at 64x64, 1 at 32x32
+    level 2  mode 0: the block's 2x2 children of 4x4 cells, 2 bits each (T, O, C, R);
+             mode 1: a 4-bit codebook index, the vector's element (ex, ey) covering the block's
+             cells 2ex..2ex+1, 2ey..2ey+1
+    level 3  each R child: a 4-bit codebook index, element (ex, ey) one cell
+    codebook E 4x4 vectors (``vec4`` general entries, 20 bits), shared by both uses; an index
+             >= E is uniform C
 
 Physical block (64 bytes, bits numbered as in ``bits.py``)::
 
-    bits   0..127  level 1: cell c = 8*cy + cx at bit 2c
+    bits   0..127  level 1: block c = 8*cy + cx at bit 2c
     bits 128..131  E, the number of codebook entries (0..15)
-    bits 132..     level 2: the r-th R cell of level 1 (raster order) at 132 + 8r, child
-                   k = 2*ky + kx at bit 2k of it
-    then           level 3: from 132 + 8*m1 (m1 = R cells in level 1), the j-th R child (in the
-                   order of level 2) at 4 bits each
+    bits 132..     mode bits: the r-th R block of level 1 (raster order) at 132 + r
+    F = 132 + m1   (m1 R blocks) level-2 children fields of the mode-0 blocks, 8 bits each: the
+                   z-th at F + 8z, child k = 2*ky + kx at bit 2k of it
+    F + 8*Z        (Z mode-0 blocks) level-2 indices of the mode-1 blocks, 4 bits each
+    then           level 3: the j-th R child (in the order of the children fields) at 4 bits each
     end            codebook: entry i at bit 512 - 20(i + 1)
 
 Every field must end at or before the codebook (bit 512 - 20E); a node whose field does not is
-uniform C. So every 512-bit pattern is a valid block, and a lookup reads at most the two level
-fields, a rank over them, one index and one entry element.
+uniform C. So every 512-bit pattern is a valid block, and a lookup reads the level-1 code, one
+mode bit, ranks over the codes before it, at most two fields and one entry element.
 """
 
 from __future__ import annotations
@@ -42,19 +50,20 @@ SIZE = 64
 BLOCK_BITS = 8 * BLOCK_BYTES
 R = 3  # the refine code of levels 1 and 2
 E_POS, E_BITS = 128, 4
-L2_POS = 132
-L2_BITS, L3_BITS, ENTRY_BITS = 8, 4, 20
+MODE_POS = 132
+CHILD_BITS, INDEX_BITS, ENTRY_BITS = 8, 4, 20
 MAX_ENTRIES = 15
 
 _CF = CFLAG_BIT[GENERAL].copy()
 _PAL = PALETTE_BIT[GENERAL].copy()
 # number of 2-bit fields equal to R in a byte
 _R_IN_BYTE = np.array([sum(((b >> (2 * i)) & 3) == R for i in range(4)) for b in range(256)], dtype=np.int64)
+_ONES_IN_BYTE = np.array([bin(b).count("1") for b in range(256)], dtype=np.int64)
 
 
 @njit(cache=True, inline="always")
 def _count_r(blk, pos, n):
-    """Number of R codes among the n 2-bit fields from bit ``pos`` (pos even)."""
+    """Number of R codes among the n 2-bit fields from bit ``pos``."""
     c = 0
     while n >= 4:
         c += _R_IN_BYTE[get_bits(blk, pos, 8)]
@@ -63,6 +72,30 @@ def _count_r(blk, pos, n):
     if n > 0:
         c += _R_IN_BYTE[get_bits(blk, pos, 2 * n)]  # the missing high fields read as 0 (not R)
     return c
+
+
+@njit(cache=True, inline="always")
+def _count_ones(blk, pos, n):
+    """Number of set bits among the n bits from bit ``pos``."""
+    c = 0
+    while n >= 8:
+        c += _ONES_IN_BYTE[get_bits(blk, pos, 8)]
+        pos += 8
+        n -= 8
+    if n > 0:
+        c += _ONES_IN_BYTE[get_bits(blk, pos, n)]
+    return c
+
+
+@njit(cache=True, inline="always")
+def _element(blk, i, n_e, e):
+    """State of element e of codebook index i (uniform C for i >= E)."""
+    if i >= n_e:
+        return states.C
+    pos = BLOCK_BITS - ENTRY_BITS * (i + 1)
+    if get_bits(blk, pos + _CF[e], 1):
+        return states.C
+    return get_bits(blk, pos + _PAL[e], 1)
 
 
 @njit(cache=True)
@@ -76,26 +109,31 @@ def lookup_at(data, base, x, y):
     n_e = get_bits(blk, E_POS, E_BITS)
     limit = BLOCK_BITS - ENTRY_BITS * n_e
     r = _count_r(blk, 0, c)
-    p2 = L2_POS + L2_BITS * r
-    if p2 + L2_BITS > limit:
+    m1 = _count_r(blk, 0, 64)
+    if MODE_POS + r + 1 > limit:
+        return states.C
+    ones = _count_ones(blk, MODE_POS, r)  # mode-1 blocks before this one
+    n_ones = _count_ones(blk, MODE_POS, min(m1, limit - MODE_POS))  # mode bits past the limit read as 0
+    z_all = m1 - n_ones
+    f0 = MODE_POS + m1
+    if get_bits(blk, MODE_POS + r, 1):  # 32x32: one index, elements of 2x2 cells
+        p = f0 + CHILD_BITS * z_all + INDEX_BITS * ones
+        if p + INDEX_BITS > limit:
+            return states.C
+        return _element(blk, get_bits(blk, p, INDEX_BITS), n_e, (((y & 7) >> 1) << 2) | ((x & 7) >> 1))
+    z = r - ones
+    p2 = f0 + CHILD_BITS * z
+    if p2 + CHILD_BITS > limit:
         return states.C
     k = (((y >> 2) & 1) << 1) | ((x >> 2) & 1)
     s = get_bits(blk, p2 + 2 * k, 2)
     if s != R:
         return s
-    m1 = _count_r(blk, 0, 64)
-    j = _count_r(blk, L2_POS, 4 * r + k)
-    p3 = L2_POS + L2_BITS * m1 + L3_BITS * j
-    if p3 + L3_BITS > limit:
+    j = _count_r(blk, f0, 4 * z + k)
+    p3 = f0 + CHILD_BITS * z_all + INDEX_BITS * n_ones + INDEX_BITS * j
+    if p3 + INDEX_BITS > limit:
         return states.C
-    i = get_bits(blk, p3, L3_BITS)
-    if i >= n_e:
-        return states.C
-    pos = BLOCK_BITS - ENTRY_BITS * (i + 1)
-    e = ((y & 3) << 2) | (x & 3)
-    if get_bits(blk, pos + _CF[e], 1):
-        return states.C
-    return get_bits(blk, pos + _PAL[e], 1)
+    return _element(blk, get_bits(blk, p3, INDEX_BITS), n_e, ((y & 3) << 2) | (x & 3))
 
 
 @njit(cache=True)
@@ -106,23 +144,32 @@ def lookup(block, x, y):
 
 @dataclass
 class Wavelet3Block:
-    """Symbolic block: ``level1`` (64,) codes 0..3; ``level2`` (m1, 4) child codes of the R cells
-    of level 1 in raster order; ``level3`` (m2,) codebook indices of the R children of level 2 in
-    order; ``entries`` (E,) general entry codes. ``pack`` requires that everything fits."""
+    """Symbolic block: ``level1`` (64,) codes 0..3; ``mode`` (m1,) 0/1 per R block of level 1 in
+    raster order; ``children`` (Z, 4) child codes of the mode-0 blocks in order; ``coarse`` (m1 - Z,)
+    codebook indices of the mode-1 blocks in order; ``fine`` (m2,) codebook indices of the R
+    children in order; ``entries`` (E,) general entry codes. ``pack`` requires that everything
+    fits."""
 
     level1: np.ndarray
-    level2: np.ndarray
-    level3: np.ndarray
+    mode: np.ndarray
+    children: np.ndarray
+    coarse: np.ndarray
+    fine: np.ndarray
     entries: np.ndarray
 
     def __post_init__(self):
         self.level1 = np.asarray(self.level1, dtype=np.uint8).reshape(64)
-        self.level2 = np.asarray(self.level2, dtype=np.uint8).reshape(-1, 4)
-        self.level3 = np.asarray(self.level3, dtype=np.uint8).reshape(-1)
+        self.mode = np.asarray(self.mode, dtype=np.uint8).reshape(-1)
+        self.children = np.asarray(self.children, dtype=np.uint8).reshape(-1, 4)
+        self.coarse = np.asarray(self.coarse, dtype=np.uint8).reshape(-1)
+        self.fine = np.asarray(self.fine, dtype=np.uint8).reshape(-1)
         self.entries = np.asarray(self.entries, dtype=np.int64).reshape(-1)
-        if len(self.level2) != int((self.level1 == R).sum()) or len(self.level3) != int((self.level2 == R).sum()):
-            raise ValueError("one level-2 row per R cell of level 1, one level-3 index per R child")
-        if self.level1.max() > 3 or self.level2.max(initial=0) > 3 or self.level3.max(initial=0) > 15 \
+        m1, z = int((self.level1 == R).sum()), int((self.mode == 0).sum())
+        if len(self.mode) != m1 or len(self.children) != z or len(self.coarse) != m1 - z \
+                or len(self.fine) != int((self.children == R).sum()):
+            raise ValueError("a mode per R block; children rows for mode 0, an index for mode 1; an index per R child")
+        if self.level1.max() > 3 or self.mode.max(initial=0) > 1 or self.children.max(initial=0) > 3 \
+                or self.coarse.max(initial=0) > 15 or self.fine.max(initial=0) > 15 \
                 or len(self.entries) > MAX_ENTRIES or np.any(self.entries < 0) \
                 or np.any(self.entries >= 1 << ENTRY_BITS):
             raise ValueError("field out of range")
@@ -131,18 +178,24 @@ class Wavelet3Block:
 
     @property
     def bits(self) -> int:
-        return L2_POS + L2_BITS * len(self.level2) + L3_BITS * len(self.level3) + ENTRY_BITS * len(self.entries)
+        return (MODE_POS + len(self.mode) + CHILD_BITS * len(self.children) + INDEX_BITS * len(self.coarse)
+                + INDEX_BITS * len(self.fine) + ENTRY_BITS * len(self.entries))
 
     def pack(self) -> bytes:
         b = np.zeros(BLOCK_BYTES, dtype=np.uint8)
         for c in range(64):
             put_bits(b, 2 * c, 2, int(self.level1[c]))
         put_bits(b, E_POS, E_BITS, len(self.entries))
-        for r, row in enumerate(self.level2):
-            put_bits(b, L2_POS + L2_BITS * r, L2_BITS, int(sum(int(v) << (2 * k) for k, v in enumerate(row))))
-        p3 = L2_POS + L2_BITS * len(self.level2)
-        for j, i in enumerate(self.level3):
-            put_bits(b, p3 + L3_BITS * j, L3_BITS, int(i))
+        pos = MODE_POS
+        for v in self.mode:
+            put_bits(b, pos, 1, int(v))
+            pos += 1
+        for row in self.children:
+            put_bits(b, pos, CHILD_BITS, int(sum(int(v) << (2 * k) for k, v in enumerate(row))))
+            pos += CHILD_BITS
+        for i in list(self.coarse) + list(self.fine):
+            put_bits(b, pos, INDEX_BITS, int(i))
+            pos += INDEX_BITS
         for i, e in enumerate(self.entries):
             put_bits(b, BLOCK_BITS - ENTRY_BITS * (i + 1), ENTRY_BITS, int(e))
         return b.tobytes()
@@ -155,15 +208,20 @@ class Wavelet3Block:
         l1 = np.array([get_bits(b, 2 * c, 2) for c in range(64)])
         n_e = int(get_bits(b, E_POS, E_BITS))
         m1 = int((l1 == R).sum())
-        l2 = np.array([[get_bits(b, L2_POS + L2_BITS * r + 2 * k, 2) for k in range(4)] for r in range(m1)],
-                      dtype=np.int64).reshape(-1, 4)
-        p3 = L2_POS + L2_BITS * m1
-        m2 = int((l2 == R).sum())
-        if p3 + L3_BITS * m2 + ENTRY_BITS * n_e > BLOCK_BITS:
+        if MODE_POS + m1 > BLOCK_BITS - ENTRY_BITS * n_e:
             raise ValueError("the fields of this block do not all fit (it decodes with C in their place)")
-        l3 = np.array([get_bits(b, p3 + L3_BITS * j, L3_BITS) for j in range(m2)], dtype=np.int64)
+        mode = np.array([get_bits(b, MODE_POS + r, 1) for r in range(m1)], dtype=np.int64)
+        z = int((mode == 0).sum())
+        pos = MODE_POS + m1
+        ch = np.array([[get_bits(b, pos + CHILD_BITS * i + 2 * k, 2) for k in range(4)] for i in range(z)],
+                      dtype=np.int64).reshape(-1, 4)
+        pos += CHILD_BITS * z
+        n_idx = (m1 - z) + int((ch == R).sum())
+        if pos + INDEX_BITS * n_idx + ENTRY_BITS * n_e > BLOCK_BITS:
+            raise ValueError("the fields of this block do not all fit (it decodes with C in their place)")
+        idx = [get_bits(b, pos + INDEX_BITS * i, INDEX_BITS) for i in range(n_idx)]
         ent = np.array([get_bits(b, BLOCK_BITS - ENTRY_BITS * (i + 1), ENTRY_BITS) for i in range(n_e)], dtype=np.int64)
-        return cls(l1, l2, l3, ent)
+        return cls(l1, mode, ch, np.array(idx[:m1 - z], dtype=np.int64), np.array(idx[m1 - z:], dtype=np.int64), ent)
 
 
 def decode(data) -> np.ndarray:
@@ -173,29 +231,39 @@ def decode(data) -> np.ndarray:
     limit = BLOCK_BITS - ENTRY_BITS * n_e
     vec = [pattern_states(*entry_pattern(GENERAL, get_bits(b, BLOCK_BITS - ENTRY_BITS * (i + 1), ENTRY_BITS)))
            for i in range(n_e)]
+
+    def vector(pos):  # the 4x4 states of the index at ``pos``, C when it does not fit or is >= E
+        i = int(get_bits(b, pos, INDEX_BITS)) if pos + INDEX_BITS <= limit else MAX_ENTRIES
+        return vec[i] if i < n_e else np.full((4, 4), states.C, np.uint8)
+
     l1 = [int(get_bits(b, 2 * c, 2)) for c in range(64)]
     m1 = l1.count(R)
+    mode = [int(get_bits(b, MODE_POS + r, 1)) if MODE_POS + r < limit else 0 for r in range(m1)]
+    z_all = mode.count(0)
+    f0 = MODE_POS + m1
+    p_coarse = f0 + CHILD_BITS * z_all
+    p_fine = p_coarse + INDEX_BITS * (m1 - z_all)
     out = np.empty((SIZE, SIZE), dtype=np.uint8)
-    r = j = 0
-    p3 = L2_POS + L2_BITS * m1
+    r = z = j = 0
     for c in range(64):
         y0, x0 = 8 * (c >> 3), 8 * (c & 7)
         if l1[c] != R:
             out[y0:y0 + 8, x0:x0 + 8] = l1[c]
             continue
-        p2 = L2_POS + L2_BITS * r
-        r += 1
-        if p2 + L2_BITS > limit:
+        if MODE_POS + r + 1 > limit:
             out[y0:y0 + 8, x0:x0 + 8] = states.C
-            continue
-        for k in range(4):
-            y1, x1 = y0 + 4 * (k >> 1), x0 + 4 * (k & 1)
-            s = int(get_bits(b, p2 + 2 * k, 2))
-            if s != R:
-                out[y1:y1 + 4, x1:x1 + 4] = s
-                continue
-            p = p3 + L3_BITS * j
-            j += 1
-            i = int(get_bits(b, p, L3_BITS)) if p + L3_BITS <= limit else MAX_ENTRIES
-            out[y1:y1 + 4, x1:x1 + 4] = vec[i] if i < n_e else states.C
+        elif mode[r]:
+            out[y0:y0 + 8, x0:x0 + 8] = np.kron(vector(p_coarse + INDEX_BITS * (r - z)), np.ones((2, 2), np.uint8))
+        else:
+            p2 = f0 + CHILD_BITS * z
+            z += 1
+            for k in range(4):
+                y1, x1 = y0 + 4 * (k >> 1), x0 + 4 * (k & 1)
+                s = int(get_bits(b, p2 + 2 * k, 2)) if p2 + CHILD_BITS <= limit else states.C
+                if s == R:
+                    out[y1:y1 + 4, x1:x1 + 4] = vector(p_fine + INDEX_BITS * j)
+                    j += 1
+                else:
+                    out[y1:y1 + 4, x1:x1 + 4] = s
+        r += 1
     return out

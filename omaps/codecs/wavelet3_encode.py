@@ -1,16 +1,19 @@
-"""wavelet3 encoder: the lossless three-level tree, a greedy level-3 codebook, then pruning to 512
-bits.
+"""wavelet3 encoder: the lossless tree, a greedy shared codebook, then a bit allocation over the
+R blocks' options.
 
 1. Level 1: an 8x8-cell block is T or O when all its cells are, C when none is known, else R;
-   level 2 likewise for the 4x4-cell children of each R block.
-2. The R children's 4x4 patterns are the items of ``vq4_synth_encode.greedy_codebook`` (general
-   entries chosen greedily by known cells kept); a child takes the entry that covers it and keeps
-   most, and becomes C at level 2 when none covers it. Any prefix of the greedy order is the
-   greedy codebook of that size, so every size E = 0..15 is tried.
-3. While the fields overflow, the cheapest loss per bit saved goes: an R child (4 bits) or a
-   whole R block (8 bits and its children's indices). The best E wins.
+   level 2 likewise for the 4x4-cell children of each R block. An R block's 32x32 vector has an
+   element per 2x2 cells: T or O when all four are, else C.
+2. Codebook (``vec4_search.greedy_codebook``, general entries chosen greedily by known cells kept):
+   its items are the R children's patterns (a known element is one cell) and the R blocks' 32x32
+   vectors (four cells). A node takes the entry that covers it and keeps most. Any prefix of the
+   greedy order is the greedy codebook of that size, so every size E = 0..15 is tried.
+3. Each R block has options (bits, cells kept): C (0, 0); at 32x32 (1 + 4, its vector's cells);
+   at 64x64 (1 + 8 + 4n, its T/O children's cells and its n best R children's). ``budget.allocate``
+   picks one per block within 512 - 132 - 20E bits (hull steps in falling cells per bit); the best
+   E wins, then the codebook is chosen again with the items weighted by the options taken, once.
 
-Only O->C or T->C changes are ever made: a node is cut to C, or a child shows a covering entry.
+Only O->C or T->C changes are ever made: a node is cut to C, or shows a covering entry.
 """
 
 from __future__ import annotations
@@ -19,10 +22,11 @@ import numpy as np
 from numba import njit
 
 from .. import states
+from ..budget import allocate
 from .options import check_maps, check_options
-from .vec4 import FULL, GENERAL, entry_code, popcount16
-from .vec4_search import distinct_items, greedy_codebook, vector_masks
-from .wavelet3_block import BLOCK_BITS, ENTRY_BITS, L2_BITS, L2_POS, L3_BITS, MAX_ENTRIES, R, SIZE, Wavelet3Block
+from .vec4 import FULL, GENERAL, entry_code
+from .vec4_search import greedy_codebook, keeps, vector_masks
+from .wavelet3_block import BLOCK_BITS, CHILD_BITS, ENTRY_BITS, INDEX_BITS, MAX_ENTRIES, MODE_POS, R, SIZE, Wavelet3Block
 
 __all__ = ["encode", "encode_many"]
 
@@ -60,134 +64,150 @@ def _tree(m):
 
 
 @njit(cache=True)
-def _fit(l1, l2, cval, n_e):
-    """Prune to the block: (level-1 codes, level-2 codes, kept-child mask, value kept in known
-    cells). ``cval[c, k]``: cells an R child keeps with the codebook (0: it becomes C)."""
-    l1 = l1.copy()
-    l2 = l2.copy()
-    keep = np.zeros((64, 4), dtype=np.bool_)
-    base = np.zeros(64, dtype=np.int64)
-    n_r = 0
-    n_kept = 0
+def _coarse(ct, co):
+    """The 32x32 vector of a block from its four children's masks: element (ex, ey) known only
+    when its 2x2 cells all are, and agree."""
+    vt = 0
+    vo = 0
+    for e in range(16):
+        ex, ey = e & 3, e >> 2
+        k = 2 * (ey >> 1) + (ex >> 1)
+        m = 0
+        for dy in range(2):
+            for dx in range(2):
+                m |= 1 << (4 * (2 * (ey & 1) + dy) + 2 * (ex & 1) + dx)
+        if (ct[k] & m) == m:
+            vt |= 1 << e
+        elif (co[k] & m) == m:
+            vo |= 1 << e
+    return vt, vo
+
+
+@njit(cache=True)
+def _best_entry(pt, po, et, eo, n_e):
+    """(cells kept, index) of the covering entry among the first n_e that keeps most; (0, 15) if
+    none keeps anything."""
+    best, bi = 0, MAX_ENTRIES
+    for i in range(n_e):
+        r = keeps(et[i], eo[i], pt, po)
+        if r > best:
+            best, bi = r, i
+    return best, bi
+
+
+@njit(cache=True)
+def _options(l1, l2, ct, co, vt, vo, et, eo, n_e):
+    """Per block: option bits (64, 7) and cells kept (64, 7) -- C, 32x32, 64x64 with 0..4 R
+    children -- and the entries: coarse index (64,), child indices (64, 4) in falling value."""
+    bits = np.zeros((64, 7), dtype=np.int64)
+    val = np.zeros((64, 7), dtype=np.float64)
+    cidx = np.full(64, MAX_ENTRIES, dtype=np.int64)
+    kidx = np.full((64, 4), MAX_ENTRIES, dtype=np.int64)
+    korder = np.zeros((64, 4), dtype=np.int64)
     for c in range(64):
         if l1[c] != R:
             continue
+        v, cidx[c] = _best_entry(vt[c], vo[c], et, eo, n_e)
+        bits[c, 1], val[c, 1] = 1 + INDEX_BITS, 4 * v
+        base = 0
+        kv = np.zeros(4, dtype=np.int64)
         for k in range(4):
             if l2[c, k] == R:
-                if cval[c, k] > 0:
-                    keep[c, k] = True
-                    n_kept += 1
-                else:
-                    l2[c, k] = states.C
+                kv[k], kidx[c, k] = _best_entry(ct[c, k], co[c, k], et, eo, n_e)
             elif l2[c, k] != states.C:
-                base[c] += 16
-        if base[c] == 0 and not keep[c].any():
-            l1[c] = states.C
-        else:
-            n_r += 1
-    cost = L2_POS + L2_BITS * n_r + L3_BITS * n_kept + ENTRY_BITS * n_e
-    while cost > BLOCK_BITS:
-        best = 1e18
-        bc, bk = -1, -1
-        for c in range(64):
-            if l1[c] != R:
-                continue
-            loss = base[c]
-            saved = L2_BITS
-            for k in range(4):
-                if keep[c, k]:
-                    loss += cval[c, k]
-                    saved += L3_BITS
-                    if cval[c, k] / L3_BITS < best:
-                        best, bc, bk = cval[c, k] / L3_BITS, c, k
-            if loss / saved < best:
-                best, bc, bk = loss / saved, c, -1
-        if bk >= 0:
-            keep[bc, bk] = False
-            l2[bc, bk] = states.C
-            cost -= L3_BITS
-        else:
-            for k in range(4):
-                if keep[bc, k]:
-                    keep[bc, k] = False
-                    cost -= L3_BITS
-            l1[bc] = states.C
-            cost -= L2_BITS
-    value = 0
-    for c in range(64):
-        if l1[c] == states.T or l1[c] == states.O:
-            value += 64
-        elif l1[c] == R:
-            value += base[c]
-            for k in range(4):
-                if keep[c, k]:
-                    value += cval[c, k]
-    return l1, l2, keep, value
+                base += 16
+        korder[c] = np.argsort(-kv, kind="mergesort")
+        acc = base
+        for n in range(5):
+            if n > 0:
+                acc += kv[korder[c, n - 1]]
+            bits[c, 2 + n] = 1 + CHILD_BITS + INDEX_BITS * n
+            val[c, 2 + n] = acc
+    return bits, val, cidx, kidx, korder
 
 
 @njit(cache=True)
-def _child_values(l1, l2, ct, co, et, eo, n_e):
-    """(cells kept, entry) of every R child with the first n_e codebook entries."""
-    cval = np.zeros((64, 4), dtype=np.int64)
-    cidx = np.full((64, 4), MAX_ENTRIES, dtype=np.int64)
+def _coarse_all(l1, ct, co):
+    vt = np.zeros(64, dtype=np.int64)
+    vo = np.zeros(64, dtype=np.int64)
+    for c in range(64):
+        if l1[c] == R:
+            vt[c], vo[c] = _coarse(ct[c], co[c])
+    return vt, vo
+
+
+@njit(cache=True)
+def _items(l1, l2, ct, co, vt, vo, use_coarse, use_fine):
+    """Codebook items: R children (weight 1 per copy) and R blocks' 32x32 vectors (weight 4),
+    each only where the mask allows."""
+    pt = np.empty(320, dtype=np.int64)
+    po = np.empty(320, dtype=np.int64)
+    w = np.empty(320, dtype=np.int64)
+    n = 0
     for c in range(64):
         if l1[c] != R:
             continue
+        if use_coarse[c] and (vt[c] | vo[c]) != 0:
+            pt[n], po[n], w[n] = vt[c], vo[c], 4
+            n += 1
         for k in range(4):
-            if l2[c, k] != R:
-                continue
-            for i in range(n_e):
-                if (et[i] & ~ct[c, k]) == 0 and (eo[i] & ~co[c, k]) == 0:
-                    v = popcount16(et[i] | eo[i])
-                    if v > cval[c, k]:
-                        cval[c, k], cidx[c, k] = v, i
-    return cval, cidx
+            if l2[c, k] == R and use_fine[c, k]:
+                pt[n], po[n], w[n] = ct[c, k], co[c, k], 1
+                n += 1
+    # merge equal patterns, adding weights
+    it = np.empty(n, dtype=np.int64)
+    io = np.empty(n, dtype=np.int64)
+    iw = np.zeros(n, dtype=np.int64)
+    m = 0
+    for a in range(n):
+        j = 0
+        while j < m and not (it[j] == pt[a] and io[j] == po[a]):
+            j += 1
+        if j == m:
+            it[m], io[m] = pt[a], po[a]
+            m += 1
+        iw[j] += w[a]
+    return it[:m], io[:m], iw[:m]
 
 
-@njit(cache=True)
-def encode_arrays(m):
-    """One 64x64 map -> (level1 (64,), level2 (m1, 4), level3 (m2,), entry codes (E,))."""
+def _encode_one(m) -> Wavelet3Block:
     l1, l2, ct, co = _tree(m)
-    n = 0
-    pt = np.empty(256, dtype=np.int64)
-    po = np.empty(256, dtype=np.int64)
-    for c in range(64):
-        if l1[c] == R:
-            for k in range(4):
-                if l2[c, k] == R:
-                    pt[n], po[n] = ct[c, k], co[c, k]
-                    n += 1
-    it, io, w = distinct_items(pt[:n], po[:n])
-    et, eo = greedy_codebook(it, io, w, MAX_ENTRIES)
-    best_v, best_e = -1, 0
-    for n_e in range(et.shape[0] + 1):
-        cval, _ = _child_values(l1, l2, ct, co, et, eo, n_e)
-        v = _fit(l1, l2, cval, n_e)[3]
-        if v > best_v:
-            best_v, best_e = v, n_e
-    cval, cidx = _child_values(l1, l2, ct, co, et, eo, best_e)
-    f1, f2, keep, _ = _fit(l1, l2, cval, best_e)
-    m1 = 0
-    for c in range(64):
-        if f1[c] == R:
-            m1 += 1
-    level2 = np.zeros((m1, 4), dtype=np.int64)
-    level3 = np.zeros(256, dtype=np.int64)
-    m2 = 0
-    r = 0
-    for c in range(64):
-        if f1[c] != R:
-            continue
-        for k in range(4):
-            level2[r, k] = f2[c, k]
-            if f2[c, k] == R:
-                level3[m2] = cidx[c, k]
-                m2 += 1
-        r += 1
-    codes = np.zeros(best_e, dtype=np.int64)
-    for i in range(best_e):
-        codes[i] = entry_code(GENERAL, et[i], eo[i])
-    return f1, level2, level3[:m2], codes
+    vt, vo = _coarse_all(l1, ct, co)
+    rb = np.flatnonzero(l1 == R)
+    fixed = 64 * int(np.isin(l1, (states.T, states.O)).sum())
+    use_c, use_f = np.ones(64, np.bool_), np.ones((64, 4), np.bool_)
+    best = None
+    for _ in range(2):  # the codebook from every node, then from the nodes the allocation kept
+        et, eo = greedy_codebook(*_items(l1, l2, ct, co, vt, vo, use_c, use_f), MAX_ENTRIES)
+        for n_e in range(len(et) + 1):
+            bits, val, cidx, kidx, korder = _options(l1, l2, ct, co, vt, vo, et, eo, n_e)
+            budget = BLOCK_BITS - MODE_POS - ENTRY_BITS * n_e
+            choice = allocate(bits[rb], val[rb], budget) if len(rb) else np.zeros(0, np.int64)
+            total = fixed + float(val[rb, choice].sum())
+            if best is None or total > best[0]:
+                best = (total, et[:n_e].copy(), eo[:n_e].copy(), choice, cidx, kidx, korder)
+        _, _, _, choice, _, _, korder = best
+        use_c[:], use_f[:] = False, False
+        for c, ch in zip(rb, choice):
+            use_c[c] = ch == 1
+            for n in range(max(0, ch - 2)):
+                use_f[c, korder[c, n]] = True
+    _, et, eo, choice, cidx, kidx, korder = best
+    level1, mode, children, coarse, fine = l1.copy(), [], [], [], []
+    for c, ch in zip(rb, choice):
+        if ch == 0:
+            level1[c] = states.C
+        elif ch == 1:
+            mode.append(1)
+            coarse.append(cidx[c])
+        else:
+            mode.append(0)
+            kept = set(int(k) for k in korder[c, :ch - 2])
+            row = [int(v) if v != R or k in kept else states.C for k, v in enumerate(l2[c])]
+            children.append(row)
+            fine += [kidx[c, k] for k in range(4) if row[k] == R]
+    codes = [entry_code(GENERAL, int(t), int(o)) for t, o in zip(et, eo)]
+    return Wavelet3Block(level1, mode, np.array(children, np.int64).reshape(-1, 4), coarse, fine, codes)
 
 
 def encode(map64, encoder: str = "best", effort: str = "medium") -> Wavelet3Block:
@@ -202,4 +222,4 @@ def encode_many(maps64, encoder: str = "best", effort: str = "medium") -> list[W
         raise ValueError(f"unknown wavelet3 encoder {encoder!r} (choose from {', '.join(ENCODERS)})")
     check_options("wavelet3", "best", effort)
     m = check_maps(maps64, SIZE, "wavelet3").reshape(-1, SIZE, SIZE)
-    return [Wavelet3Block(*encode_arrays(one)) for one in m]
+    return [_encode_one(one) for one in m]
