@@ -228,7 +228,7 @@ def _vertex(tri, i, j, inv_n, w, h, offset):
     return u * w + offset, v * h + offset
 
 
-NODE_EXACT_CELLS = 8  # a node box this small with mixed cells is rasterised before descending
+NODE_EXACT_CELLS = 16  # a node box this small with mixed cells is rasterised before descending
 STACK = 3 * MAX_LEVEL + 4  # nodes pending: 3 more per level down, plus the root
 
 
@@ -264,9 +264,14 @@ def _bake_one(sat, grid, tri, level, w, h, offset, grow, out, st_l, st_k, st_v, 
         x1, y1 = _vertex(tri, i1, j1, inv_n, w, h, offset)
         x2, y2 = _vertex(tri, i2, j2, inv_n, w, h, offset)
         state = -1
-        # the box around the node first (a leaf's too: its parent's box was mixed, its own often
-        # is not; with no growth a leaf is always rasterised, which finds those with no area)
-        if lv < level or grow > 0.0:
+        if lv == level:  # a leaf: rasterise exactly (its box was mixed at the parent already)
+            f = _leaf_flag(sat, grid, x0, y0, x1, y1, x2, y2, grow, scratch)
+            if f == 0:
+                empty += 1
+                state = 2
+            else:
+                state = 2 if f == 3 else f - 1  # FLAG_T 1 -> T 0, FLAG_O 2 -> O 1
+        else:
             c0 = int(math.floor(min(x0, min(x1, x2)) - margin))
             c1 = int(math.ceil(max(x0, max(x1, x2)) + margin))
             r0 = int(math.floor(min(y0, min(y1, y2)) - margin))
@@ -278,17 +283,10 @@ def _bake_one(sat, grid, tri, level, w, h, offset, grow, out, st_l, st_k, st_v, 
                 state = 1  # O
             elif nt == nc and no == nc and nm == 0:
                 state = 2  # every cell is C, none of them mixed
-            elif lv < level and nm > 0 and nc <= NODE_EXACT_CELLS:
+            elif nm > 0 and nc <= NODE_EXACT_CELLS:
                 f = _leaf_flag(sat, grid, x0, y0, x1, y1, x2, y2, grow, scratch)
                 if f == 1 or f == 2:
                     state = f - 1  # known exactly: so is every micro-triangle inside it
-        if state < 0 and lv == level:  # a leaf under a mixed box: rasterise exactly
-            f = _leaf_flag(sat, grid, x0, y0, x1, y1, x2, y2, grow, scratch)
-            if f == 0:
-                empty += 1
-                state = 2
-            else:
-                state = 2 if f == 3 else f - 1  # FLAG_T 1 -> T 0, FLAG_O 2 -> O 1
         if state >= 0:
             span = 1 << (2 * (level - lv))
             out[k * span:(k + 1) * span] = state
