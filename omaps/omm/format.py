@@ -82,8 +82,16 @@ def usage_histograms(levels: np.ndarray, formats: np.ndarray, index: np.ndarray)
 
 
 def _count_pairs(a, b) -> dict:
-    keys, counts = np.unique(np.stack([a, b], axis=1).reshape(-1, 2), axis=0, return_counts=True)
-    return {(int(k[0]), int(k[1])): int(c) for k, c in zip(keys, counts)}
+    a = np.asarray(a, dtype=np.int64).ravel()
+    b = np.asarray(b, dtype=np.int64).ravel()
+    if len(a) == 0:
+        return {}
+    if a.min() < 0 or b.min() < 0:  # (not from a valid file: counted the general way)
+        keys, counts = np.unique(np.stack([a, b], axis=1), axis=0, return_counts=True)
+        return {(int(k[0]), int(k[1])): int(c) for k, c in zip(keys, counts)}
+    span = int(b.max()) + 1
+    counts = np.bincount(a * span + b)
+    return {(int(k // span), int(k % span)): int(counts[k]) for k in np.flatnonzero(counts)}
 
 
 @njit(cache=True)
