@@ -56,6 +56,7 @@ class Geometry:
     # default: triangles 2k and 2k+1 in the corpus convention (``pairs.corpus_pairing``)
     pair_of: np.ndarray | None = None
     corners: np.ndarray | None = None
+    weight: np.ndarray | None = None  # (T,) expected candidate hits, for --budget (default: ``area``)
 
     def pairing(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(pair_of (T,), corners (T, 3), pairs (P, 2): triangles A and B, -1 for none)."""
@@ -86,6 +87,7 @@ class OmmSettings:
     effort: str | None = None
     seed: int = 0  # of the hashed promotion
     jobs: int = 1  # worker processes encoding --from maps (the output does not depend on it)
+    budget: int | None = None  # bytes of micromap data + records: levels and formats per triangle (omm.budget)
 
     def __post_init__(self):
         if self.format not in omm_format.FORMAT_NAMES:
@@ -94,6 +96,10 @@ class OmmSettings:
             raise InputError(f"unknown promotion {self.promotion!r} (choose from {', '.join(PROMOTIONS)})")
         check_level(self.level)
         check_level(self.max_level, "max level")
+        if self.budget is not None and (self.dynamic_scale is not None or self.source != "texture"):
+            raise InputError("--budget chooses each triangle's level from the texture: drop --dynamic and --from")
+        if self.budget is not None and self.format != "4state":
+            raise InputError("--budget chooses each micromap's format (2-state where it has no unknown region)")
         if self.dynamic_scale is not None and self.source != "texture":
             raise InputError("--dynamic needs the texture source: square pair maps fix the level to log2 N")
         if self.source != "texture":
@@ -152,9 +158,10 @@ class _Packer:
         self.stored: dict[tuple[int, int], tuple[np.ndarray, np.ndarray, np.ndarray]] = {}  # sorted hashes, rows, ids
         self.needing = 0  # micromaps before reuse of identical ones
 
-    def add(self, omm_states: np.ndarray, level: int) -> np.ndarray:
-        """Index buffer entries for micromaps (n, 4**level) of one level."""
-        fmt = self.s.format_code
+    def add(self, omm_states: np.ndarray, level: int, fmt: int | None = None) -> np.ndarray:
+        """Index buffer entries for micromaps (n, 4**level) of one level (and format: default the
+        settings')."""
+        fmt = self.s.format_code if fmt is None else fmt
         idx = np.empty(len(omm_states), dtype=np.int32)
         need = np.ones(len(omm_states), dtype=bool)
         if self.s.special:
@@ -286,12 +293,18 @@ def build(geometries: list[Geometry], settings: OmmSettings = OmmSettings()) -> 
     known_area = total_area = 0.0
     micro_total = 0
     level_hist: dict[int, int] = {}
+    bytes_no_reuse = 0
     first = 0
-    for g in geometries:
+    plan, budget_report = (None, None)
+    if settings.budget is not None:
+        from .budget import budget_levels
+
+        plan, budget_report = budget_levels(geometries, settings, settings.budget)
+    for gi, g in enumerate(geometries):
         tris = check_uv_triangles(g.tris_uv) if len(g.tris_uv) else np.zeros((0, 3, 2))
         grid = g.test.grid()
         sat = flag_table(grid)
-        levels = _triangle_levels(g.test, tris, settings, n_map)
+        levels = plan[gi] if plan is not None else _triangle_levels(g.test, tris, settings, n_map)
         area = _texel_area(g.test, tris) if g.area is None else np.asarray(g.area, dtype=np.float64)
         idx = np.empty(len(tris), dtype=np.int32)
         n_blocks = 0
@@ -326,7 +339,15 @@ def build(geometries: list[Geometry], settings: OmmSettings = OmmSettings()) -> 
                     rows = omm.reshape(len(lv), -1)
                 else:
                     rows = omm[starts[sel][:, None] + np.arange(1 << (2 * int(lvl)))]
-                idx[a + sel] = packer.add(rows, int(lvl))
+                if plan is None:
+                    idx[a + sel] = packer.add(rows, int(lvl))
+                    bytes_no_reuse += len(sel) * omm_format.micromap_bytes(int(lvl), fmt)
+                else:  # a micromap with no unknown micro-triangle is stored 2-state (the budget's bytes)
+                    two = (rows <= omm_format.OPAQUE).all(axis=1)
+                    for f, part in ((omm_format.FORMAT_2_STATE, two), (fmt, ~two)):
+                        if part.any():
+                            idx[a + sel[part]] = packer.add(rows[part], int(lvl), f)
+                            bytes_no_reuse += int(part.sum()) * omm_format.micromap_bytes(int(lvl), f)
                 level_hist[int(lvl)] = level_hist.get(int(lvl), 0) + len(sel)
         index_parts.append(idx)
         info = {"name": g.name, "first_triangle": first, "triangles": len(tris), "texture": g.test.name,
@@ -344,14 +365,14 @@ def build(geometries: list[Geometry], settings: OmmSettings = OmmSettings()) -> 
     data = np.frombuffer(b"".join(packer.chunks), dtype=np.uint8).copy()
     usage = omm_format.usage_histograms(triangles["level"], triangles["format"], index)
     special = {str(int(v)): int(np.count_nonzero(index == v)) for v in omm_format.SPECIAL_INDEX}
-    bytes_no_reuse = int(sum(c * omm_format.micromap_bytes(lvl, fmt) for lvl, c in level_hist.items()))
     summary = {
         "omaps": __version__,
         "format": settings.format, "format_code": fmt,
-        "settings": {"source": settings.source, "level": None if (settings.dynamic_scale or n_map) else settings.level,
+        "settings": {"source": settings.source, "level": None if (settings.dynamic_scale or n_map or settings.budget is not None) else settings.level,
                      "dynamic_scale": settings.dynamic_scale, "max_level": settings.max_level,
                      "promotion": settings.promotion, "special": settings.special, "dedup": settings.dedup,
-                     "seed": settings.seed, "encoder": settings.encoder, "effort": settings.effort},
+                     "seed": settings.seed, "encoder": settings.encoder, "effort": settings.effort,
+                     "budget": settings.budget},
         "geometries": geo_info,
         "statistics": {
             "triangles": int(len(index)), "micro_triangles": int(micro_total),
@@ -366,10 +387,13 @@ def build(geometries: list[Geometry], settings: OmmSettings = OmmSettings()) -> 
             "micromaps_without_reuse": int(len(index)),
             "micromaps_after_special_indices": int(packer.needing),
             "micromaps": int(len(triangles)),
-            "data_bytes": int(len(data)), "data_bytes_without_reuse": bytes_no_reuse,
+            "data_bytes": int(len(data)), "data_bytes_without_reuse": int(bytes_no_reuse),
+            "data_and_record_bytes": int(len(data) + triangles.nbytes),
             "bytes": int(len(data) + triangles.nbytes + index.nbytes),
         },
     }
+    if budget_report is not None:
+        summary["budget"] = budget_report
     if scheme is not None:
         codec = scheme.codec
         summary["pair_blocks"] = {"scheme": scheme.name, "codec": codec.name, "block_bytes": codec.block_bytes,
