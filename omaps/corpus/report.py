@@ -97,7 +97,7 @@ def plot_savings(path, results, scheme_names, title="Shader invocation savings")
     ax.set_ylim(0, 1)
     ax.grid(True, which="both", alpha=0.3)
     ax.set_title(f"{title} ({len(results)} textures)")
-    ax.legend(loc="lower right", fontsize=8)
+    ax.legend(loc="lower right", fontsize=7)
     fig.tight_layout()
     fmt = os.path.splitext(os.fspath(path))[1][1:].lower() or "png"
     with atomic.atomic_path(path, suffix="." + fmt) as tmp:
