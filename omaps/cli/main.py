@@ -11,13 +11,20 @@ from ..errors import InputError
 from .common import show_warning
 
 
-def parser() -> argparse.ArgumentParser:
-    from . import batch, maps, omm, trace
-
+def parser(command: str | None = None) -> argparse.ArgumentParser:
+    """The command line's parser; with ``command="omm"`` only that command's (a command line
+    that names it needs no other, and ``omaps omm`` then imports no other command's modules)."""
     p = argparse.ArgumentParser(prog="omaps", description="Bake, compress and evaluate opacity maps "
                                 "for ray tracing alpha-tested geometry.")
     p.add_argument("--version", action="version", version=f"omaps {__version__}")
     sub = p.add_subparsers(dest="command", required=True)
+    if command == "omm":
+        from . import omm
+
+        omm.add_parser(sub)
+        return p
+    from . import batch, maps, omm, trace
+
     maps.add_parsers(sub)
     trace.add_parser(sub)
     omm.add_parser(sub)
@@ -31,11 +38,16 @@ def main(argv=None) -> int:
     while writing (nothing written); 2 bad input or options (nothing written); 130 interrupted
     (nothing written)."""
     from . import precompile
-    from .trace import bind_camera_value
 
+    argv = list(sys.argv[1:] if argv is None else argv)
     ahead = None
     try:
-        args = parser().parse_args(bind_camera_value(sys.argv[1:] if argv is None else argv))
+        if argv[:1] == ["omm"]:
+            args = parser("omm").parse_args(argv)
+        else:
+            from .trace import bind_camera_value
+
+            args = parser().parse_args(bind_camera_value(argv))
         precompile.announce(args)
         ahead = precompile.start_ahead(args)
         with warnings.catch_warnings():
