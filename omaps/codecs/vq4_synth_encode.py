@@ -57,76 +57,16 @@ def _distinct(idx, ent, slots):
 
 
 @njit(cache=True)
-def _assign(pt, po, mixed, fixed_t, fixed_o, two_t, two_o, n_two, xt, xo, has_x):
-    """Best covering index of every mixed vector: 3 + j for entry j (two-value entries 0..2 from
-    (two_t, two_o), the others fixed), 2 for X or (without X) uniform C. Returns (indices, cells
-    kept, every vector covered)."""
-    idx = np.zeros(64, dtype=np.int64)
-    total = 0
-    ok = True
-    for v in range(64):
-        if not mixed[v]:
-            continue
-        best, bi = -1, 2
-        if has_x:
-            best = keeps(xt, xo, pt[v], po[v])
-        else:
-            best = 0
-        for j in range(N_ENTRIES):
-            if j < n_two:
-                r = keeps(two_t[j], two_o[j], pt[v], po[v])
-            elif j < 3:
-                r = -1
-            else:
-                r = keeps(fixed_t[j], fixed_o[j], pt[v], po[v])
-            if r > best:
-                best, bi = r, 3 + j
-        if best < 0:
-            ok = False
-        idx[v] = bi
-        total += max(best, 0)
-    return idx, total, ok
-
-
-@njit(cache=True)
-def _greedy_two(pt, po, mixed, base, cand_t, cand_o, n_pick):
-    """Up to n_pick two-value candidates by gain over ``base`` (cells kept by the other entries,
-    -1 when none covers)."""
-    cur = base.copy()
-    pick_t = np.zeros(4, dtype=np.int64)
-    pick_o = np.zeros(4, dtype=np.int64)
-    n = 0
-    while n < n_pick:
-        best, bj = 0, -1
-        for c in range(cand_t.shape[0]):
-            g = 0
-            for v in range(64):
-                if mixed[v]:
-                    r = keeps(cand_t[c], cand_o[c], pt[v], po[v])
-                    if r > cur[v]:
-                        g += r - max(cur[v], 0)
-            if g > best:
-                best, bj = g, c
-        if bj < 0:
-            break
-        pick_t[n], pick_o[n] = cand_t[bj], cand_o[bj]
-        for v in range(64):
-            if mixed[v]:
-                cur[v] = max(cur[v], keeps(cand_t[bj], cand_o[bj], pt[v], po[v]))
-        n += 1
-    return pick_t, pick_o, n, cur
-
-
-@njit(cache=True)
 def _best_x(pt, po, mixed, cur):
-    """The two-value vector covering every vector with cur < 0 (at uniform C: cur 0 counts too when
-    ``cur`` marks them -1) that adds most cells: (gain, xt, xo)."""
+    """The two-value vector X that adds most cells over ``cur`` (cells each vector keeps now; 0 at
+    uniform C, which X must then cover): the two-value projection of a vector's or a pair's merge
+    with the merge of the vectors at C. Returns (gain, xt, xo)."""
     mt, mo = FULL, FULL
     for v in range(64):
-        if mixed[v] and cur[v] < 0:
+        if mixed[v] and cur[v] == 0:
             mt &= pt[v]
             mo &= po[v]
-    best, bt, bo = -1, 0, 0
+    best, bt, bo = 0, 0, 0
     for a in range(64):
         if not mixed[a]:
             continue
@@ -137,9 +77,7 @@ def _best_x(pt, po, mixed, cur):
             g = 0
             for v in range(64):
                 if mixed[v]:
-                    r = keeps(xt, xo, pt[v], po[v])
-                    if r > cur[v]:
-                        g += r - max(cur[v], 0)
+                    g += max(keeps(xt, xo, pt[v], po[v]) - cur[v], 0)
             if g > best:
                 best, bt, bo = g, xt, xo
     return best, bt, bo
@@ -147,76 +85,40 @@ def _best_x(pt, po, mixed, cur):
 
 @njit(cache=True)
 def synthesise(m, indices, entries, tr):
-    """A 32x32 map and its VQ4 block -> (indices, entries, extra code or NO_EXTRA). Tries VQ4's
-    own entries with and without X, and the three two-value entries chosen again greedily with
-    the other ten fixed, with and without X; the most cells kept wins (VQ4's block on a tie)."""
+    """A 32x32 map and its VQ4 block -> (indices, entries, extra code or NO_EXTRA): X where it
+    keeps more than VQ4's entries and uniform C, the block unchanged otherwise."""
     dt, do = vector_masks(m, 8, 0, 0)
+    idx = indices.copy()
     ent = entries.copy()
+    _distinct(idx, ent, GENERAL_SLOTS)
+    _distinct(idx, ent, TWO_VALUE_SLOTS)
     pt = np.zeros(64, dtype=np.int64)
     po = np.zeros(64, dtype=np.int64)
     mixed = np.zeros(64, dtype=np.bool_)
-    for v in range(64):
+    cur = np.zeros(64, dtype=np.int64)  # cells each mixed vector keeps now
+    et = np.zeros(N_ENTRIES, dtype=np.int64)
+    eo = np.zeros(N_ENTRIES, dtype=np.int64)
+    for j in range(N_ENTRIES):
+        et[j], eo[j] = entry_pattern(ENTRY_KIND[j], ent[j])
+    for v in range(64):  # every vector again: a trial's block hid some of them as uniform T
         if dt[v] == FULL or do[v] == FULL:
+            idx[v] = 0 if dt[v] == FULL else 1
             continue
         q = 2 * ((v >> 3) >> 2) + ((v & 7) >> 2)
         pt[v], po[v] = untransform_mask(dt[v], tr[q]), untransform_mask(do[v], tr[q])
         mixed[v] = True
-    fixed_t = np.zeros(N_ENTRIES, dtype=np.int64)
-    fixed_o = np.zeros(N_ENTRIES, dtype=np.int64)
-    for j in range(N_ENTRIES):
-        fixed_t[j], fixed_o[j] = entry_pattern(ENTRY_KIND[j], ent[j])
-    # the other entries' cells kept; -1 when none covers
-    base = np.full(64, -1, dtype=np.int64)
+        idx[v] = 2
+        for j in range(N_ENTRIES):
+            r = keeps(et[j], eo[j], pt[v], po[v])
+            if r > cur[v]:
+                cur[v], idx[v] = r, 3 + j
+    gain, xt, xo = _best_x(pt, po, mixed, cur)
+    if gain == 0:
+        return idx, ent, NO_EXTRA
     for v in range(64):
-        if mixed[v]:
-            for j in range(3, N_ENTRIES):
-                base[v] = max(base[v], keeps(fixed_t[j], fixed_o[j], pt[v], po[v]))
-    # candidates: two-value projections of every vector and of every pair's merge
-    keys = np.empty(64 * 65 // 2 + 1, dtype=np.int64)
-    nk = 0
-    for a in range(64):
-        if not mixed[a]:
-            continue
-        for b in range(a, 64):
-            if mixed[b]:
-                xt, xo = project(TWO_VALUE, pt[a] & pt[b], po[a] & po[b])
-                if (xt | xo) != 0:
-                    keys[nk] = (xt << 16) | xo
-                    nk += 1
-    u = np.unique(keys[:nk])
-    cand_t, cand_o = u >> 16, u & FULL
-    two_t = fixed_t[:3].copy()
-    two_o = fixed_o[:3].copy()
-    _, best_val, _ = _assign(pt, po, mixed, fixed_t, fixed_o, two_t, two_o, 3, 0, 0, False)
-    b_two_t, b_two_o, b_n, b_x, b_xt, b_xo = two_t.copy(), two_o.copy(), 3, False, 0, 0
-    # VQ4's entries + X
-    cur = base.copy()
-    for v in range(64):
-        if mixed[v]:
-            for j in range(3):
-                cur[v] = max(cur[v], keeps(two_t[j], two_o[j], pt[v], po[v]))
-    g, xt, xo = _best_x(pt, po, mixed, cur)
-    _, val, ok = _assign(pt, po, mixed, fixed_t, fixed_o, two_t, two_o, 3, xt, xo, True)
-    if ok and val > best_val:
-        best_val, b_x, b_xt, b_xo = val, True, xt, xo
-    # the two-value entries again: 3 with uniform C, or 3 and X
-    pick_t, pick_o, n, cur = _greedy_two(pt, po, mixed, base, cand_t, cand_o, 3)
-    _, val, ok = _assign(pt, po, mixed, fixed_t, fixed_o, pick_t, pick_o, n, 0, 0, False)
-    if val > best_val:
-        best_val, b_two_t, b_two_o, b_n, b_x = val, pick_t[:3].copy(), pick_o[:3].copy(), n, False
-    g, xt, xo = _best_x(pt, po, mixed, cur)
-    _, val, ok = _assign(pt, po, mixed, fixed_t, fixed_o, pick_t, pick_o, n, xt, xo, True)
-    if ok and val > best_val:
-        best_val, b_two_t, b_two_o, b_n, b_x, b_xt, b_xo = val, pick_t[:3].copy(), pick_o[:3].copy(), n, True, xt, xo
-    idx, _, _ = _assign(pt, po, mixed, fixed_t, fixed_o, b_two_t, b_two_o, b_n, b_xt, b_xo, b_x)
-    for v in range(64):
-        if not mixed[v]:
-            idx[v] = 0 if dt[v] == FULL else 1
-    for j in range(3):
-        ent[j] = entry_code(TWO_VALUE, b_two_t[j], b_two_o[j]) if j < b_n else j  # unused: any code
-    _distinct(idx, ent, GENERAL_SLOTS)
-    _distinct(idx, ent, TWO_VALUE_SLOTS)
-    return idx, ent, (entry_code(TWO_VALUE, b_xt, b_xo) if b_x else NO_EXTRA)
+        if mixed[v] and (idx[v] == 2 or keeps(xt, xo, pt[v], po[v]) > cur[v]):
+            idx[v] = 2
+    return idx, ent, entry_code(TWO_VALUE, xt, xo)
 
 
 TRIALS = {"fast": 0, "medium": 6, "thorough": 12}  # hidden-vector trials per effort
