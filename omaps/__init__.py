@@ -20,16 +20,37 @@ Example::
 
 __version__ = "0.1.0"
 
-from . import states  # noqa: E402
-from .alpha_test import AlphaTest, MaterialRules, StateRule  # noqa: E402
-from .bake import (bake_micromaps, bake_pair_squares, bake_pair_triangles, bake_square, known_fraction,  # noqa: E402
-                   texel_limit)
-from .codecs import get_codec  # noqa: E402
-from .corpus import EvalConfig, default_corpus, evaluate_many, evaluate_texture  # noqa: E402
-from .errors import InputError  # noqa: E402
-from .sampling import footprint_grid  # noqa: E402
-from .schemes import get_scheme, parse_schemes  # noqa: E402
-from .texture import AlphaTexture, load_alpha  # noqa: E402
+# the public names, imported on first use (PEP 562): ``import omaps`` (and so parsing a command
+# line, ``omaps omm --help``) loads neither numpy nor numba until a name is used
+_LAZY = {
+    "states": (".states", None), "AlphaTest": (".alpha_test", "AlphaTest"),
+    "MaterialRules": (".alpha_test", "MaterialRules"), "StateRule": (".alpha_test", "StateRule"),
+    "bake_micromaps": (".bake", "bake_micromaps"), "bake_pair_squares": (".bake", "bake_pair_squares"),
+    "bake_pair_triangles": (".bake", "bake_pair_triangles"), "bake_square": (".bake", "bake_square"),
+    "known_fraction": (".bake", "known_fraction"), "texel_limit": (".bake", "texel_limit"),
+    "get_codec": (".codecs", "get_codec"), "EvalConfig": (".corpus", "EvalConfig"),
+    "default_corpus": (".corpus", "default_corpus"), "evaluate_many": (".corpus", "evaluate_many"),
+    "evaluate_texture": (".corpus", "evaluate_texture"), "InputError": (".errors", "InputError"),
+    "footprint_grid": (".sampling", "footprint_grid"), "get_scheme": (".schemes", "get_scheme"),
+    "parse_schemes": (".schemes", "parse_schemes"), "AlphaTexture": (".texture", "AlphaTexture"),
+    "load_alpha": (".texture", "load_alpha"),
+}
+
+
+def __getattr__(name):
+    if name not in _LAZY:
+        raise AttributeError(f"module 'omaps' has no attribute {name!r}")
+    import importlib
+
+    module, attr = _LAZY[name]
+    mod = importlib.import_module(module, __name__)
+    value = mod if attr is None else getattr(mod, attr)
+    globals()[name] = value
+    return value
+
+
+def __dir__():
+    return sorted(set(globals()) | set(_LAZY))
 
 
 def load_scene(path):

@@ -44,8 +44,7 @@ __all__ = ["AlphaTest", "StateRule", "MaterialRules", "material_test", "sample_p
            "RULES", "CUTOFF_TOLERANCE"]
 
 RULES = ("test", "levels", "unknown")
-MODES = ("levels", "cutoff")  # the corpus rules of ``omaps eval`` (``StateRule``)
-BLEND_RULES = ("levels", "cutoff", "skip")  # glTF BLEND materials (``MaterialRules.blend``)
+from .names import BLEND_RULES, MODES  # noqa: E402,F401 corpus rules (``StateRule``), BLEND rules (``MaterialRules``)
 # glTF texels whose alpha x baseColorFactor.a is this close to the cut-off are unknown: a shader's
 # float32 product may fall on either side (exact 8-bit alphas are 1/255 = 0.0039 apart)
 CUTOFF_TOLERANCE = 1e-6

@@ -30,7 +30,7 @@ from .errors import InputError
 
 __all__ = ["PROMOTIONS", "promotion_code", "hashed_threshold", "promote", "resolve_regions"]
 
-PROMOTIONS = ("nearest", "opaque", "transparent", "hashed")
+from .names import PROMOTIONS  # noqa: E402 (numba-free, for the command line)
 HASH_CELLS_PER_TEXEL = 64  # the hashed threshold is constant over 1/64-texel squares
 
 

@@ -30,8 +30,7 @@ from numba import njit
 from . import states
 from .errors import InputError
 
-WRAP_MODES = ("wrap", "clamp", "mirror")
-FILTERS = ("nearest", "linear")
+from .names import FILTERS, WRAP_MODES  # noqa: E402,F401 (defined there, numba-free, for the command line)
 
 
 @njit(cache=True, inline="always")

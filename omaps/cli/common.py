@@ -7,11 +7,8 @@ import argparse
 import os
 import sys
 
-from ..alpha_test import BLEND_RULES, MODES, MaterialRules, StateRule
-from ..codecs import EFFORTS, ENCODERS
-from ..corpus.evaluate import EvalConfig
 from ..errors import InputError
-from ..sampling import FILTERS, WRAP_MODES
+from ..names import BLEND_RULES, EFFORTS, ENCODERS, FILTERS, MODES, WRAP_MODES  # numba-free: parsing loads no kernel
 
 
 def add_state_options(p: argparse.ArgumentParser, default_mode: str) -> None:
@@ -29,7 +26,11 @@ def add_state_options(p: argparse.ArgumentParser, default_mode: str) -> None:
                    help="read coverage from this channel (R, G, B, A, L or an index) instead of alpha")
 
 
-def eval_config(a) -> EvalConfig:
+def eval_config(a):
+    """The ``corpus.evaluate.EvalConfig`` of eval's options."""
+    from ..alpha_test import StateRule
+    from ..corpus.evaluate import EvalConfig
+
     rule = StateRule(a.mode, a.t_max, a.o_min, a.cutoff)
     return EvalConfig(rule, a.filter, a.wrap, a.channel, getattr(a, "encoder", None), getattr(a, "effort", None))
 
@@ -55,7 +56,10 @@ def add_material_options(p: argparse.ArgumentParser) -> None:
                    help="the any-hit shader's cut-off for BLEND materials (default: %(default)s)")
 
 
-def material_rules(a) -> MaterialRules:
+def material_rules(a):
+    """The ``alpha_test.MaterialRules`` of a scene command's options."""
+    from ..alpha_test import MaterialRules
+
     return MaterialRules(a.cutoff, a.filter, a.wrap, a.blend, a.blend_cutoff)
 
 

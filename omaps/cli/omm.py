@@ -6,15 +6,9 @@ from __future__ import annotations
 import sys
 import time
 
-from tqdm import tqdm
-
 from ..atomic import Outputs
 from ..errors import InputError
-from ..omm import files, gltf_io, inputs
-from ..omm import format as omm_format
-from ..omm.pipeline import OmmSettings, build
-from ..omm.verify import verify
-from ..promotion import PROMOTIONS
+from ..names import OMM_FORMATS, PROMOTIONS
 from .common import add_codec_options, add_material_options, check_jobs, material_rules, show_progress
 
 GLTF_EXTENSIONS = (".gltf", ".glb")
@@ -49,7 +43,7 @@ def add_parser(sub) -> None:
                          "triangle within BYTES (1263936, 1.2MiB, 800KiB); weights: world area x instances "
                          "(a scene), texel area (a texture)")
     f = o.add_argument_group("states")
-    f.add_argument("--format", choices=list(omm_format.FORMAT_NAMES), default="4state",
+    f.add_argument("--format", choices=list(OMM_FORMATS), default="4state",
                    help="4state (conservative, unknown runs the any-hit shader) or 2state (default 4state)")
     f.add_argument("--promote", choices=PROMOTIONS, default="nearest",
                    help="what unknown regions become: nearest (the majority of their area), opaque, transparent, "
@@ -76,6 +70,8 @@ def add_parser(sub) -> None:
 
 
 def _spec(a) -> dict:
+    from ..omm import inputs
+
     if len(a.inputs) == 1 and a.inputs[0].lower().endswith(GLTF_EXTENSIONS):
         if a.channel:
             raise InputError("--channel applies to a texture input, not to glTF")
@@ -88,7 +84,9 @@ def _spec(a) -> dict:
     raise InputError("give SCENE.gltf|.glb, or TEXTURE UVS.npy (and -o DIR), or --verify DIR")
 
 
-def _settings(a) -> OmmSettings:
+def _settings(a):
+    from ..omm.pipeline import OmmSettings
+
     if sum(x is not None for x in (a.level, a.dynamic, a.budget)) > 1:
         raise InputError("--level, --dynamic and --budget exclude each other")
     budget = None
@@ -106,6 +104,13 @@ def _settings(a) -> OmmSettings:
 
 
 def cmd_omm(a) -> int:
+    # the library is imported here, not at the top: parsing (and --help) loads no numba kernel
+    from tqdm import tqdm
+
+    from ..omm import files, gltf_io, inputs
+    from ..omm import format as omm_format
+    from ..omm.pipeline import build
+
     if a.threads is not None:
         import numba
 
@@ -167,6 +172,8 @@ class _counted(list):
 
 
 def _cmd_verify(folder) -> int:
+    from ..omm.verify import verify
+
     res, problems, done = verify(folder)
     st = res.summary["statistics"]
     for d in done:
@@ -182,6 +189,7 @@ def _cmd_verify(folder) -> int:
 def _cmd_expand(a) -> int:
     """``omaps omm BAKED.glb --expand -o STD.glb``: the stored pair blocks decoded and expanded
     into standard micromaps (``omm.pairs.expand``), packed as ``build`` packs them."""
+    from ..omm import gltf_io
     from ..omm.expand import expand_result
 
     if len(a.inputs) != 1 or not gltf_io.is_gltf(a.inputs[0]) or not a.output or not gltf_io.is_gltf(a.output):

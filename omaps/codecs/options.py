@@ -6,8 +6,7 @@ import numpy as np
 
 from .. import states
 
-ENCODERS = ("paper", "best")  # the deck's compressor, and our search
-EFFORTS = {"fast": 0, "medium": 1, "thorough": 2}
+from ..names import EFFORTS, ENCODERS  # noqa: E402,F401 (the deck's compressor and our search; efforts)
 
 
 def check_options(codec: str, encoder: str, effort: str) -> tuple[int, int]:

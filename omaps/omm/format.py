@@ -19,10 +19,11 @@ from numba import njit
 
 from ..birdcurve import MAX_LEVEL  # noqa: F401 (the APIs' largest subdivision level)
 from ..codecs.raw import pack_states, row_bytes, unpack_states
+from ..names import OMM_FORMATS
 
 FORMAT_2_STATE = 1
 FORMAT_4_STATE = 2
-FORMAT_NAMES = {"2state": FORMAT_2_STATE, "4state": FORMAT_4_STATE}
+FORMAT_NAMES = OMM_FORMATS  # {"2state": FORMAT_2_STATE, "4state": FORMAT_4_STATE}
 BITS = {FORMAT_2_STATE: 1, FORMAT_4_STATE: 2}
 
 TRANSPARENT = 0
