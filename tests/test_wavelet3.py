@@ -29,13 +29,14 @@ def reference_decode(block: bytes) -> np.ndarray:
         return (x >> pos) & ((1 << n) - 1)
 
     n_e = field(128, 4)
+    w = len(bin(n_e)) - 2 if n_e else 0  # index width: enough bits for 0 .. E
     limit = 512 - 20 * n_e
 
-    def vector(pos):  # a 4-bit index at pos -> 4x4 states (uniform C if it does not fit or is >= E)
+    def vector(pos):  # a w-bit index at pos -> 4x4 states (uniform C if it does not fit or is >= E)
         out = np.full((4, 4), C, dtype=np.uint8)
-        if pos + 4 > limit or field(pos, 4) >= n_e:
+        if w == 0 or pos + w > limit or field(pos, w) >= n_e:
             return out
-        e = field(512 - 20 * (field(pos, 4) + 1), 20)
+        e = field(512 - 20 * (field(pos, w) + 1), 20)
         for ey in range(4):
             for ex in range(4):
                 code = e >> (5 * (2 * (ey // 2) + ex // 2)) & 31  # four VQ2 codes
@@ -48,7 +49,7 @@ def reference_decode(block: bytes) -> np.ndarray:
     modes = [field(132 + r, 1) if 132 + r + 1 <= limit else 0 for r in range(m1)]
     f0 = 132 + m1
     z_all = modes.count(0)
-    coarse0, fine0 = f0 + 8 * z_all, f0 + 8 * z_all + 4 * (m1 - z_all)
+    coarse0, fine0 = f0 + 8 * z_all, f0 + 8 * z_all + w * (m1 - z_all)
     out = np.full((64, 64), C, dtype=np.uint8)
     r = z = j = 0
     for c in range(64):
@@ -60,7 +61,7 @@ def reference_decode(block: bytes) -> np.ndarray:
         if 132 + r > limit:
             continue  # no room for its mode bit: C
         if modes[r - 1] == 1:  # one 32x32 vector, elements of 2x2 cells
-            v = vector(coarse0 + 4 * (r - 1 - z))
+            v = vector(coarse0 + w * (r - 1 - z))
             out[y0:y0 + 8, x0:x0 + 8] = v.repeat(2, 0).repeat(2, 1)
             continue
         p2 = f0 + 8 * z
@@ -73,7 +74,7 @@ def reference_decode(block: bytes) -> np.ndarray:
             if s < 3:
                 out[y1:y1 + 4, x1:x1 + 4] = s
             else:
-                out[y1:y1 + 4, x1:x1 + 4] = vector(fine0 + 4 * j)
+                out[y1:y1 + 4, x1:x1 + 4] = vector(fine0 + w * j)
                 j += 1
     return out
 
@@ -170,7 +171,7 @@ def test_lossless_where_it_fits(rng):
 
 def test_32x32_mode_keeps_an_upsampled_map(rng):
     """Every block mixed and shown by one of three 32x32 vectors (elements of 2x2 cells): too many
-    bits at 64x64, lossless at 32x32 (64 blocks x 7 bits + 3 entries fit)."""
+    bits at 64x64, lossless at 32x32 (64 blocks x 5 bits with 2-bit indices + 3 entries fit)."""
     vecs = []
     while len(vecs) < 3:
         v = np.kron(rng.choice([T, O, C], (2, 2)), np.ones((2, 2), np.uint8))

@@ -10,11 +10,11 @@ children through the codebook) or, when that costs more than it keeps, at 32x32 
     level 1  8x8 blocks of 8x8 map cells: 2 bits each (0 T, 1 O, 2 C, 3 R)
     mode     one bit per R block: 0 refine at 64x64, 1 at 32x32
     level 2  mode 0: the block's 2x2 children of 4x4 cells, 2 bits each (T, O, C, R);
-             mode 1: a 4-bit codebook index, the vector's element (ex, ey) covering the block's
+             mode 1: a codebook index, the vector's element (ex, ey) covering the block's
              cells 2ex..2ex+1, 2ey..2ey+1
-    level 3  each R child: a 4-bit codebook index, element (ex, ey) one cell
+    level 3  each R child: a codebook index, element (ex, ey) one cell
     codebook E 4x4 vectors (``vec4`` general entries, 20 bits), shared by both uses; an index
-             >= E is uniform C
+             is w = bit_length(E) bits (0 for E = 0, 4 for E = 8..15); an index >= E is uniform C
 
 Physical block (64 bytes, bits numbered as in ``bits.py``)::
 
@@ -23,8 +23,8 @@ Physical block (64 bytes, bits numbered as in ``bits.py``)::
     bits 132..     mode bits: the r-th R block of level 1 (raster order) at 132 + r
     F = 132 + m1   (m1 R blocks) level-2 children fields of the mode-0 blocks, 8 bits each: the
                    z-th at F + 8z, child k = 2*ky + kx at bit 2k of it
-    F + 8*Z        (Z mode-0 blocks) level-2 indices of the mode-1 blocks, 4 bits each
-    then           level 3: the j-th R child (in the order of the children fields) at 4 bits each
+    F + 8*Z        (Z mode-0 blocks) level-2 indices of the mode-1 blocks, w bits each
+    then           level 3: the j-th R child (in the order of the children fields), w bits each
     end            codebook: entry i at bit 512 - 20(i + 1)
 
 Every field must end at or before the codebook (bit 512 - 20E); a node whose field does not is
@@ -51,7 +51,7 @@ BLOCK_BITS = 8 * BLOCK_BYTES
 R = 3  # the refine code of levels 1 and 2
 E_POS, E_BITS = 128, 4
 MODE_POS = 132
-CHILD_BITS, INDEX_BITS, ENTRY_BITS = 8, 4, 20
+CHILD_BITS, ENTRY_BITS = 8, 20
 MAX_ENTRIES = 15
 
 _CF = CFLAG_BIT[GENERAL].copy()
@@ -88,6 +88,15 @@ def _count_ones(blk, pos, n):
 
 
 @njit(cache=True, inline="always")
+def index_bits(n_e):
+    """Width of a codebook index with E entries: just enough for 0..E (E itself reads as C)."""
+    w = 0
+    while (1 << w) <= n_e:
+        w += 1
+    return w
+
+
+@njit(cache=True, inline="always")
 def _element(blk, i, n_e, e):
     """State of element e of codebook index i (uniform C for i >= E)."""
     if i >= n_e:
@@ -107,6 +116,7 @@ def lookup_at(data, base, x, y):
     if s != R:
         return s
     n_e = get_bits(blk, E_POS, E_BITS)
+    w = index_bits(n_e)
     limit = BLOCK_BITS - ENTRY_BITS * n_e
     r = _count_r(blk, 0, c)
     m1 = _count_r(blk, 0, 64)
@@ -117,10 +127,10 @@ def lookup_at(data, base, x, y):
     z_all = m1 - n_ones
     f0 = MODE_POS + m1
     if get_bits(blk, MODE_POS + r, 1):  # 32x32: one index, elements of 2x2 cells
-        p = f0 + CHILD_BITS * z_all + INDEX_BITS * ones
-        if p + INDEX_BITS > limit:
+        p = f0 + CHILD_BITS * z_all + w * ones
+        if p + w > limit:
             return states.C
-        return _element(blk, get_bits(blk, p, INDEX_BITS), n_e, (((y & 7) >> 1) << 2) | ((x & 7) >> 1))
+        return _element(blk, get_bits(blk, p, w), n_e, (((y & 7) >> 1) << 2) | ((x & 7) >> 1))
     z = r - ones
     p2 = f0 + CHILD_BITS * z
     if p2 + CHILD_BITS > limit:
@@ -130,10 +140,10 @@ def lookup_at(data, base, x, y):
     if s != R:
         return s
     j = _count_r(blk, f0, 4 * z + k)
-    p3 = f0 + CHILD_BITS * z_all + INDEX_BITS * n_ones + INDEX_BITS * j
-    if p3 + INDEX_BITS > limit:
+    p3 = f0 + CHILD_BITS * z_all + w * n_ones + w * j
+    if p3 + w > limit:
         return states.C
-    return _element(blk, get_bits(blk, p3, INDEX_BITS), n_e, ((y & 3) << 2) | (x & 3))
+    return _element(blk, get_bits(blk, p3, w), n_e, ((y & 3) << 2) | (x & 3))
 
 
 @njit(cache=True)
@@ -178,8 +188,9 @@ class Wavelet3Block:
 
     @property
     def bits(self) -> int:
-        return (MODE_POS + len(self.mode) + CHILD_BITS * len(self.children) + INDEX_BITS * len(self.coarse)
-                + INDEX_BITS * len(self.fine) + ENTRY_BITS * len(self.entries))
+        w = len(self.entries).bit_length()
+        return (MODE_POS + len(self.mode) + CHILD_BITS * len(self.children) + w * len(self.coarse)
+                + w * len(self.fine) + ENTRY_BITS * len(self.entries))
 
     def pack(self) -> bytes:
         b = np.zeros(BLOCK_BYTES, dtype=np.uint8)
@@ -193,9 +204,11 @@ class Wavelet3Block:
         for row in self.children:
             put_bits(b, pos, CHILD_BITS, int(sum(int(v) << (2 * k) for k, v in enumerate(row))))
             pos += CHILD_BITS
+        w = len(self.entries).bit_length()
         for i in list(self.coarse) + list(self.fine):
-            put_bits(b, pos, INDEX_BITS, int(i))
-            pos += INDEX_BITS
+            if w:
+                put_bits(b, pos, w, int(i))
+            pos += w
         for i, e in enumerate(self.entries):
             put_bits(b, BLOCK_BITS - ENTRY_BITS * (i + 1), ENTRY_BITS, int(e))
         return b.tobytes()
@@ -217,9 +230,10 @@ class Wavelet3Block:
                       dtype=np.int64).reshape(-1, 4)
         pos += CHILD_BITS * z
         n_idx = (m1 - z) + int((ch == R).sum())
-        if pos + INDEX_BITS * n_idx + ENTRY_BITS * n_e > BLOCK_BITS:
+        w = n_e.bit_length()
+        if pos + w * n_idx + ENTRY_BITS * n_e > BLOCK_BITS:
             raise ValueError("the fields of this block do not all fit (it decodes with C in their place)")
-        idx = [get_bits(b, pos + INDEX_BITS * i, INDEX_BITS) for i in range(n_idx)]
+        idx = [get_bits(b, pos + w * i, w) if w else 0 for i in range(n_idx)]
         ent = np.array([get_bits(b, BLOCK_BITS - ENTRY_BITS * (i + 1), ENTRY_BITS) for i in range(n_e)], dtype=np.int64)
         return cls(l1, mode, ch, np.array(idx[:m1 - z], dtype=np.int64), np.array(idx[m1 - z:], dtype=np.int64), ent)
 
@@ -228,12 +242,13 @@ def decode(data) -> np.ndarray:
     """Any 64 bytes to their 64x64 map (``map[y, x]``), level by level."""
     b = as_block(data, BLOCK_BYTES, "a wavelet3 block")
     n_e = int(get_bits(b, E_POS, E_BITS))
+    w = n_e.bit_length()
     limit = BLOCK_BITS - ENTRY_BITS * n_e
     vec = [pattern_states(*entry_pattern(GENERAL, get_bits(b, BLOCK_BITS - ENTRY_BITS * (i + 1), ENTRY_BITS)))
            for i in range(n_e)]
 
     def vector(pos):  # the 4x4 states of the index at ``pos``, C when it does not fit or is >= E
-        i = int(get_bits(b, pos, INDEX_BITS)) if pos + INDEX_BITS <= limit else MAX_ENTRIES
+        i = int(get_bits(b, pos, w)) if w and pos + w <= limit else MAX_ENTRIES
         return vec[i] if i < n_e else np.full((4, 4), states.C, np.uint8)
 
     l1 = [int(get_bits(b, 2 * c, 2)) for c in range(64)]
@@ -242,7 +257,7 @@ def decode(data) -> np.ndarray:
     z_all = mode.count(0)
     f0 = MODE_POS + m1
     p_coarse = f0 + CHILD_BITS * z_all
-    p_fine = p_coarse + INDEX_BITS * (m1 - z_all)
+    p_fine = p_coarse + w * (m1 - z_all)
     out = np.empty((SIZE, SIZE), dtype=np.uint8)
     r = z = j = 0
     for c in range(64):
@@ -253,7 +268,7 @@ def decode(data) -> np.ndarray:
         if MODE_POS + r + 1 > limit:
             out[y0:y0 + 8, x0:x0 + 8] = states.C
         elif mode[r]:
-            out[y0:y0 + 8, x0:x0 + 8] = np.kron(vector(p_coarse + INDEX_BITS * (r - z)), np.ones((2, 2), np.uint8))
+            out[y0:y0 + 8, x0:x0 + 8] = np.kron(vector(p_coarse + w * (r - z)), np.ones((2, 2), np.uint8))
         else:
             p2 = f0 + CHILD_BITS * z
             z += 1
@@ -261,7 +276,7 @@ def decode(data) -> np.ndarray:
                 y1, x1 = y0 + 4 * (k >> 1), x0 + 4 * (k & 1)
                 s = int(get_bits(b, p2 + 2 * k, 2)) if p2 + CHILD_BITS <= limit else states.C
                 if s == R:
-                    out[y1:y1 + 4, x1:x1 + 4] = vector(p_fine + INDEX_BITS * j)
+                    out[y1:y1 + 4, x1:x1 + 4] = vector(p_fine + w * j)
                     j += 1
                 else:
                     out[y1:y1 + 4, x1:x1 + 4] = s

@@ -8,8 +8,8 @@ R blocks' options.
    its items are the R children's patterns (a known element is one cell) and the R blocks' 32x32
    vectors (four cells). A node takes the entry that covers it and keeps most. Any prefix of the
    greedy order is the greedy codebook of that size, so every size E = 0..15 is tried.
-3. Each R block has options (bits, cells kept): C (0, 0); at 32x32 (1 + 4, its vector's cells);
-   at 64x64 (1 + 8 + 4n, its T/O children's cells and its n best R children's). ``budget.allocate``
+3. Each R block has options (bits, cells kept): C (0, 0); at 32x32 (1 + w, its vector's cells);
+   at 64x64 (1 + 8 + w n, its T/O children's cells and its n best R children's). ``budget.allocate``
    picks one per block within 512 - 132 - 20E bits (hull steps in falling cells per bit); the best
    E wins, then the codebook is chosen again with the items weighted by the options taken, once.
 
@@ -26,7 +26,8 @@ from ..budget import allocate
 from .options import check_maps, check_options
 from .vec4 import FULL, GENERAL, entry_code
 from .vec4_search import greedy_codebook, keeps, vector_masks
-from .wavelet3_block import BLOCK_BITS, CHILD_BITS, ENTRY_BITS, INDEX_BITS, MAX_ENTRIES, MODE_POS, R, SIZE, Wavelet3Block
+from .wavelet3_block import (BLOCK_BITS, CHILD_BITS, ENTRY_BITS, MAX_ENTRIES, MODE_POS, R, SIZE, Wavelet3Block,
+                             index_bits)
 
 __all__ = ["encode", "encode_many"]
 
@@ -104,11 +105,12 @@ def _options(l1, l2, ct, co, vt, vo, et, eo, n_e):
     cidx = np.full(64, MAX_ENTRIES, dtype=np.int64)
     kidx = np.full((64, 4), MAX_ENTRIES, dtype=np.int64)
     korder = np.zeros((64, 4), dtype=np.int64)
+    w = index_bits(n_e)
     for c in range(64):
         if l1[c] != R:
             continue
         v, cidx[c] = _best_entry(vt[c], vo[c], et, eo, n_e)
-        bits[c, 1], val[c, 1] = 1 + INDEX_BITS, 4 * v
+        bits[c, 1], val[c, 1] = 1 + w, 4 * v
         base = 0
         kv = np.zeros(4, dtype=np.int64)
         for k in range(4):
@@ -121,7 +123,7 @@ def _options(l1, l2, ct, co, vt, vo, et, eo, n_e):
         for n in range(5):
             if n > 0:
                 acc += kv[korder[c, n - 1]]
-            bits[c, 2 + n] = 1 + CHILD_BITS + INDEX_BITS * n
+            bits[c, 2 + n] = 1 + CHILD_BITS + w * n
             val[c, 2 + n] = acc
     return bits, val, cidx, kidx, korder
 
