@@ -11,7 +11,7 @@ R blocks' options.
 3. Each R block has options (bits, cells kept): C (0, 0); at 32x32 (1 + w, its vector's cells);
    at 64x64 (1 + 8 + w n, its T/O children's cells and its n best R children's). ``budget.allocate``
    picks one per block within 512 - 132 - 20E bits (hull steps in falling cells per bit); the best
-   E wins, then the codebook is chosen again with the items weighted by the options taken, once.
+   E wins, then the codebook is chosen again with the items weighted by the options taken, twice.
 
 Only O->C or T->C changes are ever made: a node is cut to C, or shows a covering entry.
 """
@@ -179,7 +179,7 @@ def _encode_one(m) -> Wavelet3Block:
     fixed = 64 * int(np.isin(l1, (states.T, states.O)).sum())
     use_c, use_f = np.ones(64, np.bool_), np.ones((64, 4), np.bool_)
     best = None
-    for _ in range(2):  # the codebook from every node, then from the nodes the allocation kept
+    for _ in range(3):  # the codebook from every node, then (twice) from the nodes the allocation kept
         et, eo = greedy_codebook(*_items(l1, l2, ct, co, vt, vo, use_c, use_f), MAX_ENTRIES)
         for n_e in range(len(et) + 1):
             bits, val, cidx, kidx, korder = _options(l1, l2, ct, co, vt, vo, et, eo, n_e)
