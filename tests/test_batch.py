@@ -142,7 +142,7 @@ def test_batch_errors_before_work(tmp_path, capsys):
     assert main(["batch", "eval", str(src), "-o", str(tmp_path / "o"), "--scheduler", "none", "--schemes", "sq3"]) == 2
     assert main(["batch", "omm", str(src), "-o", str(tmp_path / "o"), "--level", "3", "--dynamic", "2"]) == 2
     err = capsys.readouterr().err
-    assert "power of two from 1 to 128, got 3" in err and "--level and --dynamic exclude" in err
+    assert "power of two from 1 to 128, got 3" in err and "--level, --dynamic and --budget exclude" in err
     assert "--csv is not available" in err and "--scheduler must be" in err and "no file matches" in err
     assert not (tmp_path / "o").exists()
     from omaps.cli.trace import bind_camera_value  # omaps batch trace binds --camera as omaps trace does
