@@ -32,7 +32,7 @@ def reference_decode(block: bytes) -> np.ndarray:
     w = len(bin(n_e)) - 2 if n_e else 0  # index width: enough bits for 0 .. E
     limit = 512 - 20 * n_e
 
-    def vector(pos):  # a w-bit index at pos -> 4x4 states (uniform C if it does not fit or is >= E)
+    def vector(pos, c):  # w-bit index at pos in block c -> shown 4x4 states (C if it does not fit or is >= E)
         out = np.full((4, 4), C, dtype=np.uint8)
         if w == 0 or pos + w > limit or field(pos, w) >= n_e:
             return out
@@ -42,12 +42,20 @@ def reference_decode(block: bytes) -> np.ndarray:
                 code = e >> (5 * (2 * (ey // 2) + ex // 2)) & 31  # four VQ2 codes
                 cf, pal = code >> (1 + 2 * (ey % 2) + ex % 2) & 1, code & 1
                 out[ey, ex] = C if cf else (O if pal else T)
+        q = 2 * (c // 8 // 4) + (c % 8) // 4  # the block's 32x32 quadrant and its transform
+        t = field(132 + 3 * (q - 1), 3) if q else 0
+        if t & 4:
+            out = np.fliplr(out)
+        if t & 2:
+            out = np.flipud(out)
+        if t & 1:
+            out = np.rot90(out)  # a quarter turn anticlockwise as displayed
         return out
 
     l1 = [field(2 * c, 2) for c in range(64)]
     m1 = l1.count(3)
-    modes = [field(132 + r, 1) if 132 + r + 1 <= limit else 0 for r in range(m1)]
-    f0 = 132 + m1
+    modes = [field(141 + r, 1) if 141 + r + 1 <= limit else 0 for r in range(m1)]
+    f0 = 141 + m1
     z_all = modes.count(0)
     coarse0, fine0 = f0 + 8 * z_all, f0 + 8 * z_all + w * (m1 - z_all)
     out = np.full((64, 64), C, dtype=np.uint8)
@@ -58,10 +66,10 @@ def reference_decode(block: bytes) -> np.ndarray:
             out[y0:y0 + 8, x0:x0 + 8] = l1[c]
             continue
         r += 1
-        if 132 + r > limit:
+        if 141 + r > limit:
             continue  # no room for its mode bit: C
         if modes[r - 1] == 1:  # one 32x32 vector, elements of 2x2 cells
-            v = vector(coarse0 + w * (r - 1 - z))
+            v = vector(coarse0 + w * (r - 1 - z), c)
             out[y0:y0 + 8, x0:x0 + 8] = v.repeat(2, 0).repeat(2, 1)
             continue
         p2 = f0 + 8 * z
@@ -74,7 +82,7 @@ def reference_decode(block: bytes) -> np.ndarray:
             if s < 3:
                 out[y1:y1 + 4, x1:x1 + 4] = s
             else:
-                out[y1:y1 + 4, x1:x1 + 4] = vector(fine0 + w * j)
+                out[y1:y1 + 4, x1:x1 + 4] = vector(fine0 + w * j, c)
                 j += 1
     return out
 
@@ -114,7 +122,8 @@ def test_structured_blocks_reach_level_3():
         b = rng.integers(0, 256, 64).astype(np.uint8)
         b[:16] = 0
         b[0] = 3  # one R block ...
-        b[16] = (b[16] & 0xE0) | 4  # ... E = 4, its mode bit (bit 132) 0: children at bit 133
+        b[16] = (b[16] & 0xF0) | 4  # ... E = 4 ...
+        b[17] &= 0xDF  # ... its mode bit (bit 141) 0: children at bit 142
         d = wb.decode(b.tobytes())
         found += bool(((d[:8, :8] != C) & (d[:8, :8] != d[0, 0])).any())
         np.testing.assert_array_equal(d, reference_decode(b.tobytes()))
@@ -183,6 +192,22 @@ def test_32x32_mode_keeps_an_upsampled_map(rng):
     blk = we.encode(m)
     assert blk.mode.sum() > 0
     np.testing.assert_array_equal(wb.decode(blk.pack()), m)
+
+
+def test_transforms_share_entries(rng):
+    """Quadrants 1..3 mirror quadrant 0 (a symmetric sprite): the aligned transforms show quadrant
+    0's entries there, and the map keeps at least what identity transforms keep."""
+    y, x = np.mgrid[0:32, 0:32] + 0.5
+    d = np.hypot(x - 40, y - 44) + 3 * np.sin(x / 2) * np.cos(y / 3)
+    q0 = np.where(d < 22, O, np.where(d < 25, C, T)).astype(np.uint8)
+    m = np.block([[q0, np.fliplr(q0)], [np.flipud(q0), np.rot90(q0, 2)]])
+    tr = we.aligned_transforms(m)
+    assert list(tr) == [0, 4, 2, 6]  # reflect left/right, top/bottom, rotate 180
+    blk = we.encode(m, effort="fast")
+    d = reference_decode(blk.pack())
+    assert ((d == m) | (d == C)).all()
+    plain = we._encode_with(m, np.zeros(4, np.int64))[1]
+    assert (d != C).sum() >= (wb.decode(plain.pack()) != C).sum()
 
 
 def test_registered():

@@ -20,8 +20,10 @@ Physical block (64 bytes, bits numbered as in ``bits.py``)::
 
     bits   0..127  level 1: block c = 8*cy + cx at bit 2c
     bits 128..131  E, the number of codebook entries (0..15)
-    bits 132..     mode bits: the r-th R block of level 1 (raster order) at 132 + r
-    F = 132 + m1   (m1 R blocks) level-2 children fields of the mode-0 blocks, 8 bits each: the
+    bits 132..140  transforms of the 32x32 quadrants 1, 2, 3 (3 bits each, as VQ4's): an entry
+                   shown in quadrant q is t_q(entry), quadrant 0 untransformed
+    bits 141..     mode bits: the r-th R block of level 1 (raster order) at 141 + r
+    F = 141 + m1   (m1 R blocks) level-2 children fields of the mode-0 blocks, 8 bits each: the
                    z-th at F + 8z, child k = 2*ky + kx at bit 2k of it
     F + 8*Z        (Z mode-0 blocks) level-2 indices of the mode-1 blocks, w bits each
     then           level 3: the j-th R child (in the order of the children fields), w bits each
@@ -41,7 +43,7 @@ from numba import njit
 
 from .. import states
 from .bits import as_block, get_bits, put_bits
-from .vec4 import CFLAG_BIT, GENERAL, PALETTE_BIT, entry_pattern, pattern_states
+from .vec4 import CFLAG_BIT, FWD4, GENERAL, INV4, PALETTE_BIT, entry_pattern, pattern_states
 
 __all__ = ["Wavelet3Block", "decode", "lookup", "lookup_at", "BLOCK_BYTES", "SIZE", "MAX_ENTRIES", "R"]
 
@@ -50,7 +52,8 @@ SIZE = 64
 BLOCK_BITS = 8 * BLOCK_BYTES
 R = 3  # the refine code of levels 1 and 2
 E_POS, E_BITS = 128, 4
-MODE_POS = 132
+T_POS, T_BITS = 132, 3  # transforms of the 32x32 quadrants 1, 2, 3
+MODE_POS = 141
 CHILD_BITS, ENTRY_BITS = 8, 20
 MAX_ENTRIES = 15
 
@@ -97,10 +100,14 @@ def index_bits(n_e):
 
 
 @njit(cache=True, inline="always")
-def _element(blk, i, n_e, e):
-    """State of element e of codebook index i (uniform C for i >= E)."""
+def _element(blk, i, n_e, e, x, y):
+    """State of shown element e of codebook index i (uniform C for i >= E) at cell (x, y): the
+    entry's stored element under the inverse of the cell's quadrant transform."""
     if i >= n_e:
         return states.C
+    q = ((y >> 5) << 1) | (x >> 5)
+    if q != 0:
+        e = INV4[get_bits(blk, T_POS + T_BITS * (q - 1), T_BITS), e]
     pos = BLOCK_BITS - ENTRY_BITS * (i + 1)
     if get_bits(blk, pos + _CF[e], 1):
         return states.C
@@ -130,7 +137,7 @@ def lookup_at(data, base, x, y):
         p = f0 + CHILD_BITS * z_all + w * ones
         if p + w > limit:
             return states.C
-        return _element(blk, get_bits(blk, p, w), n_e, (((y & 7) >> 1) << 2) | ((x & 7) >> 1))
+        return _element(blk, get_bits(blk, p, w), n_e, (((y & 7) >> 1) << 2) | ((x & 7) >> 1), x, y)
     z = r - ones
     p2 = f0 + CHILD_BITS * z
     if p2 + CHILD_BITS > limit:
@@ -143,7 +150,7 @@ def lookup_at(data, base, x, y):
     p3 = f0 + CHILD_BITS * z_all + w * n_ones + w * j
     if p3 + w > limit:
         return states.C
-    return _element(blk, get_bits(blk, p3, w), n_e, ((y & 3) << 2) | (x & 3))
+    return _element(blk, get_bits(blk, p3, w), n_e, ((y & 3) << 2) | (x & 3), x, y)
 
 
 @njit(cache=True)
@@ -157,8 +164,9 @@ class Wavelet3Block:
     """Symbolic block: ``level1`` (64,) codes 0..3; ``mode`` (m1,) 0/1 per R block of level 1 in
     raster order; ``children`` (Z, 4) child codes of the mode-0 blocks in order; ``coarse`` (m1 - Z,)
     codebook indices of the mode-1 blocks in order; ``fine`` (m2,) codebook indices of the R
-    children in order; ``entries`` (E,) general entry codes. ``pack`` requires that everything
-    fits."""
+    children in order; ``entries`` (E,) general entry codes; ``transforms`` (4,) of the 32x32
+    quadrants, transforms[0] = 0 (or 3 values, quadrants 1..3). ``pack`` requires that
+    everything fits."""
 
     level1: np.ndarray
     mode: np.ndarray
@@ -166,8 +174,13 @@ class Wavelet3Block:
     coarse: np.ndarray
     fine: np.ndarray
     entries: np.ndarray
+    transforms: np.ndarray = None
 
     def __post_init__(self):
+        t = np.zeros(4, np.uint8) if self.transforms is None else np.asarray(self.transforms, np.uint8).reshape(-1)
+        self.transforms = np.concatenate([[0], t]).astype(np.uint8) if t.size == 3 else t
+        if self.transforms.shape != (4,) or self.transforms[0] != 0 or self.transforms.max() > 7:
+            raise ValueError("transforms: 3 values (quadrants 1..3) or 4 with the first 0, each 0..7")
         self.level1 = np.asarray(self.level1, dtype=np.uint8).reshape(64)
         self.mode = np.asarray(self.mode, dtype=np.uint8).reshape(-1)
         self.children = np.asarray(self.children, dtype=np.uint8).reshape(-1, 4)
@@ -197,6 +210,8 @@ class Wavelet3Block:
         for c in range(64):
             put_bits(b, 2 * c, 2, int(self.level1[c]))
         put_bits(b, E_POS, E_BITS, len(self.entries))
+        for q in range(1, 4):
+            put_bits(b, T_POS + T_BITS * (q - 1), T_BITS, int(self.transforms[q]))
         pos = MODE_POS
         for v in self.mode:
             put_bits(b, pos, 1, int(v))
@@ -235,7 +250,9 @@ class Wavelet3Block:
             raise ValueError("the fields of this block do not all fit (it decodes with C in their place)")
         idx = [get_bits(b, pos + w * i, w) if w else 0 for i in range(n_idx)]
         ent = np.array([get_bits(b, BLOCK_BITS - ENTRY_BITS * (i + 1), ENTRY_BITS) for i in range(n_e)], dtype=np.int64)
-        return cls(l1, mode, ch, np.array(idx[:m1 - z], dtype=np.int64), np.array(idx[m1 - z:], dtype=np.int64), ent)
+        tr = [get_bits(b, T_POS + T_BITS * (q - 1), T_BITS) for q in range(1, 4)]
+        return cls(l1, mode, ch, np.array(idx[:m1 - z], dtype=np.int64), np.array(idx[m1 - z:], dtype=np.int64), ent,
+                   np.array(tr))
 
 
 def decode(data) -> np.ndarray:
@@ -247,9 +264,15 @@ def decode(data) -> np.ndarray:
     vec = [pattern_states(*entry_pattern(GENERAL, get_bits(b, BLOCK_BITS - ENTRY_BITS * (i + 1), ENTRY_BITS)))
            for i in range(n_e)]
 
-    def vector(pos):  # the 4x4 states of the index at ``pos``, C when it does not fit or is >= E
+    tr = [0] + [int(get_bits(b, T_POS + T_BITS * (q - 1), T_BITS)) for q in range(1, 4)]
+
+    def vector(pos, c):  # shown 4x4 states of the index at ``pos`` in block c; C if it does not fit or is >= E
         i = int(get_bits(b, pos, w)) if w and pos + w <= limit else MAX_ENTRIES
-        return vec[i] if i < n_e else np.full((4, 4), states.C, np.uint8)
+        if i >= n_e:
+            return np.full((4, 4), states.C, np.uint8)
+        shown = np.empty(16, np.uint8)
+        shown[FWD4[tr[2 * ((c >> 3) >> 2) + ((c & 7) >> 2)]]] = vec[i].reshape(16)
+        return shown.reshape(4, 4)
 
     l1 = [int(get_bits(b, 2 * c, 2)) for c in range(64)]
     m1 = l1.count(R)
@@ -268,7 +291,7 @@ def decode(data) -> np.ndarray:
         if MODE_POS + r + 1 > limit:
             out[y0:y0 + 8, x0:x0 + 8] = states.C
         elif mode[r]:
-            out[y0:y0 + 8, x0:x0 + 8] = np.kron(vector(p_coarse + w * (r - z)), np.ones((2, 2), np.uint8))
+            out[y0:y0 + 8, x0:x0 + 8] = np.kron(vector(p_coarse + w * (r - z), c), np.ones((2, 2), np.uint8))
         else:
             p2 = f0 + CHILD_BITS * z
             z += 1
@@ -276,7 +299,7 @@ def decode(data) -> np.ndarray:
                 y1, x1 = y0 + 4 * (k >> 1), x0 + 4 * (k & 1)
                 s = int(get_bits(b, p2 + 2 * k, 2)) if p2 + CHILD_BITS <= limit else states.C
                 if s == R:
-                    out[y1:y1 + 4, x1:x1 + 4] = vector(p_fine + w * j)
+                    out[y1:y1 + 4, x1:x1 + 4] = vector(p_fine + w * j, c)
                     j += 1
                 else:
                     out[y1:y1 + 4, x1:x1 + 4] = s

@@ -13,6 +13,10 @@ R blocks' options.
    picks one per block within 512 - 132 - 20E bits (hull steps in falling cells per bit); the best
    E wins, then the codebook is chosen again with the items weighted by the options taken, twice.
 
+4. Transforms (one per 32x32 quadrant, quadrant 0 untransformed; nodes work in their quadrant's
+   stored space): identity and ``aligned_transforms``, the better one; then ``PASSES[effort]``
+   passes of coordinate descent, each quadrant trying its other 7 transforms with steps 1-3.
+
 Only O->C or T->C changes are ever made: a node is cut to C, or shows a covering entry.
 """
 
@@ -24,7 +28,8 @@ from numba import njit
 from .. import states
 from ..budget import allocate
 from .options import check_maps, check_options
-from .vec4 import FULL, GENERAL, entry_code
+from .symmetry import position_tables
+from .vec4 import FULL, GENERAL, entry_code, untransform_mask
 from .vec4_search import greedy_codebook, keeps, vector_masks
 from .wavelet3_block import (BLOCK_BITS, CHILD_BITS, ENTRY_BITS, MAX_ENTRIES, MODE_POS, R, SIZE, Wavelet3Block,
                              index_bits)
@@ -32,6 +37,7 @@ from .wavelet3_block import (BLOCK_BITS, CHILD_BITS, ENTRY_BITS, MAX_ENTRIES, MO
 __all__ = ["encode", "encode_many"]
 
 ENCODERS = ("best",)
+_FWD32 = position_tables(32)[0]
 
 
 @njit(cache=True)
@@ -172,9 +178,66 @@ def _items(l1, l2, ct, co, vt, vo, use_coarse, use_fine):
     return it[:m], io[:m], iw[:m]
 
 
-def _encode_one(m) -> Wavelet3Block:
+@njit(cache=True)
+def _to_stored(l1, ct, co, vt, vo, tr):
+    """Every R block's masks in its quadrant's stored space (the inverse of its transform)."""
+    for c in range(64):
+        if l1[c] != R:
+            continue
+        t = tr[2 * ((c >> 3) >> 2) + ((c & 7) >> 2)]
+        vt[c], vo[c] = untransform_mask(vt[c], t), untransform_mask(vo[c], t)
+        for k in range(4):
+            ct[c, k], co[c, k] = untransform_mask(ct[c, k], t), untransform_mask(co[c, k], t)
+
+
+def aligned_transforms(m) -> np.ndarray:
+    """Per 32x32 quadrant q = 1..3 the symmetry that best maps quadrant 0's known cells onto it
+    (the most equal known cells; identity on a tie), transforms[0] = 0."""
+    quads = m.reshape(2, 32, 2, 32).transpose(0, 2, 1, 3).reshape(4, -1)
+    tr = np.zeros(4, dtype=np.int64)
+    for q in range(1, 4):
+        scores = []
+        for t in range(8):
+            shown = np.empty(1024, np.uint8)
+            shown[_FWD32[t]] = quads[0]
+            scores.append(int(((shown == quads[q]) & (shown != states.C)).sum()))
+        tr[q] = int(np.argmax(scores))
+    return tr
+
+
+PASSES = {"fast": 0, "medium": 1, "thorough": 3}  # coordinate-descent passes over the transforms
+
+
+def _encode_one(m, passes: int) -> Wavelet3Block:
+    """The better of identity transforms and ``aligned_transforms``, then ``passes`` passes of
+    coordinate descent: each quadrant 1..3 in turn tries its 7 other transforms."""
+    best, blk = _encode_with(m, np.zeros(4, np.int64))
+    tr = aligned_transforms(m)
+    if tr.any():
+        t2, b2 = _encode_with(m, tr)
+        if t2 > best:
+            best, blk = t2, b2
+    tr = blk.transforms.astype(np.int64)
+    for _ in range(passes):
+        improved = False
+        for q in range(1, 4):
+            for t in range(8):
+                if t == tr[q]:
+                    continue
+                trial = tr.copy()
+                trial[q] = t
+                v, b = _encode_with(m, trial)
+                if v > best:
+                    best, blk, tr, improved = v, b, trial, True
+        if not improved:
+            break
+    return blk
+
+
+def _encode_with(m, tr) -> tuple[float, Wavelet3Block]:
     l1, l2, ct, co = _tree(m)
     vt, vo = _coarse_all(l1, ct, co)
+    _to_stored(l1, ct, co, vt, vo, tr)
     rb = np.flatnonzero(l1 == R)
     fixed = 64 * int(np.isin(l1, (states.T, states.O)).sum())
     use_c, use_f = np.ones(64, np.bool_), np.ones((64, 4), np.bool_)
@@ -209,12 +272,12 @@ def _encode_one(m) -> Wavelet3Block:
             children.append(row)
             fine += [kidx[c, k] for k in range(4) if row[k] == R]
     codes = [entry_code(GENERAL, int(t), int(o)) for t, o in zip(et, eo)]
-    return Wavelet3Block(level1, mode, np.array(children, np.int64).reshape(-1, 4), coarse, fine, codes)
+    return best[0], Wavelet3Block(level1, mode, np.array(children, np.int64).reshape(-1, 4), coarse, fine, codes, tr)
 
 
 def encode(map64, encoder: str = "best", effort: str = "medium") -> Wavelet3Block:
-    """One 64x64 map -> its symbolic block (conservative: only O->C or T->C). The search has no
-    effort levels: every effort gives the same block."""
+    """One 64x64 map -> its symbolic block (conservative: only O->C or T->C); ``effort``: the
+    transform search (``PASSES``)."""
     return encode_many(np.asarray(map64)[None], encoder, effort)[0]
 
 
@@ -224,4 +287,4 @@ def encode_many(maps64, encoder: str = "best", effort: str = "medium") -> list[W
         raise ValueError(f"unknown wavelet3 encoder {encoder!r} (choose from {', '.join(ENCODERS)})")
     check_options("wavelet3", "best", effort)
     m = check_maps(maps64, SIZE, "wavelet3").reshape(-1, SIZE, SIZE)
-    return [_encode_one(one) for one in m]
+    return [_encode_one(one, PASSES[effort]) for one in m]
