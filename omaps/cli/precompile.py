@@ -36,7 +36,7 @@ FAMILIES = {
     "trace": (("omaps.trace.rays", "omaps.scene.pairing"), 10),
     "vq2": (("omaps.codecs.vq2_encode",), 12),
     "vq4": (("omaps.codecs.vq4_encode",), 45),
-    "omm": (("omaps.omm.resolve",), 6),
+    "omm": (("omaps.omm.resolve", "omaps.omm.format"), 6),
 }
 # what the README's first command compiles ahead, beside its own evaluation (which compiles
 # "square" and "micromap"): two processes, the longest family alone
