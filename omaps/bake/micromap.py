@@ -377,6 +377,14 @@ def bake_micromap_rows(grid: FootprintGrid, tris_uv, level: int, grow: float = 0
     return s.reshape(-1, 4 ** level)
 
 
+def texel_areas(tris_uv, width: int, height: int) -> np.ndarray:
+    """Area in texels of each UV triangle (T, 3, 2) on a width x height texture."""
+    t = np.asarray(tris_uv, dtype=np.float64) * np.array([width, height], dtype=np.float64)
+    e1 = t[:, 1] - t[:, 0]
+    e2 = t[:, 2] - t[:, 0]
+    return 0.5 * np.abs(e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0])
+
+
 def dynamic_levels(tris_uv, width: int, height: int, scale: float, max_level: int) -> np.ndarray:
     """Per-triangle level from its texel area: the smallest level whose micro-triangles cover at
     most ``scale``² texels each (as the OMM SDKs' dynamic subdivision scale), capped at
@@ -384,10 +392,7 @@ def dynamic_levels(tris_uv, width: int, height: int, scale: float, max_level: in
     if not (np.isfinite(scale) and scale > 0):
         raise InputError(f"dynamic scale must be a positive number of texels, got {scale!r}")
     max_level = check_level(max_level, "max level")
-    t = np.asarray(tris_uv, dtype=np.float64) * np.array([width, height], dtype=np.float64)
-    e1 = t[:, 1] - t[:, 0]
-    e2 = t[:, 2] - t[:, 0]
-    area = 0.5 * np.abs(e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0])
+    area = texel_areas(tris_uv, width, height)
     ratio = np.maximum(area / (scale * scale), 1.0)
     lv = np.ceil(np.log(ratio) / np.log(4.0) - 1e-12)
     return np.clip(lv, 0, max_level).astype(np.int64)

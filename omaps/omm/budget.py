@@ -34,13 +34,10 @@ def _options(g, settings, budget: int):
     """Per triangle its item (its distinct UV triangle), and per item the option bytes (I, L+1),
     known fractions (I, L+1), weight (I,) and the content id of its stored micromap per level
     (I, L+1; -1 for none): the packer stores one micromap per (level, content)."""
-    from .pipeline import _texel_area
-
     max_level, special = settings.max_level, settings.special
     tris = check_uv_triangles(g.tris_uv) if len(g.tris_uv) else np.zeros((0, 3, 2))
     n = len(tris)
-    weight = np.asarray(g.weight if g.weight is not None else (g.area if g.area is not None else
-                                                               _texel_area(g.test, tris)), np.float64)
+    weight = g.areas(tris) if g.weight is None else np.asarray(g.weight, np.float64)
     unknown = np.zeros(n, bool) if g.unknown is None else np.asarray(g.unknown, bool)
     reps, inv = distinct_rows(tris, unknown)
     wsum = np.bincount(inv, weights=np.nan_to_num(weight), minlength=len(reps))

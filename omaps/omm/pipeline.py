@@ -30,7 +30,7 @@ import numpy as np
 from .. import __version__, states
 from ..alpha_test import AlphaTest
 from ..bake import GROW_TEXEL, bake_micromaps, bake_pair_squares, check_level, dynamic_levels, micro_starts
-from ..bake.micromap import check_uv_triangles, flag_table
+from ..bake.micromap import check_uv_triangles, flag_table, texel_areas
 from ..errors import InputError
 from ..pair import corner_uvs
 from ..promotion import PROMOTIONS
@@ -57,6 +57,12 @@ class Geometry:
     pair_of: np.ndarray | None = None
     corners: np.ndarray | None = None
     weight: np.ndarray | None = None  # (T,) expected candidate hits, for --budget (default: ``area``)
+
+    def areas(self, tris: np.ndarray) -> np.ndarray:
+        """Weights of the known-area fraction: ``area``, else the triangles' texel areas."""
+        if self.area is None:
+            return texel_areas(tris, self.test.width, self.test.height)
+        return np.asarray(self.area, dtype=np.float64)
 
     def pairing(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(pair_of (T,), corners (T, 3), pairs (P, 2): triangles A and B, -1 for none)."""
@@ -248,13 +254,6 @@ def _chunks(levels: np.ndarray):
         a = b
 
 
-def _texel_area(test: AlphaTest, tris: np.ndarray) -> np.ndarray:
-    t = tris * np.array([test.width, test.height], dtype=np.float64)
-    e1 = t[:, 1] - t[:, 0]
-    e2 = t[:, 2] - t[:, 0]
-    return 0.5 * np.abs(e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0])
-
-
 def _pair_states(g: Geometry, grid, tris: np.ndarray, scheme, jobs: int = 1) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """T/O/C micromaps (flat) at level log2 N of every triangle from its pair's square map, stored
     and decoded by the scheme's codec; the blocks (P, bytes) and the pairing records."""
@@ -305,7 +304,7 @@ def build(geometries: list[Geometry], settings: OmmSettings = OmmSettings()) -> 
         grid = g.test.grid()
         sat = flag_table(grid)
         levels = plan[gi] if plan is not None else _triangle_levels(g.test, tris, settings, n_map)
-        area = _texel_area(g.test, tris) if g.area is None else np.asarray(g.area, dtype=np.float64)
+        area = g.areas(tris)
         idx = np.empty(len(tris), dtype=np.int32)
         n_blocks = 0
         if n_map is not None:
