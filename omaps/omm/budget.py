@@ -41,7 +41,7 @@ def _options(g, settings, budget: int):
     unknown = np.zeros(n, bool) if g.unknown is None else np.asarray(g.unknown, bool)
     reps, inv = distinct_rows(tris, unknown)
     wsum = np.bincount(inv, weights=np.nan_to_num(weight), minlength=len(reps))
-    cap = np.minimum(dynamic_levels(tris[reps], g.test.width, g.test.height, FINEST_TEXELS, max_level), max_level)
+    cap = dynamic_levels(tris[reps], g.test.width, g.test.height, FINEST_TEXELS, max_level)
     cap[unknown[reps]] = 0  # all unknown: nothing to gain at any level
     record = omm_format.TRIANGLE_RECORD.itemsize
     nbytes = np.zeros((len(reps), max_level + 1), np.int64)
@@ -63,7 +63,8 @@ def _options(g, settings, budget: int):
             known = (s3.reshape(len(sel), -1) != states.C).sum(axis=1)
             uniform = (stored == stored[:, :1]).all(axis=1)
             fmt = np.where(known == 4 ** lvl, omm_format.FORMAT_2_STATE, omm_format.FORMAT_4_STATE)
-            b = np.array([omm_format.micromap_bytes(lvl, f) for f in (1, 2)])[fmt - 1] + record
+            b = np.where(fmt == omm_format.FORMAT_2_STATE, omm_format.micromap_bytes(lvl, omm_format.FORMAT_2_STATE),
+                         omm_format.micromap_bytes(lvl, omm_format.FORMAT_4_STATE)) + record
             nbytes[sel, lvl] = np.where(uniform & special, 0, b)
             frac[sel, lvl] = known / 4 ** lvl
             _, content = np.unique(np.ascontiguousarray(stored).view(np.dtype((np.void, stored.shape[1]))).ravel(),
@@ -77,7 +78,7 @@ def _options(g, settings, budget: int):
             ids[rest, lvl] = ids[rest, lvl - 1]
             eff[rest, lvl] = eff[rest, lvl - 1]
         elif len(rest):
-            nbytes[rest, 0] = 0  # level 0 of an unknown triangle: a special index
+            nbytes[rest, 0] = 0  # a budget below one level-0 micromap: uniform, so a special index
     return inv, nbytes, frac, wsum, ids, eff
 
 

@@ -35,7 +35,7 @@ def budget_maps(at, tests: dict, scheme, weights: np.ndarray, jobs: int = 1, pro
     w_b = np.where(at.pair_second >= 0, weights[np.maximum(at.pair_second, 0)], 0.0)
     nbytes = pair_option_bytes(options)
     value = np.zeros((n_pairs, len(options)))
-    decoded: dict[str, tuple] = {}  # option -> (blocks of the distinct maps, pair -> distinct row)
+    decoded: dict[str, tuple] = {}  # option -> (blocks of the distinct maps, pair -> distinct row, pair -> known share)
     for k, o in enumerate(options):
         if o == "none":
             continue
