@@ -156,6 +156,22 @@ def _box(sat, r0, r1, c0, c1, period_y, period_x):
     return nt, no, nm, n
 
 
+@njit(cache=True, inline="always")
+def _points_flag(flags, mixed, values, bounds, period_x, period_y, x0, y0, x1, y1, x2, y2, grow, tri):
+    """OR of the three vertices' own flags (``bilinear.point_flag``); stores the triangle in
+    ``tri`` (3, 2) as the polygon ``bilinear.cell_flag`` clips."""
+    acc = point_flag(flags, mixed, values, bounds, period_x, period_y, x0, y0, grow)
+    acc |= point_flag(flags, mixed, values, bounds, period_x, period_y, x1, y1, grow)
+    acc |= point_flag(flags, mixed, values, bounds, period_x, period_y, x2, y2, grow)
+    tri[0, 0] = x0
+    tri[0, 1] = y0
+    tri[1, 0] = x1
+    tri[1, 1] = y1
+    tri[2, 0] = x2
+    tri[2, 1] = y2
+    return acc
+
+
 @njit(cache=True)
 def _leaf_flag(sat, grid, x0, y0, x1, y1, x2, y2, grow, scratch):
     """OR of the flags of the cells a micro-triangle (grown by ``grow``) overlaps (0: no area):
@@ -167,6 +183,14 @@ def _leaf_flag(sat, grid, x0, y0, x1, y1, x2, y2, grow, scratch):
     ymin = min(y0, min(y1, y2))
     ymax = max(y0, max(y1, y2))
     acc = 0
+    if grow > 0.0 and mixed.shape[0] > 0:
+        # grown, every vertex's cell is in a row span below, so its flag is part of the OR: read
+        # first (cheap), a leaf across the cut-off is C before any row is counted. (Ungrown, a
+        # vertex on a row's lower edge lies outside the spans: then only after a mixed span.)
+        points_done = True
+        acc = _points_flag(flags, mixed, values, bounds, period_x, period_y, x0, y0, x1, y1, x2, y2, grow, tri)
+        if acc == 3:
+            return 3
     for r in range(int(math.floor(ymin - grow)), int(math.ceil(ymax + grow))):
         b0 = max(float(r) - grow, ymin)
         b1 = min(float(r + 1) + grow, ymax)
@@ -191,17 +215,10 @@ def _leaf_flag(sat, grid, x0, y0, x1, y1, x2, y2, grow, scratch):
         if nm > 0 and acc != 3:  # the mixed cells, each decided on its own
             if not points_done:  # the vertices' own flags first (``raster.polygon_flags`` does the same)
                 points_done = True
-                acc |= point_flag(flags, mixed, values, bounds, period_x, period_y, x0, y0, grow)
-                acc |= point_flag(flags, mixed, values, bounds, period_x, period_y, x1, y1, grow)
-                acc |= point_flag(flags, mixed, values, bounds, period_x, period_y, x2, y2, grow)
+                acc |= _points_flag(flags, mixed, values, bounds, period_x, period_y, x0, y0, x1, y1, x2, y2, grow,
+                                    tri)
                 if acc == 3:
                     return 3
-                tri[0, 0] = x0  # the triangle as the polygon ``bilinear.cell_flag`` clips
-                tri[0, 1] = y0
-                tri[1, 0] = x1
-                tri[1, 1] = y1
-                tri[2, 0] = x2
-                tri[2, 1] = y2
             hc, wc = flags.shape
             row = cell_index(r, hc, period_y)
             for c in range(c0, c1):
