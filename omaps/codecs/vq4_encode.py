@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import numpy as np
 from numba import njit
+from numba.cpython.unsafe.numbers import trailing_zeros
 
 from .. import states
 from .options import ENCODERS, EFFORTS, check_maps, check_options  # noqa: F401 (re-exported)
@@ -204,69 +205,49 @@ def _positions(pool_keys, queries):
 
 
 @njit(cache=True)
-def _gain_matrix(ck, ct, co, it, io):
-    g = np.zeros((ck.shape[0], it.shape[0]), dtype=np.int64)
-    for c in range(ck.shape[0]):
-        for i in range(it.shape[0]):
-            g[c, i] = _retained(ct[c], co[c], it[i], io[i])
-    return g
-
-
-@njit(cache=True)
-def _sparse(g):
-    """The nonzero gains by candidate (rows) and by item (columns): a candidate covers few items,
-    so the greedy and the swaps walk these lists instead of the dense matrix."""
-    nc, n = g.shape
-    nnz = 0
-    for c in range(nc):
+def _covers(ct, co, it, io):
+    """Bit i of cov[c] set when candidate c covers item i (at most 64 items), and the known cells
+    pc[c] that c keeps of every item it covers: the gain of c on item i is pc[c] or 0."""
+    n = it.shape[0]
+    nit = ~it & FULL
+    nio = ~io & FULL
+    cov = np.zeros(ct.shape[0], dtype=np.int64)
+    pc = np.empty(ct.shape[0], dtype=np.int64)
+    for c in range(ct.shape[0]):
+        a, b = ct[c], co[c]
+        m = 0
         for i in range(n):
-            if g[c, i]:
-                nnz += 1
-    rp = np.zeros(nc + 1, dtype=np.int64)
-    ri = np.empty(nnz, dtype=np.int64)
-    cp = np.zeros(n + 1, dtype=np.int64)
-    cc = np.empty(nnz, dtype=np.int64)
-    k = 0
-    for c in range(nc):
-        for i in range(n):
-            if g[c, i]:
-                ri[k] = i
-                k += 1
-                cp[i + 1] += 1
-        rp[c + 1] = k
-    for i in range(n):
-        cp[i + 1] += cp[i]
-    fill = cp[:-1].copy()
-    for c in range(nc):
-        for k in range(rp[c], rp[c + 1]):
-            i = ri[k]
-            cc[fill[i]] = c
-            fill[i] += 1
-    return rp, ri, cp, cc
+            m |= np.int64(((a & nit[i]) | (b & nio[i])) == 0) << i
+        cov[c] = m
+        pc[c] = popcount16(a | b)
+    return cov, pc
 
 
 @njit(cache=True, inline="always")
-def _marginal(g, sp, c, cur, w):
-    rp, ri = sp[0], sp[1]
+def _marginal(cov, pc, c, cur, w):
+    """Cells candidate c adds to the items' current best counts ``cur``."""
     s = 0
-    for k in range(rp[c], rp[c + 1]):
-        i = ri[k]
-        d = g[c, i] - cur[i]
+    p = pc[c]
+    m = cov[c]
+    while m != 0:
+        i = trailing_zeros(m)
+        m &= m - 1
+        d = p - cur[i]
         if d > 0:
             s += d * w[i]
     return s
 
 
 @njit(cache=True)
-def _greedy(g, sp, ck, w, allowed):
+def _greedy(cov, pc, ck, w, allowed):
     """Slots filled one at a time by the allowed candidate of largest marginal gain whose kind
     has room. chosen[s] is the candidate in entry s (-1 empty)."""
-    nc, n = g.shape
-    cur = np.zeros(n, dtype=np.int64)
+    nc = cov.shape[0]
+    cur = np.zeros(w.shape[0], dtype=np.int64)
     marg = np.zeros(nc, dtype=np.int64)
     for c in range(nc):
         if allowed[c]:
-            marg[c] = _marginal(g, sp, c, cur, w)
+            marg[c] = _marginal(cov, pc, c, cur, w)
     used = np.zeros(N_KINDS, dtype=np.int64)
     chosen = np.full(N_ENTRIES, -1, dtype=np.int64)
     for _ in range(N_ENTRIES):
@@ -279,28 +260,45 @@ def _greedy(g, sp, ck, w, allowed):
         k = ck[pick]
         chosen[KIND_FIRST[k] + used[k]] = pick
         used[k] += 1
-        for i in range(n):  # update the marginal gains where the item's best count rises
-            new = g[pick, i]
-            old = cur[i]
-            if new > old:
-                for k in range(sp[2][i], sp[2][i + 1]):
-                    c = sp[3][k]
-                    gc = g[c, i]
-                    if gc > old and allowed[c]:
-                        marg[c] -= w[i] * (min(gc, new) - old)
-                cur[i] = new
+        new = pc[pick]
+        rise = 0  # the items whose best count rises
+        m = cov[pick]
+        while m != 0:
+            i = trailing_zeros(m)
+            m &= m - 1
+            if new > cur[i]:
+                rise |= np.int64(1) << i
+        for c in range(nc):  # lower the marginal gains of the candidates on those items
+            x = cov[c] & rise
+            if x == 0 or not allowed[c]:
+                continue
+            gc = pc[c]
+            while x != 0:
+                i = trailing_zeros(x)
+                x &= x - 1
+                if gc > cur[i]:
+                    marg[c] -= w[i] * (min(gc, new) - cur[i])
+        m = rise
+        while m != 0:
+            i = trailing_zeros(m)
+            m &= m - 1
+            cur[i] = new
     return chosen
 
 
 @njit(cache=True)
-def _value_without(g, chosen, skip, w, cur):
+def _value_without(cov, pc, chosen, skip, w, cur):
     """Fills ``cur`` with each item's best retained count over the chosen entries but ``skip``."""
     cur[:] = 0
     for s in range(N_ENTRIES):
         c = chosen[s]
         if s != skip and c >= 0:
-            for i in range(cur.shape[0]):
-                cur[i] = max(cur[i], g[c, i])
+            p = pc[c]
+            m = cov[c]
+            while m != 0:
+                i = trailing_zeros(m)
+                m &= m - 1
+                cur[i] = max(cur[i], p)
     total = 0
     for i in range(cur.shape[0]):
         total += cur[i] * w[i]
@@ -308,21 +306,26 @@ def _value_without(g, chosen, skip, w, cur):
 
 
 @njit(cache=True)
-def _swap(g, sp, ck, w, chosen, target, max_passes):
+def _swap(cov, pc, ck, w, chosen, target, max_passes):
     """Replace one entry at a time by the candidate of its kind that keeps most cells."""
-    n = g.shape[1]
+    n = w.shape[0]
     cur = np.zeros(n, dtype=np.int64)
-    value = _value_without(g, chosen, -1, w, cur)
+    below = np.zeros(17, dtype=np.int64)  # below[p]: the items whose count is under p
+    value = _value_without(cov, pc, chosen, -1, w, cur)
     for _ in range(max_passes):
         improved = False
         for s in range(N_ENTRIES):
             if value == target:
                 return value
-            base = _value_without(g, chosen, s, w, cur)
+            base = _value_without(cov, pc, chosen, s, w, cur)
+            below[:] = 0
+            for i in range(n):
+                for p in range(cur[i] + 1, 17):
+                    below[p] |= np.int64(1) << i
             best, bc = value - base, chosen[s]
-            for c in range(g.shape[0]):
-                if ck[c] == ENTRY_KIND[s]:
-                    m = _marginal(g, sp, c, cur, w)
+            for c in range(cov.shape[0]):
+                if ck[c] == ENTRY_KIND[s] and (cov[c] & below[pc[c]]) != 0:
+                    m = _marginal(cov, pc, c, cur, w)
                     if m > best:
                         best, bc = m, c
             if bc != chosen[s]:
@@ -335,12 +338,12 @@ def _swap(g, sp, ck, w, chosen, target, max_passes):
 
 
 @njit(cache=True)
-def _served_merges(g, chosen, it, io, w):
+def _served_merges(cov, pc, chosen, it, io, w):
     """For each entry, the conservative merge of the items it serves best plus each further item
     it could serve: new base patterns that merge more than two vectors."""
     n = it.shape[0]
     cur = np.zeros(n, dtype=np.int64)
-    _value_without(g, chosen, -1, w, cur)
+    _value_without(cov, pc, chosen, -1, w, cur)
     out_t = np.empty(N_ENTRIES * (n + 1), dtype=np.int64)
     out_o = np.empty(N_ENTRIES * (n + 1), dtype=np.int64)
     m = 0
@@ -351,7 +354,7 @@ def _served_merges(g, chosen, it, io, w):
         mt, mo = FULL, FULL
         cnt = 0
         for i in range(n):
-            if g[c, i] > 0 and g[c, i] == cur[i]:
+            if (cov[c] >> i) & 1 and pc[c] == cur[i]:
                 mt &= it[i]
                 mo &= io[i]
                 cnt += 1
@@ -360,7 +363,7 @@ def _served_merges(g, chosen, it, io, w):
         out_t[m], out_o[m] = mt, mo
         m += 1
         for i in range(n):
-            if g[c, i] < cur[i] or g[c, i] == 0:
+            if ((cov[c] >> i) & 1) == 0 or pc[c] < cur[i]:
                 out_t[m], out_o[m] = mt & it[i], mo & io[i]
                 m += 1
     return out_t[:m], out_o[:m]
@@ -381,25 +384,24 @@ def _codebook(it, io, w, level, target):
     the 13 entries (kind -1: empty). Level 0: greedy over the items alone; 1: over items and
     pair merges; 2: then swaps; 3: then merges of the items each entry serves, and swaps."""
     ck, ct, co = _candidates(it, io, level >= 1)
-    g = _gain_matrix(ck, ct, co, it, io)
-    sp = _sparse(g)
-    chosen = _greedy(g, sp, ck, w, np.ones(ck.shape[0], dtype=np.bool_))
+    cov, pc = _covers(ct, co, it, io)
+    chosen = _greedy(cov, pc, ck, w, np.ones(ck.shape[0], dtype=np.bool_))
     cur = np.zeros(it.shape[0], dtype=np.int64)
-    value = _value_without(g, chosen, -1, w, cur)
+    value = _value_without(cov, pc, chosen, -1, w, cur)
     if level >= 1 and value < target:
         # merges can crowd out the scarce general entries: also try the vectors alone
         ik, i_t, i_o = _pool(it, io)
         allowed = np.zeros(ck.shape[0], dtype=np.bool_)
         allowed[_positions((ck << 32) | (ct << 16) | co, (ik << 32) | (i_t << 16) | i_o)] = True
-        alone = _greedy(g, sp, ck, w, allowed)
-        v = _value_without(g, alone, -1, w, cur)
+        alone = _greedy(cov, pc, ck, w, allowed)
+        v = _value_without(cov, pc, alone, -1, w, cur)
         if v > value:
             value, chosen = v, alone
     if level >= 2 and value < target:
-        value = _swap(g, sp, ck, w, chosen, target, 8)
+        value = _swap(cov, pc, ck, w, chosen, target, 8)
     if level >= 3 and value < target:
         for _ in range(3):
-            nt, no = _served_merges(g, chosen, it, io, w)
+            nt, no = _served_merges(cov, pc, chosen, it, io, w)
             old_keys = (ck << 32) | (ct << 16) | co
             ck, ct, co = _extend_pool(ck, ct, co, nt, no)
             if ck.shape[0] == old_keys.shape[0]:
@@ -409,8 +411,8 @@ def _codebook(it, io, w, level, target):
             for s in range(N_ENTRIES):
                 if chosen[s] >= 0:
                     chosen[s] = where[chosen[s]]
-            g = _gain_matrix(ck, ct, co, it, io)
-            v = _swap(g, _sparse(g), ck, w, chosen, target, 8)
+            cov, pc = _covers(ct, co, it, io)
+            v = _swap(cov, pc, ck, w, chosen, target, 8)
             if v <= value:
                 value = v
                 break
