@@ -6,11 +6,17 @@ stored either exactly, or through a codebook entry that *covers* it (equal or C 
 element), or as uniform C. Encoders work in each quadrant's canonical space: a displayed vector
 D of a quadrant with transform t is stored as an entry covering t^-1(D).
 
-``best`` builds the codebook greedily by marginal gain (known cells kept) over all 11 slots --
-global or quadrant-local, whichever gains more -- for each transform combination it tries:
-``fast`` by coordinate descent from the identity, ``medium`` (default) every combination that
-gives distinct canonical vectors, ``thorough`` the same and then swaps codebook entries while
-that keeps more cells. It stops as soon as a block is lossless.
+``best`` first fills the codebook greedily by marginal gain (known cells kept) over all 11 slots
+with every quadrant untransformed, and stops there when that is lossless. Otherwise it searches
+the *global* entries, which are what couples the quadrants: once the 3 globals are fixed, each
+quadrant's transform and 2 local entries are chosen on their own. The globals are picked one at a
+time (a lazy greedy: a candidate's gain from the previous pick bounds its next one), each scored
+by every quadrant taking its best transform and 2 greedy locals; the first pick is scored in
+displayed space (a quadrant with transform t and global g is the untransformed quadrant with
+t(g)). ``medium`` (default) runs this search; ``fast`` caps the candidates scored per pick;
+``thorough`` also runs the greedy over every transform combination that gives distinct canonical
+vectors (``medium`` before issue 14, ``EXHAUSTIVE``) and then swaps codebook entries while that
+keeps more cells. Every effort keeps the best block it has seen and stops once one is lossless.
 """
 
 from __future__ import annotations
@@ -20,8 +26,11 @@ from numba import njit
 
 from .options import ENCODERS, EFFORTS, check_maps, check_options  # noqa: F401 (re-exported)
 from .vec2 import INVERSE_T, KNOWN, RETAINED, TRANS_CODE
-from .vq2_block import N_ENTRIES, N_GLOBAL, SIZE, VQ2Block, quadrant_of_vector
+from .vq2_block import N_ENTRIES, N_GLOBAL, N_LOCAL, SIZE, VQ2Block, quadrant_of_vector
 
+
+EXHAUSTIVE = 3  # effort number of the issue-14 baseline (``medium`` before): the greedy codebook
+# for every distinct transform combination; encode_many_arrays(maps, 1, EXHAUSTIVE)
 
 # non-uniform codes: C mask 1..14 with either palette
 CANDIDATES = np.array([(m << 1) | p for m in range(1, 15) for p in (0, 1)], dtype=np.int64)
@@ -33,24 +42,20 @@ def vector_codes(m):
     codes = np.empty(64, dtype=np.int64)
     for vy in range(8):
         for vx in range(8):
-            s = np.empty(4, dtype=np.int64)
             nt = 0
             no = 0
             for e in range(4):
-                s[e] = m[2 * vy + (e >> 1), 2 * vx + (e & 1)]
-                if s[e] == 0:
-                    nt += 1
-                elif s[e] == 1:
-                    no += 1
+                s = m[2 * vy + (e >> 1), 2 * vx + (e & 1)]
+                nt += s == 0
+                no += s == 1
+            drop = 3  # no state dropped
             if nt > 0 and no > 0:  # both O and T: turn the minority to C (keep O on a tie)
                 drop = 1 if nt > no else 0
-                for e in range(4):
-                    if s[e] == drop:
-                        s[e] = 2
                 no = 0 if drop == 1 else no
             mask = 0
             for e in range(4):
-                if s[e] == 2:
+                s = m[2 * vy + (e >> 1), 2 * vx + (e & 1)]
+                if s == 2 or s == drop:
                     mask |= 1 << e
             codes[8 * vy + vx] = 30 if mask == 15 else (mask << 1) | (1 if no > 0 else 0)
     return codes
@@ -215,28 +220,290 @@ def _refine(cc, item_cnt, n_item, gl, ngl, lo, nlo, target, max_passes):
 @njit(cache=True)
 def _distinct_transforms(item_code, item_cnt, n_item):
     """Per quadrant, the transforms that give distinct canonical vector sets (a quadrant
-    without stored vectors keeps only the identity; symmetric content needs fewer)."""
+    without stored vectors keeps only the identity; symmetric content needs fewer), in
+    increasing order, and each one's canonical item codes: ``cc[q, j, k]`` is item k of
+    quadrant q under transform ``opts[q, j]``."""
     opts = np.zeros((4, 8), dtype=np.int64)
     n_opts = np.ones(4, dtype=np.int64)
-    hist = np.zeros((8, 32), dtype=np.int64)
+    cc = np.zeros((4, 8, 16), dtype=np.int64)
+    count = np.zeros((8, 32), dtype=np.int64)  # count[j, code]: the kept transform j's counts
+    sets = np.zeros(8, dtype=np.int64)  # bit mask of the codes each kept transform gives
+    for k in range(n_item[0]):
+        cc[0, 0, k] = item_code[0, k]
     for q in range(1, 4):
-        if n_item[q] == 0:
+        n = n_item[q]
+        for k in range(n):
+            cc[q, 0, k] = item_code[q, k]
+        if n == 0:
             continue
         n_opts[q] = 0
         for t in range(8):
-            hist[t, :] = 0
+            j = n_opts[q]
             ti = INVERSE_T[t]
-            for k in range(n_item[q]):
-                hist[t, TRANS_CODE[ti, item_code[q, k]]] += item_cnt[q, k]
+            mask = 0
+            for k in range(n):
+                c = TRANS_CODE[ti, item_code[q, k]]
+                cc[q, j, k] = c
+                mask |= 1 << c
             new = True
-            for j in range(n_opts[q]):
-                if np.all(hist[opts[q, j]] == hist[t]):
-                    new = False
-                    break
+            for i in range(j):  # the same codes (a transform keeps items distinct) and counts
+                if sets[i] == mask:
+                    same = True
+                    for k in range(n):
+                        if count[i, cc[q, j, k]] != item_cnt[q, k]:
+                            same = False
+                            break
+                    if same:
+                        new = False
+                        break
             if new:
-                opts[q, n_opts[q]] = t
+                opts[q, j] = t
+                sets[j] = mask
+                for k in range(n):
+                    count[j, cc[q, j, k]] = item_cnt[q, k]
                 n_opts[q] += 1
-    return opts, n_opts
+        for i in range(n_opts[q]):  # clear the counts for the next quadrant
+            for k in range(n):
+                count[i, cc[q, i, k]] = 0
+    return opts, n_opts, cc
+
+
+@njit(cache=True)
+def _search_exhaustive(item_code, item_cnt, n_item, target, gl, ngl, lo, nlo, best_tr, best_val):
+    """The greedy codebook for every distinct transform combination, from a starting block."""
+    tr = np.zeros(4, dtype=np.int64)
+    opts, n_opts, _ = _distinct_transforms(item_code, item_cnt, n_item)
+    for a in range(n_opts[1]):
+        for b in range(n_opts[2]):
+            for c in range(n_opts[3]):
+                tr[1], tr[2], tr[3] = opts[1, a], opts[2, b], opts[3, c]
+                if tr[1] == 0 and tr[2] == 0 and tr[3] == 0 or best_val == target:
+                    continue
+                cc = _canonical(item_code, n_item, tr)
+                v, g2, n2, l2, m2 = _greedy(cc, item_cnt, n_item)
+                if v > best_val:
+                    best_val, gl, ngl, lo, nlo = v, g2, n2, l2, m2
+                    best_tr[:] = tr
+    return best_val, gl, ngl, lo, nlo
+
+
+@njit(cache=True)
+def _fill_locals(cc, row, w, n, cur, gain, lo):
+    """Two local entries chosen greedily for the n items ``cc[row, :n]`` (counts ``w``) on top of
+    ``cur`` (known cells each keeps so far; updated) -> (value, entries put in ``lo``). ``gain``
+    (32,) is zero on entry and on return."""
+    nl = 0
+    for _ in range(N_LOCAL):
+        for k in range(n):
+            d = cc[row, k]
+            ck = cur[k]
+            for j in range(N_COVERERS[d]):
+                c = COVERERS[d, j]
+                r = RETAINED[d, c] - ck
+                if r > 0:
+                    gain[c] += r * w[k]
+        best_g = 0
+        best_c = -1
+        for k in range(n):  # the largest gain (smallest code on a tie); clears gain
+            d = cc[row, k]
+            for j in range(N_COVERERS[d]):
+                c = COVERERS[d, j]
+                g = gain[c]
+                if g > best_g or g == best_g and g > 0 and c < best_c:
+                    best_g, best_c = g, c
+                gain[c] = 0
+        if best_c < 0:
+            break
+        lo[nl] = best_c
+        nl += 1
+        for k in range(n):
+            cur[k] = max(cur[k], RETAINED[cc[row, k], best_c])
+    v = 0
+    for k in range(n):
+        v += cur[k] * w[k]
+    return v, nl
+
+
+@njit(cache=True)
+def _search_globals(item_code, item_cnt, n_item, target, cap):
+    """The global entries by a lazy greedy; each quadrant then takes its best transform and two
+    greedy locals. ``cap`` bounds the candidates scored per pick after the first.
+    Returns (value, transforms, gl, ngl, lo, nlo)."""
+    opts, n_opts, cc3 = _distinct_transforms(item_code, item_cnt, n_item)
+    cc = cc3.reshape(32, 16)  # row 8q + j: quadrant q's items under transform opts[q, j]
+    gain = np.zeros(32, dtype=np.int64)
+    cur = np.zeros(16, dtype=np.int64)
+    lo2 = np.zeros(N_LOCAL, dtype=np.int64)
+    # no globals: a quadrant's value and locals do not depend on its transform
+    base = np.zeros(4, dtype=np.int64)
+    base_lo = np.zeros((4, N_LOCAL), dtype=np.int64)
+    base_nlo = np.zeros(4, dtype=np.int64)
+    base_cur = np.zeros((4, 16), dtype=np.int64)
+    for q in range(4):
+        n = n_item[q]
+        cur[:n] = 0
+        base[q], base_nlo[q] = _fill_locals(cc, 8 * q, item_cnt[q], n, cur, gain, base_lo[q])
+        base_cur[q, :n] = cur[:n]
+    value = base.sum()
+    # the first pick in displayed space: shown[q, x] = quadrant q (untransformed) with entry x
+    shown = np.zeros((4, 32), dtype=np.int64)
+    for q in range(4):
+        n = n_item[q]
+        w = item_cnt[q]
+        for ci in range(CANDIDATES.shape[0]):
+            x = CANDIDATES[ci]
+            lb = base[q]  # x added to the locals already chosen
+            ub = base[q]  # x's cells on top of nothing (the locals re-chosen can do no better)
+            for k in range(n):
+                r = RETAINED[cc[8 * q, k], x]
+                ub += r * w[k]
+                if r > base_cur[q, k]:
+                    lb += (r - base_cur[q, k]) * w[k]
+            if ub > lb:
+                for k in range(n):
+                    cur[k] = RETAINED[cc[8 * q, k], x]
+                v, _ = _fill_locals(cc, 8 * q, w, n, cur, gain, lo2)
+                lb = max(lb, v)
+            shown[q, x] = lb
+    bound = np.zeros(CANDIDATES.shape[0], dtype=np.int64)  # a candidate's last gain
+    for ci in range(CANDIDATES.shape[0]):
+        c = CANDIDATES[ci]
+        v = shown[0, c]
+        for q in range(1, 4):
+            b = 0
+            for t in range(8):
+                b = max(b, shown[q, TRANS_CODE[t, c]])
+            v += b
+        bound[ci] = v - value
+    # per (quadrant, transform) row: cells kept per item by the globals (kept_g) and by the
+    # globals and locals (kept), the locals and the value
+    kept_g = np.zeros((32, 16), dtype=np.int64)
+    kept = np.zeros((32, 16), dtype=np.int64)
+    row_lo = np.zeros((32, N_LOCAL), dtype=np.int64)
+    row_nlo = np.zeros(32, dtype=np.int64)
+    row_val = np.zeros(32, dtype=np.int64)
+    for q in range(4):
+        for j in range(n_opts[q]):
+            r = 8 * q + j
+            kept[r, :n_item[q]] = base_cur[q, :n_item[q]]
+            for i in range(base_nlo[q]):
+                row_lo[r, i] = TRANS_CODE[INVERSE_T[opts[q, j]], base_lo[q, i]]
+            row_nlo[r] = base_nlo[q]
+            row_val[r] = base[q]
+    lbs = np.zeros(32, dtype=np.int64)
+    ubs = np.zeros(32, dtype=np.int64)
+    gl = np.zeros(N_GLOBAL, dtype=np.int64)
+    ngl = 0
+    done = np.zeros(CANDIDATES.shape[0], dtype=np.bool_)
+    used = np.zeros(CANDIDATES.shape[0], dtype=np.bool_)
+    for step in range(N_GLOBAL):
+        if value == target:
+            break
+        done[:] = used
+        best_gain = 0
+        best_ci = -1
+        scored = 0
+        while step == 0 or scored < cap:
+            ci = -1  # the unscored candidate of largest bound, if that beats the best so far
+            top = best_gain
+            for i in range(CANDIDATES.shape[0]):
+                if not done[i] and bound[i] > top:
+                    top = bound[i]
+                    ci = i
+            if ci < 0:
+                break
+            done[ci] = True
+            if step > 0:  # score it: each quadrant's best transform with it and 2 locals
+                scored += 1
+                c = CANDIDATES[ci]
+                ub_tot = 0
+                for q in range(4):
+                    n = n_item[q]
+                    w = item_cnt[q]
+                    bu = 0
+                    for j in range(n_opts[q]):
+                        r = 8 * q + j
+                        lb = row_val[r]  # c added, locals kept
+                        ub = row_val[r]  # c's gain over the globals alone
+                        for k in range(n):
+                            x = RETAINED[cc[r, k], c]
+                            if x > kept[r, k]:
+                                lb += (x - kept[r, k]) * w[k]
+                            if x > kept_g[r, k]:
+                                ub += (x - kept_g[r, k]) * w[k]
+                        lbs[r] = lb
+                        ubs[r] = ub
+                        bu = max(bu, ub)
+                    ub_tot += bu
+                if ub_tot - value <= best_gain:  # cannot win this pick: keep a bound
+                    bound[ci] = ub_tot - value
+                    continue
+                lb_tot = 0
+                for q in range(4):
+                    n = n_item[q]
+                    bl = 0
+                    for j in range(n_opts[q]):
+                        bl = max(bl, lbs[8 * q + j])
+                    for j in range(n_opts[q]):
+                        r = 8 * q + j
+                        if ubs[r] > bl:  # re-choosing the locals might do better
+                            for k in range(n):
+                                cur[k] = max(kept_g[r, k], RETAINED[cc[r, k], c])
+                            v, _ = _fill_locals(cc, r, item_cnt[q], n, cur, gain, lo2)
+                            bl = max(bl, v)
+                    lb_tot += bl
+                bound[ci] = lb_tot - value
+            if bound[ci] > best_gain:
+                best_gain = bound[ci]
+                best_ci = ci
+        if best_ci < 0:
+            break
+        used[best_ci] = True
+        c = CANDIDATES[best_ci]
+        gl[ngl] = c
+        ngl += 1
+        value = 0
+        for q in range(4):  # take c into every row: locals kept, or re-chosen if better
+            n = n_item[q]
+            w = item_cnt[q]
+            bq = 0
+            for j in range(n_opts[q]):
+                r = 8 * q + j
+                lb = 0
+                ub = row_val[r]
+                for k in range(n):
+                    x = RETAINED[cc[r, k], c]
+                    if x > kept_g[r, k]:
+                        ub += (x - kept_g[r, k]) * w[k]
+                        kept_g[r, k] = x
+                    kept[r, k] = max(kept[r, k], x)
+                    lb += kept[r, k] * w[k]
+                row_val[r] = lb
+                if ub > lb:
+                    cur[:n] = kept_g[r, :n]
+                    v, nl = _fill_locals(cc, r, w, n, cur, gain, lo2)
+                    if v > lb:
+                        row_val[r] = v
+                        row_nlo[r] = nl
+                        row_lo[r, :] = lo2
+                        kept[r, :n] = cur[:n]
+                bq = max(bq, row_val[r])
+            value += bq
+    tr = np.zeros(4, dtype=np.int64)
+    lo = np.zeros((4, N_LOCAL), dtype=np.int64)
+    nlo = np.zeros(4, dtype=np.int64)
+    value = 0
+    for q in range(4):
+        bj = 0
+        for j in range(1, n_opts[q]):
+            if row_val[8 * q + j] > row_val[8 * q + bj]:
+                bj = j
+        r = 8 * q + bj
+        tr[q] = opts[q, bj]
+        lo[q] = row_lo[r]
+        nlo[q] = row_nlo[r]
+        value += row_val[r]
+    return value, tr, gl, ngl, lo, nlo
 
 
 @njit(cache=True)
@@ -245,38 +512,15 @@ def _search_best(item_code, item_cnt, n_item, target, effort):
     cc = _canonical(item_code, n_item, tr)
     best_val, gl, ngl, lo, nlo = _greedy(cc, item_cnt, n_item)
     best_tr = tr.copy()
-    if best_val < target:
-        if effort >= 1:  # every distinct transform combination
-            opts, n_opts = _distinct_transforms(item_code, item_cnt, n_item)
-            for a in range(n_opts[1]):
-                for b in range(n_opts[2]):
-                    for c in range(n_opts[3]):
-                        tr[1], tr[2], tr[3] = opts[1, a], opts[2, b], opts[3, c]
-                        if tr[1] == 0 and tr[2] == 0 and tr[3] == 0 or best_val == target:
-                            continue
-                        cc = _canonical(item_code, n_item, tr)
-                        v, g2, n2, l2, m2 = _greedy(cc, item_cnt, n_item)
-                        if v > best_val:
-                            best_val, gl, ngl, lo, nlo = v, g2, n2, l2, m2
-                            best_tr[:] = tr
-        else:  # coordinate descent over the three transformed quadrants
-            for _ in range(2):
-                improved = False
-                for q in range(1, 4):
-                    for t in range(8):
-                        if t == best_tr[q] or best_val == target:
-                            continue
-                        tr[:] = best_tr
-                        tr[q] = t
-                        cc = _canonical(item_code, n_item, tr)
-                        v, g2, n2, l2, m2 = _greedy(cc, item_cnt, n_item)
-                        if v > best_val:
-                            best_val, gl, ngl, lo, nlo = v, g2, n2, l2, m2
-                            best_tr[:] = tr
-                            improved = True
-                if not improved:
-                    break
-    if effort >= 2 and best_val < target:
+    if best_val < target and effort != EXHAUSTIVE:
+        v, tr, g2, n2, l2, m2 = _search_globals(item_code, item_cnt, n_item, target, 2 if effort == 0 else 99)
+        if v > best_val:
+            best_val, gl, ngl, lo, nlo = v, g2, n2, l2, m2
+            best_tr[:] = tr
+    if best_val < target and effort >= 2:
+        best_val, gl, ngl, lo, nlo = _search_exhaustive(item_code, item_cnt, n_item, target, gl, ngl, lo,
+                                                        nlo, best_tr, best_val)
+    if effort == 2 and best_val < target:
         cc = _canonical(item_code, n_item, best_tr)
         best_val, gl, ngl, lo, nlo = _refine(cc, item_cnt, n_item, gl, ngl, lo, nlo, target, 4)
     return best_tr, gl, ngl, lo, nlo
