@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import resource
 import subprocess
 import sys
 import tempfile
@@ -41,17 +42,27 @@ ISSUE_OMAPS_S = 1.94  # the issue's measurement of omaps on the same case (befor
 LEVEL = 4
 
 
+def _child_cpu():
+    u = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return u.ru_utime + u.ru_stime
+
+
 def best_run(cmd, repeat, env=None):
-    """Fastest wall time of ``repeat`` runs of a command (it must succeed)."""
-    best = np.inf
+    """Fastest wall time of ``repeat`` runs of a command (it must succeed), and the least CPU
+    time (user + system, every thread) of one run: on a shared machine the wall time depends on
+    the other jobs, the CPU time much less (on an idle machine a one-thread run takes about its
+    CPU time)."""
+    best = cpu = np.inf
     for _ in range(repeat):
+        c0 = _child_cpu()
         t0 = time.perf_counter()
         r = subprocess.run(cmd, capture_output=True, text=True, env=env)
         dt = time.perf_counter() - t0
         if r.returncode:
             raise SystemExit(f"{' '.join(cmd)} failed:\n{r.stdout}{r.stderr}")
         best = min(best, dt)
-    return best
+        cpu = min(cpu, _child_cpu() - c0)
+    return best, cpu
 
 
 def main():
@@ -95,26 +106,29 @@ def main():
         args = ["--level", str(LEVEL), "--filter", "linear", "--wrap", "clamp", "--cutoff", str(CUTOFF), "--quiet"]
         env = dict(os.environ, OMAPS_PROGRESS="0")
         best_run(omm + [str(LEAF), str(one), "-o", str(Path(d) / "o1")] + args, 1, env)
-        t_whole = best_run(omm + [str(LEAF), str(uvs), "-o", str(Path(d) / "o")] + args, a.repeat, env)
-        t_first = best_run(omm + [str(LEAF), str(one), "-o", str(Path(d) / "o1")] + args, a.repeat, env)
-        t_help = best_run(omm + ["--help"], a.repeat, env)
-        t_python = best_run([sys.executable, "-c", "pass"], a.repeat, env)
+        t_whole, c_whole = best_run(omm + [str(LEAF), str(uvs), "-o", str(Path(d) / "o")] + args, a.repeat, env)
+        t_first, c_first = best_run(omm + [str(LEAF), str(one), "-o", str(Path(d) / "o1")] + args, a.repeat, env)
+        t_help, _ = best_run(omm + ["--help"], a.repeat, env)
+        t_python, _ = best_run([sys.executable, "-c", "pass"], a.repeat, env)
         imp = subprocess.run([sys.executable, "-X", "importtime", "-m", "omaps", "omm", "--help"], capture_output=True,
                              text=True, env=env)
         help_numba = any(line.split("|")[-1].strip() == "numba" for line in imp.stderr.splitlines())
 
+    load = os.getloadavg()[0]
     print(f"\nwhole process `omaps omm OAK UVS --level {LEVEL}`: {t_whole:.2f} s "
-          f"({n_micro / t_whole / 1e6:.1f} M micro-triangles/s end to end)")
+          f"({n_micro / t_whole / 1e6:.1f} M micro-triangles/s end to end); {c_whole:.2f} CPU-s "
+          f"(load average {load:.1f} on {os.cpu_count()} cores)")
     print(f"  meshoptimizer's one-thread baker: {ISSUE_MESHOPT_S:.2f} s -- the issue's figure, NOT measured here "
           "(no registry package exposes its opacity-map baker)")
     print(f"  omaps / meshoptimizer (issue figure): {t_whole / ISSUE_MESHOPT_S:.2f}x the time; omaps at issue time: "
           f"{ISSUE_OMAPS_S:.2f} s (issue figure)")
-    print(f"start to first triangle baked (whole process on 1 triangle, output written): {t_first:.2f} s "
-          f"(bare python start {t_python:.2f} s)")
+    print(f"start to first triangle baked (whole process on 1 triangle, output written): {t_first:.2f} s, "
+          f"{c_first:.2f} CPU-s (bare python start {t_python:.2f} s)")
     print(f"`omaps omm --help`: {t_help:.2f} s; imports numba: {'yes' if help_numba else 'no'}")
     goals = [("whole process <= meshoptimizer's 0.72 s (issue figure)", t_whole <= ISSUE_MESHOPT_S),
              ("--help <= 0.3 s", t_help <= 0.3), ("--help without numba", not help_numba),
-             ("first triangle <= 0.5 s", t_first <= 0.5)]
+             ("first triangle <= 0.5 s", t_first <= 0.5),
+             ("first triangle <= 0.5 CPU-s (about its time on an idle machine)", c_first <= 0.5)]
     print("goals: " + "; ".join(f"{name}: {'met' if ok else 'MISSED'}" for name, ok in goals))
     return 0
 
