@@ -28,10 +28,11 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 from numba.cpython.unsafe.numbers import trailing_zeros
+from numba.extending import intrinsic
 
 from .. import states
 from .options import ENCODERS, EFFORTS, check_maps, check_options  # noqa: F401 (re-exported)
-from .vec4 import FULL, entry_code, popcount16, project, untransform_mask
+from .vec4 import FULL, FWD4, GENERAL, INV4, entry_code, popcount16, project, transform_mask, untransform_mask
 from .vq4_block import ENTRY_KIND, N_ENTRIES, SIZE, VQ4Block
 
 N_KINDS = 4
@@ -41,6 +42,18 @@ CAPACITY = np.bincount(ENTRY_KIND, minlength=N_KINDS).astype(np.int64)  # entrie
 # (start 0 identity / 1 aligned / 3 ranked, coordinate-descent level, passes, final level)
 SEARCH = np.array([[1, 0, 0, 2], [1, 0, 2, 2], [3, 2, 1, 3]], dtype=np.int64)
 KIND_FIRST = np.array([int(np.flatnonzero(ENTRY_KIND == k)[0]) for k in range(N_KINDS)], dtype=np.int64)
+# RELATIVE[tb, ta]: the transform r with r(x) = tb(ta^-1(x)), so that a pattern stored under ta
+# and shown under tb is the displayed pattern moved by r
+RELATIVE = np.array([[next(r for r in range(8) if np.array_equal(FWD4[r], FWD4[tb][INV4[ta]])) for ta in range(8)]
+                     for tb in range(8)], dtype=np.int64)
+
+
+@intrinsic
+def popcount64(typingctx, x):
+    """Set bits of an integer (one instruction)."""
+    def codegen(context, builder, signature, args):
+        return builder.ctpop(args[0])
+    return x(x), codegen
 
 
 @njit(cache=True)
@@ -239,45 +252,72 @@ def _marginal(cov, pc, c, cur, w):
 
 
 @njit(cache=True)
-def _greedy(cov, pc, ck, w, allowed):
-    """Slots filled one at a time by the allowed candidate of largest marginal gain whose kind
-    has room. chosen[s] is the candidate in entry s (-1 empty)."""
-    nc = cov.shape[0]
+def _weight_planes(w):
+    """Bit planes of the item weights: plane b holds the items whose weight has bit b, so that
+    the weight of an item set x is the sum of popcount(x & plane b) << b."""
+    top = 0
+    for i in range(w.shape[0]):
+        top = max(top, w[i])
+    n_planes = 1
+    while top >> n_planes:
+        n_planes += 1
+    planes = np.zeros(n_planes, dtype=np.int64)
+    for i in range(w.shape[0]):
+        for b in range(planes.shape[0]):
+            if (w[i] >> b) & 1:
+                planes[b] |= np.int64(1) << i
+    return planes
+
+
+@njit(cache=True, inline="always")
+def _weight(x, planes):
+    s = 0
+    for b in range(planes.shape[0]):
+        s += popcount64(x & planes[b]) << b
+    return s
+
+
+@njit(cache=True)
+def _greedy(cov, pc, ck, w, cands):
+    """Slots filled one at a time by the candidate (of ``cands``, increasing) of largest marginal
+    gain whose kind has room. chosen[s] is the candidate in entry s (-1 empty)."""
+    nc = cands.shape[0]
+    planes = _weight_planes(w)
     cur = np.zeros(w.shape[0], dtype=np.int64)
-    marg = np.zeros(nc, dtype=np.int64)
-    for c in range(nc):
-        if allowed[c]:
-            marg[c] = _marginal(cov, pc, c, cur, w)
+    marg = np.empty(nc, dtype=np.int64)
+    for j in range(nc):
+        marg[j] = pc[cands[j]] * _weight(cov[cands[j]], planes)
     used = np.zeros(N_KINDS, dtype=np.int64)
     chosen = np.full(N_ENTRIES, -1, dtype=np.int64)
     for _ in range(N_ENTRIES):
         best, pick = 0, -1
-        for c in range(nc):
-            if marg[c] > best and used[ck[c]] < CAPACITY[ck[c]]:
-                best, pick = marg[c], c
+        for j in range(nc):
+            if marg[j] > best and used[ck[cands[j]]] < CAPACITY[ck[cands[j]]]:
+                best, pick = marg[j], j
         if pick < 0:
             break
-        k = ck[pick]
-        chosen[KIND_FIRST[k] + used[k]] = pick
+        p = cands[pick]
+        k = ck[p]
+        chosen[KIND_FIRST[k] + used[k]] = p
         used[k] += 1
-        new = pc[pick]
+        new = pc[p]
         rise = 0  # the items whose best count rises
-        m = cov[pick]
+        m = cov[p]
         while m != 0:
             i = trailing_zeros(m)
             m &= m - 1
             if new > cur[i]:
                 rise |= np.int64(1) << i
-        for c in range(nc):  # lower the marginal gains of the candidates on those items
-            x = cov[c] & rise
-            if x == 0 or not allowed[c]:
+        for j in range(nc):  # lower the marginal gains of the candidates on those items
+            x = cov[cands[j]] & rise
+            if x == 0 or marg[j] == 0:
                 continue
-            gc = pc[c]
+            gc = pc[cands[j]]
             while x != 0:
                 i = trailing_zeros(x)
                 x &= x - 1
                 if gc > cur[i]:
-                    marg[c] -= w[i] * (min(gc, new) - cur[i])
+                    marg[j] -= w[i] * (min(gc, new) - cur[i])
         m = rise
         while m != 0:
             i = trailing_zeros(m)
@@ -311,6 +351,8 @@ def _swap(cov, pc, ck, w, chosen, target, max_passes):
     n = w.shape[0]
     cur = np.zeros(n, dtype=np.int64)
     below = np.zeros(17, dtype=np.int64)  # below[p]: the items whose count is under p
+    planes = _weight_planes(w)
+    first = np.searchsorted(ck, np.arange(N_KINDS + 1))  # candidates are sorted by kind
     value = _value_without(cov, pc, chosen, -1, w, cur)
     for _ in range(max_passes):
         improved = False
@@ -323,8 +365,9 @@ def _swap(cov, pc, ck, w, chosen, target, max_passes):
                 for p in range(cur[i] + 1, 17):
                     below[p] |= np.int64(1) << i
             best, bc = value - base, chosen[s]
-            for c in range(cov.shape[0]):
-                if ck[c] == ENTRY_KIND[s] and (cov[c] & below[pc[c]]) != 0:
+            for c in range(first[ENTRY_KIND[s]], first[ENTRY_KIND[s] + 1]):
+                x = cov[c] & below[pc[c]]
+                if x != 0 and pc[c] * _weight(x, planes) > best:  # a bound first
                     m = _marginal(cov, pc, c, cur, w)
                     if m > best:
                         best, bc = m, c
@@ -385,7 +428,7 @@ def _codebook(it, io, w, level, target):
     pair merges; 2: then swaps; 3: then merges of the items each entry serves, and swaps."""
     ck, ct, co = _candidates(it, io, level >= 1)
     cov, pc = _covers(ct, co, it, io)
-    chosen = _greedy(cov, pc, ck, w, np.ones(ck.shape[0], dtype=np.bool_))
+    chosen = _greedy(cov, pc, ck, w, np.arange(ck.shape[0]))
     cur = np.zeros(it.shape[0], dtype=np.int64)
     value = _value_without(cov, pc, chosen, -1, w, cur)
     if level >= 1 and value < target:
@@ -393,7 +436,7 @@ def _codebook(it, io, w, level, target):
         ik, i_t, i_o = _pool(it, io)
         allowed = np.zeros(ck.shape[0], dtype=np.bool_)
         allowed[_positions((ck << 32) | (ct << 16) | co, (ik << 32) | (i_t << 16) | i_o)] = True
-        alone = _greedy(cov, pc, ck, w, allowed)
+        alone = _greedy(cov, pc, ck, w, np.flatnonzero(allowed))
         v = _value_without(cov, pc, alone, -1, w, cur)
         if v > value:
             value, chosen = v, alone
@@ -604,12 +647,128 @@ def _aligned_transforms(dt, do):
 
 
 @njit(cache=True)
+def _rank_transforms(dt, do, used):
+    """A cheap score of every transform combination (code t1 | t2 << 3 | t3 << 6; -1 for the
+    combinations skipped: a transform other than 0 on a quadrant without mixed vectors, or, with
+    quadrant 0 empty, on the first quadrant used, since turning every quadrant alike changes
+    nothing). The score: cells kept by a greedy 13-entry codebook of the vectors' general-kind
+    projections, over the vectors (not distinct patterns). A projection commutes with the
+    transforms, so whether vector j's projection covers vector k depends only on their relative
+    transform: 8 coverage masks per vector, computed once, serve every combination."""
+    mix = np.empty(64, dtype=np.int64)
+    nm = 0
+    for v in range(64):
+        if not _uniform(dt[v], do[v]):
+            mix[nm] = v
+            nm += 1
+    qof = np.empty(nm, dtype=np.int64)
+    gp = np.empty(nm, dtype=np.int64)
+    qmask = np.zeros(4, dtype=np.int64)
+    cov = np.zeros((nm, 8), dtype=np.int64)
+    for j in range(nm):
+        qof[j] = _quadrant(mix[j])
+        qmask[qof[j]] |= np.int64(1) << j
+        gt, go = project(GENERAL, dt[mix[j]], do[mix[j]])
+        gp[j] = popcount16(gt | go)
+        for r in range(8):
+            a, b = transform_mask(gt, r), transform_mask(go, r)
+            m = 0
+            for k in range(nm):
+                m |= np.int64(((a & ~dt[mix[k]]) | (b & ~do[mix[k]])) == 0) << k
+            cov[j, r] = m
+    first = 0
+    while first < 3 and not used[first]:
+        first += 1
+    score = np.full(512, -1, dtype=np.int64)
+    tr = np.zeros(4, dtype=np.int64)
+    cj = np.empty(nm, dtype=np.int64)
+    ub = np.empty(nm, dtype=np.int64)
+    stamp = np.empty(nm, dtype=np.int64)
+    cur = np.empty(nm, dtype=np.int64)
+    for code in range(512):
+        tr[1], tr[2], tr[3] = code & 7, (code >> 3) & 7, code >> 6
+        skip = False
+        for q in range(1, 4):
+            if tr[q] != 0 and (not used[q] or q == first):
+                skip = True
+        if skip:
+            continue
+        for j in range(nm):
+            ta = tr[qof[j]]
+            c = 0
+            for q in range(4):
+                c |= cov[j, RELATIVE[tr[q], ta]] & qmask[q]
+            cj[j] = c
+            ub[j] = gp[j] * popcount64(c)
+            stamp[j] = -1
+            cur[j] = 0
+        total = 0
+        for s in range(N_ENTRIES):  # lazy greedy: ub holds upper bounds of the marginal gains
+            while True:
+                best, bj = 0, -1
+                for j in range(nm):
+                    if ub[j] > best:
+                        best, bj = ub[j], j
+                if bj < 0 or stamp[bj] == s:
+                    break
+                g = 0
+                m = cj[bj]
+                while m != 0:
+                    k = trailing_zeros(m)
+                    m &= m - 1
+                    d = gp[bj] - cur[k]
+                    if d > 0:
+                        g += d
+                ub[bj] = g
+                stamp[bj] = s
+            if bj < 0:
+                break
+            total += best
+            ub[bj] = 0
+            m = cj[bj]
+            while m != 0:
+                k = trailing_zeros(m)
+                m &= m - 1
+                cur[k] = max(cur[k], gp[bj])
+        score[code] = total
+    return score
+
+
+@njit(cache=True)
+def _search_rank_top(dt, do, k_eval, level, final_level):
+    """The ``k_eval`` best combinations by ``_rank_transforms`` scored by the codebook at
+    ``level``; the winner re-encoded at ``final_level``."""
+    used = _quadrant_used(dt, do)
+    score = _rank_transforms(dt, do, used)
+    order = np.argsort(-score, kind="mergesort")
+    tr = np.zeros(4, dtype=np.int64)
+    best_v, best_tr, target = -1, np.zeros(4, dtype=np.int64), 0
+    kinds, et, eo = np.full(N_ENTRIES, -1, dtype=np.int64), np.zeros(N_ENTRIES, dtype=np.int64), np.zeros(N_ENTRIES, dtype=np.int64)
+    for r in range(k_eval):
+        code = order[r]
+        if score[code] < 0:
+            break
+        tr[1], tr[2], tr[3] = code & 7, (code >> 3) & 7, code >> 6
+        v, target, k2, t2, o2 = _evaluate(dt, do, tr, 1, level)
+        if v > best_v:
+            best_v, kinds, et, eo = v, k2, t2, o2
+            best_tr[:] = tr
+        if best_v == target:
+            break
+    if final_level != level and best_v < target:
+        best_v, target, kinds, et, eo = _evaluate(dt, do, best_tr, 1, final_level)
+    return best_tr, kinds, et, eo
+
+
+@njit(cache=True)
 def _search(dt, do, encoder, start, cd_level, cd_passes, final_level):
     """Transforms and codebook. Start from the identity (0), ``_aligned_transforms`` (1) or the
     ranking of every combination (3); coordinate descent over quadrants 1..3 scored by the
     codebook at ``cd_level``; the winner re-encoded at ``final_level``."""
     if start == 3:  # rank every combination cheaply, refine the best few
         return _search_ranked(dt, do, cd_level, cd_passes, final_level)
+    if start == 4:  # rank every combination by the coverage greedy, the best cd_passes at cd_level
+        return _search_rank_top(dt, do, cd_passes, cd_level, final_level)
     used = _quadrant_used(dt, do)
     start_tr = _aligned_transforms(dt, do) if start == 1 else np.zeros(4, dtype=np.int64)
     for q in range(4):
