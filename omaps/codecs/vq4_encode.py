@@ -280,49 +280,66 @@ def _weight(x, planes):
 @njit(cache=True)
 def _greedy(cov, pc, ck, w, cands):
     """Slots filled one at a time by the candidate (of ``cands``, increasing) of largest marginal
-    gain whose kind has room. chosen[s] is the candidate in entry s (-1 empty)."""
+    gain whose kind has room, the first on a tie. chosen[s] is the candidate in entry s (-1
+    empty). Lazily: marginal gains only fall as entries are chosen, so each candidate waits in
+    the bucket of its last known gain and is re-scored only when that bucket is the highest."""
     nc = cands.shape[0]
     planes = _weight_planes(w)
     cur = np.zeros(w.shape[0], dtype=np.int64)
-    marg = np.empty(nc, dtype=np.int64)
+    hi = 16 * w.sum()
+    head = np.full(hi + 1, -1, dtype=np.int64)  # bucket lists by gain
+    nxt = np.empty(nc, dtype=np.int64)
+    stamp = np.full(nc, -1, dtype=np.int64)  # the step at which the gain was last computed
+    fresh = np.empty(nc, dtype=np.int64)
     for j in range(nc):
-        marg[j] = pc[cands[j]] * _weight(cov[cands[j]], planes)
+        v = pc[cands[j]] * _weight(cov[cands[j]], planes)
+        if v > 0:
+            nxt[j] = head[v]
+            head[v] = j
     used = np.zeros(N_KINDS, dtype=np.int64)
     chosen = np.full(N_ENTRIES, -1, dtype=np.int64)
-    for _ in range(N_ENTRIES):
-        best, pick = 0, -1
-        for j in range(nc):
-            if marg[j] > best and used[ck[cands[j]]] < CAPACITY[ck[cands[j]]]:
-                best, pick = marg[j], j
-        if pick < 0:
+    step = 0
+    while step < N_ENTRIES:
+        while hi > 0 and head[hi] < 0:
+            hi -= 1
+        if hi == 0:
             break
+        j = head[hi]
+        head[hi] = -1
+        nf = 0
+        pick = nc
+        while j >= 0:  # re-score the bucket: those still at hi are the best
+            nj = nxt[j]
+            c = cands[j]
+            if used[ck[c]] < CAPACITY[ck[c]]:
+                v = hi
+                if stamp[j] != step:
+                    v = _marginal(cov, pc, c, cur, w)
+                    stamp[j] = step
+                if v == hi:
+                    fresh[nf] = j
+                    nf += 1
+                    pick = min(pick, j)
+                elif v > 0:
+                    nxt[j] = head[v]
+                    head[v] = j
+            j = nj
+        for f in range(nf):
+            if fresh[f] != pick:
+                nxt[fresh[f]] = head[hi]
+                head[hi] = fresh[f]
+        if nf == 0:
+            continue
         p = cands[pick]
         k = ck[p]
         chosen[KIND_FIRST[k] + used[k]] = p
         used[k] += 1
-        new = pc[p]
-        rise = 0  # the items whose best count rises
         m = cov[p]
         while m != 0:
             i = trailing_zeros(m)
             m &= m - 1
-            if new > cur[i]:
-                rise |= np.int64(1) << i
-        for j in range(nc):  # lower the marginal gains of the candidates on those items
-            x = cov[cands[j]] & rise
-            if x == 0 or marg[j] == 0:
-                continue
-            gc = pc[cands[j]]
-            while x != 0:
-                i = trailing_zeros(x)
-                x &= x - 1
-                if gc > cur[i]:
-                    marg[j] -= w[i] * (min(gc, new) - cur[i])
-        m = rise
-        while m != 0:
-            i = trailing_zeros(m)
-            m &= m - 1
-            cur[i] = new
+            cur[i] = max(cur[i], pc[p])
+        step += 1
     return chosen
 
 
