@@ -127,6 +127,20 @@ def _coverers():
 COVERERS, N_COVERERS = _coverers()
 
 
+def _orbits():
+    """ORBITS[o, :]: the non-uniform codes one transform takes into each other (-1 padded)."""
+    out, seen = [], set()
+    for c in CANDIDATES:
+        if c not in seen:
+            o = sorted(set(int(x) for x in TRANS_CODE[:, c]))
+            seen.update(o)
+            out.append(o + [-1] * (8 - len(o)))
+    return np.array(out, dtype=np.int64)
+
+
+ORBITS = _orbits()
+
+
 @njit(cache=True)
 def _greedy(cc, item_cnt, n_item):
     """Fill the slots one at a time with the (entry, slot) of largest marginal gain."""
@@ -345,26 +359,35 @@ def _search_globals(item_code, item_cnt, n_item, target, cap):
         base[q], base_nlo[q] = _fill_locals(cc, 8 * q, item_cnt[q], n, cur, gain, base_lo[q])
         base_cur[q, :n] = cur[:n]
     value = base.sum()
-    # the first pick in displayed space: shown[q, x] = quadrant q (untransformed) with entry x
+    # the first pick in displayed space: shown[q, x] = quadrant q (untransformed) with entry x.
+    # Quadrants 1..3 take the best transform of a candidate, so only each orbit's best counts.
     shown = np.zeros((4, 32), dtype=np.int64)
+    full = np.zeros(4, dtype=np.int64)  # every known cell of the quadrant kept
     for q in range(4):
         n = n_item[q]
         w = item_cnt[q]
-        for ci in range(CANDIDATES.shape[0]):
-            x = CANDIDATES[ci]
-            lb = base[q]  # x added to the locals already chosen
-            ub = base[q]  # x's cells on top of nothing (the locals re-chosen can do no better)
-            for k in range(n):
-                r = RETAINED[cc[8 * q, k], x]
-                ub += r * w[k]
-                if r > base_cur[q, k]:
-                    lb += (r - base_cur[q, k]) * w[k]
-            if ub > lb:
+        for k in range(n):
+            full[q] += KNOWN[cc[8 * q, k]] * w[k]
+        for o in range(ORBITS.shape[0]):
+            top = 0
+            for i in range(ORBITS.shape[1]):
+                x = ORBITS[o, i]
+                if x < 0:
+                    break
+                lb = base[q]  # x added to the locals already chosen
+                ub = base[q]  # x's cells on top of nothing (re-chosen locals can do no better)
                 for k in range(n):
-                    cur[k] = RETAINED[cc[8 * q, k], x]
-                v, _ = _fill_locals(cc, 8 * q, w, n, cur, gain, lo2)
-                lb = max(lb, v)
-            shown[q, x] = lb
+                    r = RETAINED[cc[8 * q, k], x]
+                    ub += r * w[k]
+                    if r > base_cur[q, k]:
+                        lb += (r - base_cur[q, k]) * w[k]
+                if min(ub, full[q]) > (lb if q == 0 else max(lb, top)):
+                    for k in range(n):
+                        cur[k] = RETAINED[cc[8 * q, k], x]
+                    v, _ = _fill_locals(cc, 8 * q, w, n, cur, gain, lo2)
+                    lb = max(lb, v)
+                shown[q, x] = lb
+                top = max(top, lb)
     bound = np.zeros(CANDIDATES.shape[0], dtype=np.int64)  # a candidate's last gain
     for ci in range(CANDIDATES.shape[0]):
         c = CANDIDATES[ci]
@@ -432,8 +455,8 @@ def _search_globals(item_code, item_cnt, n_item, target, cap):
                             if x > kept_g[r, k]:
                                 ub += (x - kept_g[r, k]) * w[k]
                         lbs[r] = lb
-                        ubs[r] = ub
-                        bu = max(bu, ub)
+                        ubs[r] = min(ub, full[q])
+                        bu = max(bu, ubs[r])
                     ub_tot += bu
                 if ub_tot - value <= best_gain:  # cannot win this pick: keep a bound
                     bound[ci] = ub_tot - value
@@ -463,7 +486,7 @@ def _search_globals(item_code, item_cnt, n_item, target, cap):
         gl[ngl] = c
         ngl += 1
         value = 0
-        for q in range(4):  # take c into every row: locals kept, or re-chosen if better
+        for q in range(4):  # take c into every row: locals kept, or re-chosen where that may win
             n = n_item[q]
             w = item_cnt[q]
             bq = 0
@@ -479,15 +502,19 @@ def _search_globals(item_code, item_cnt, n_item, target, cap):
                     kept[r, k] = max(kept[r, k], x)
                     lb += kept[r, k] * w[k]
                 row_val[r] = lb
-                if ub > lb:
+                ubs[r] = min(ub, full[q])
+                bq = max(bq, lb)
+            for j in range(n_opts[q]):
+                r = 8 * q + j
+                if ubs[r] > row_val[r] and (step < N_GLOBAL - 1 or ubs[r] > bq):  # the last pick: only a win counts
                     cur[:n] = kept_g[r, :n]
                     v, nl = _fill_locals(cc, r, w, n, cur, gain, lo2)
-                    if v > lb:
+                    if v > row_val[r]:
                         row_val[r] = v
                         row_nlo[r] = nl
                         row_lo[r, :] = lo2
                         kept[r, :n] = cur[:n]
-                bq = max(bq, row_val[r])
+                        bq = max(bq, v)
             value += bq
     tr = np.zeros(4, dtype=np.int64)
     lo = np.zeros((4, N_LOCAL), dtype=np.int64)
