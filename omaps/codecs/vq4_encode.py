@@ -143,22 +143,26 @@ def _candidates(it, io, pairs):
                 if (mt | mo) != 0:
                     bt[nb], bo[nb] = mt, mo
                     nb += 1
-    return _pool(bt[:nb], bo[:nb])
+    return _pool(bt[:nb], bo[:nb], n)
 
 
 @njit(cache=True)
-def _pool(bt, bo):
-    """Unique projections of base patterns onto every kind, as (kinds, T masks, O masks)."""
+def _pool(bt, bo, n_first):
+    """Unique projections of base patterns onto every kind, as (kinds, T masks, O masks, whether
+    a projection of one of the first ``n_first`` bases)."""
     keys = np.empty(bt.shape[0] * N_KINDS, dtype=np.int64)
     nk = 0
+    nk_first = 0
     for b in range(bt.shape[0]):
         for kind in range(N_KINDS):
             kt, ko = project(kind, bt[b], bo[b])
             if (kt | ko) != 0:
                 keys[nk] = (kind << 32) | (kt << 16) | ko
                 nk += 1
-    u = _unique_by_kind(keys[:nk])
-    return u >> 32, (u >> 16) & FULL, u & FULL
+        if b + 1 == n_first:
+            nk_first = nk
+    u, first = _unique_by_kind(keys[:nk], nk_first)
+    return u >> 32, (u >> 16) & FULL, u & FULL, first
 
 
 # Pools are deduplicated with a small hash table: numba's sort made np.unique the slowest step.
@@ -182,27 +186,33 @@ def _slot(table, keys, key):
 
 
 @njit(cache=True)
-def _unique_by_kind(keys):
-    """Distinct keys (kind << 32 | T << 16 | O), grouped by kind in increasing order."""
+def _unique_by_kind(keys, n_first):
+    """Distinct keys (kind << 32 | T << 16 | O), grouped by kind in increasing order, and whether
+    each is among the first ``n_first`` keys."""
     table = _new_table(keys.shape[0])
     uniq = np.empty_like(keys)
+    early = np.empty(keys.shape[0], dtype=np.bool_)
     m = 0
     count = np.zeros(N_KINDS + 1, dtype=np.int64)
-    for key in keys:
+    for j in range(keys.shape[0]):
+        key = keys[j]
         h = _slot(table, uniq, key)
         if table[h] < 0:
             table[h] = m
             uniq[m] = key
+            early[m] = j < n_first
             m += 1
             count[(key >> 32) + 1] += 1
     for k in range(N_KINDS):
         count[k + 1] += count[k]
     out = np.empty(m, dtype=np.int64)
+    first = np.zeros(m, dtype=np.bool_)
     for i in range(m):
         k = uniq[i] >> 32
         out[count[k]] = uniq[i]
+        first[count[k]] = early[i]
         count[k] += 1
-    return out
+    return out, first
 
 
 @njit(cache=True)
@@ -432,9 +442,9 @@ def _served_merges(cov, pc, chosen, it, io, w):
 @njit(cache=True)
 def _extend_pool(ck, ct, co, nt, no):
     """The pool plus the projections of new base patterns, without duplicates."""
-    ek, et, eo = _pool(nt, no)
+    ek, et, eo, _ = _pool(nt, no, 0)
     keys = np.concatenate(((ck << 32) | (ct << 16) | co, (ek << 32) | (et << 16) | eo))
-    u = _unique_by_kind(keys)
+    u, _ = _unique_by_kind(keys, 0)
     return u >> 32, (u >> 16) & FULL, u & FULL
 
 
@@ -443,17 +453,14 @@ def _codebook(it, io, w, level, target):
     """Best codebook found for one transform combination: (value, kinds, T masks, O masks) of
     the 13 entries (kind -1: empty). Level 0: greedy over the items alone; 1: over items and
     pair merges; 2: then swaps; 3: then merges of the items each entry serves, and swaps."""
-    ck, ct, co = _candidates(it, io, level >= 1)
+    ck, ct, co, alone_ok = _candidates(it, io, level >= 1)
     cov, pc = _covers(ct, co, it, io)
     chosen = _greedy(cov, pc, ck, w, np.arange(ck.shape[0]))
     cur = np.zeros(it.shape[0], dtype=np.int64)
     value = _value_without(cov, pc, chosen, -1, w, cur)
     if level >= 1 and value < target:
         # merges can crowd out the scarce general entries: also try the vectors alone
-        ik, i_t, i_o = _pool(it, io)
-        allowed = np.zeros(ck.shape[0], dtype=np.bool_)
-        allowed[_positions((ck << 32) | (ct << 16) | co, (ik << 32) | (i_t << 16) | i_o)] = True
-        alone = _greedy(cov, pc, ck, w, np.flatnonzero(allowed))
+        alone = _greedy(cov, pc, ck, w, np.flatnonzero(alone_ok))
         v = _value_without(cov, pc, alone, -1, w, cur)
         if v > value:
             value, chosen = v, alone
