@@ -113,18 +113,22 @@ def _value(cc, item_cnt, n_item, gl, ngl, lo, nlo):
 
 
 def _coverers():
-    """COVERERS[d, :N_COVERERS[d]]: the non-uniform codes that cover code d (keep some of it)."""
+    """COVERERS[d, :N_COVERERS[d]]: the non-uniform codes that cover code d (keep some of it),
+    most cells kept first (a search stops at the first that keeps no more than it has);
+    COVER_KEEPS[d, j]: the cells COVERERS[d, j] keeps of d."""
     cov = np.full((32, 16), -1, dtype=np.int64)
+    keeps = np.zeros((32, 16), dtype=np.int64)
     n = np.zeros(32, dtype=np.int64)
     for d in range(32):
-        for c in CANDIDATES:
+        for c in sorted(CANDIDATES, key=lambda c: (-RETAINED[d, c], c)):
             if RETAINED[d, c] > 0:
                 cov[d, n[d]] = c
+                keeps[d, n[d]] = RETAINED[d, c]
                 n[d] += 1
-    return cov, n
+    return cov, keeps, n
 
 
-COVERERS, N_COVERERS = _coverers()
+COVERERS, COVER_KEEPS, N_COVERERS = _coverers()
 
 
 def _orbits():
@@ -156,10 +160,10 @@ def _greedy(cc, item_cnt, n_item):
             for k in range(n_item[q]):
                 d = cc[q, k]
                 for j in range(N_COVERERS[d]):
-                    c = COVERERS[d, j]
-                    r = RETAINED[d, c] - cur[q, k]
-                    if r > 0:
-                        gain[q, c] += r * item_cnt[q, k]
+                    r = COVER_KEEPS[d, j] - cur[q, k]
+                    if r <= 0:
+                        break
+                    gain[q, COVERERS[d, j]] += r * item_cnt[q, k]
         best_gain = 0
         best_c = -1
         best_slot = -2
@@ -308,26 +312,30 @@ def _fill_locals(cc, row, w, n, cur, gain, lo):
     (32,) is zero on entry and on return."""
     nl = 0
     for _ in range(N_LOCAL):
+        some = False
         for k in range(n):
             d = cc[row, k]
             ck = cur[k]
             for j in range(N_COVERERS[d]):
-                c = COVERERS[d, j]
-                r = RETAINED[d, c] - ck
-                if r > 0:
-                    gain[c] += r * w[k]
+                r = COVER_KEEPS[d, j] - ck
+                if r <= 0:
+                    break
+                gain[COVERERS[d, j]] += r * w[k]
+                some = True
+        if not some:
+            break
         best_g = 0
         best_c = -1
-        for k in range(n):  # the largest gain (smallest code on a tie); clears gain
+        for k in range(n):  # the largest gain (the first found on a tie); clears gain
             d = cc[row, k]
             for j in range(N_COVERERS[d]):
+                if COVER_KEEPS[d, j] <= cur[k]:
+                    break
                 c = COVERERS[d, j]
-                g = gain[c]
-                if g > best_g or g == best_g and g > 0 and c < best_c:
-                    best_g, best_c = g, c
+                if gain[c] > best_g:
+                    best_g = gain[c]
+                    best_c = c
                 gain[c] = 0
-        if best_c < 0:
-            break
         lo[nl] = best_c
         nl += 1
         for k in range(n):
@@ -415,6 +423,7 @@ def _search_globals(item_code, item_cnt, n_item, target, cap):
             row_val[r] = base[q]
     lbs = np.zeros(32, dtype=np.int64)
     ubs = np.zeros(32, dtype=np.int64)
+    q_ub = np.zeros(4, dtype=np.int64)
     gl = np.zeros(N_GLOBAL, dtype=np.int64)
     ngl = 0
     done = np.zeros(CANDIDATES.shape[0], dtype=np.bool_)
@@ -457,25 +466,34 @@ def _search_globals(item_code, item_cnt, n_item, target, cap):
                         lbs[r] = lb
                         ubs[r] = min(ub, full[q])
                         bu = max(bu, ubs[r])
+                    q_ub[q] = bu
                     ub_tot += bu
-                if ub_tot - value <= best_gain:  # cannot win this pick: keep a bound
-                    bound[ci] = ub_tot - value
-                    continue
-                lb_tot = 0
+                # exact where it may matter, best bound first; stop once c cannot win the pick
                 for q in range(4):
                     n = n_item[q]
                     bl = 0
                     for j in range(n_opts[q]):
                         bl = max(bl, lbs[8 * q + j])
-                    for j in range(n_opts[q]):
-                        r = 8 * q + j
-                        if ubs[r] > bl:  # re-choosing the locals might do better
-                            for k in range(n):
-                                cur[k] = max(kept_g[r, k], RETAINED[cc[r, k], c])
-                            v, _ = _fill_locals(cc, r, item_cnt[q], n, cur, gain, lo2)
-                            bl = max(bl, v)
-                    lb_tot += bl
-                bound[ci] = lb_tot - value
+                    while ub_tot - value > best_gain:
+                        r = -1
+                        top = bl
+                        for j in range(n_opts[q]):
+                            if ubs[8 * q + j] > top:
+                                top = ubs[8 * q + j]
+                                r = 8 * q + j
+                        if r < 0:
+                            break
+                        ubs[r] = 0
+                        for k in range(n):
+                            cur[k] = max(kept_g[r, k], RETAINED[cc[r, k], c])
+                        v, _ = _fill_locals(cc, r, item_cnt[q], n, cur, gain, lo2)
+                        bl = max(bl, v)
+                        ub_tot -= q_ub[q]  # the quadrant's bound: its best so far or a row left
+                        q_ub[q] = bl
+                        for j in range(n_opts[q]):
+                            q_ub[q] = max(q_ub[q], ubs[8 * q + j])
+                        ub_tot += q_ub[q]
+                bound[ci] = ub_tot - value  # exact unless c lost early (then a bound)
             if bound[ci] > best_gain:
                 best_gain = bound[ci]
                 best_ci = ci
