@@ -37,10 +37,13 @@ from .vq4_block import ENTRY_KIND, N_ENTRIES, SIZE, VQ4Block
 
 N_KINDS = 4
 TOP_K = 16
+PRUNED = 4  # added to a codebook level: fewer pair merges (see ``_candidates``)
+RANK_PRE = 8  # combinations the cheaper ranking score passes to the greedy one
 CAPACITY = np.bincount(ENTRY_KIND, minlength=N_KINDS).astype(np.int64)  # entries per kind: 3, 1, 1, 8
 # transform search per effort (see ``_search``):
-# (start 0 identity / 1 aligned / 3 ranked, coordinate-descent level, passes, final level)
-SEARCH = np.array([[1, 0, 0, 2], [1, 0, 2, 2], [3, 2, 1, 3]], dtype=np.int64)
+# (start 0 identity / 1 aligned / 3 ranked / 4 ranked cheaply, coordinate-descent level (start 4:
+# the level scoring the best few), passes (start 4: how many), final level)
+SEARCH = np.array([[1, 0, 0, 2], [4, PRUNED + 2, 5, PRUNED + 2], [3, 2, 1, 3]], dtype=np.int64)
 KIND_FIRST = np.array([int(np.flatnonzero(ENTRY_KIND == k)[0]) for k in range(N_KINDS)], dtype=np.int64)
 # RELATIVE[tb, ta]: the transform r with r(x) = tb(ta^-1(x)), so that a pattern stored under ta
 # and shown under tb is the displayed pattern moved by r
@@ -126,21 +129,23 @@ def _retained(ct, co, it, io):
 
 @njit(cache=True)
 def _candidates(it, io, pairs):
-    """Unique (kind, pattern) candidates: every item and (with ``pairs``) the conservative merge
-    of every pair of items, projected onto every kind; sorted by kind, so that ties prefer the
-    more constrained kinds."""
+    """Unique (kind, pattern) candidates: every item and (``pairs`` 1) the conservative merge of
+    every pair of items (``pairs`` 2: of the pairs whose merge keeps at least half the known
+    cells of the first), projected onto every kind; sorted by kind, so that ties prefer the more
+    constrained kinds."""
     n = it.shape[0]
-    nb = n + (n * (n - 1) // 2 if pairs else 0)
+    nb = n + (n * (n - 1) // 2 if pairs > 0 else 0)
     bt = np.empty(nb, dtype=np.int64)
     bo = np.empty(nb, dtype=np.int64)
     bt[:n] = it
     bo[:n] = io
     nb = n
-    if pairs:
+    if pairs > 0:
         for a in range(n):
+            half = popcount16(it[a] | io[a]) if pairs == 2 else 1
             for c in range(a + 1, n):
                 mt, mo = it[a] & it[c], io[a] & io[c]
-                if (mt | mo) != 0:
+                if 2 * popcount16(mt | mo) >= half:
                     bt[nb], bo[nb] = mt, mo
                     nb += 1
     return _pool(bt[:nb], bo[:nb], n)
@@ -452,8 +457,12 @@ def _extend_pool(ck, ct, co, nt, no):
 def _codebook(it, io, w, level, target):
     """Best codebook found for one transform combination: (value, kinds, T masks, O masks) of
     the 13 entries (kind -1: empty). Level 0: greedy over the items alone; 1: over items and
-    pair merges; 2: then swaps; 3: then merges of the items each entry serves, and swaps."""
-    ck, ct, co, alone_ok = _candidates(it, io, level >= 1)
+    pair merges; 2: then swaps; 3: then merges of the items each entry serves, and swaps.
+    Plus PRUNED: only the pairs that ``_candidates`` keeps with ``pairs`` 2."""
+    pruned = level >= PRUNED
+    if pruned:
+        level -= PRUNED
+    ck, ct, co, alone_ok = _candidates(it, io, 0 if level == 0 else (2 if pruned else 1))
     cov, pc = _covers(ct, co, it, io)
     chosen = _greedy(cov, pc, ck, w, np.arange(ck.shape[0]))
     cur = np.zeros(it.shape[0], dtype=np.int64)
@@ -671,14 +680,15 @@ def _aligned_transforms(dt, do):
 
 
 @njit(cache=True)
-def _rank_transforms(dt, do, used):
-    """A cheap score of every transform combination (code t1 | t2 << 3 | t3 << 6; -1 for the
-    combinations skipped: a transform other than 0 on a quadrant without mixed vectors, or, with
-    quadrant 0 empty, on the first quadrant used, since turning every quadrant alike changes
-    nothing). The score: cells kept by a greedy 13-entry codebook of the vectors' general-kind
-    projections, over the vectors (not distinct patterns). A projection commutes with the
-    transforms, so whether vector j's projection covers vector k depends only on their relative
-    transform: 8 coverage masks per vector, computed once, serve every combination."""
+def _rank_transforms(dt, do, used, n_pre, n_keep):
+    """The ``n_keep`` most promising transform combinations (codes t1 | t2 << 3 | t3 << 6), best
+    first, by two cheap scores of the vectors' general-kind projections. A projection commutes
+    with the transforms, so whether vector j's projection covers vector k depends only on their
+    relative transform: it is tabled once per map. First every combination is scored by the sum
+    over the vectors of the largest projection of another vector that covers it; the ``n_pre``
+    best by that are scored by the cells a greedy 13-entry codebook of projections keeps.
+    Skipped: a transform other than 0 on a quadrant without mixed vectors, or, with quadrant 0
+    empty, on the first quadrant used (turning every quadrant alike changes nothing)."""
     mix = np.empty(64, dtype=np.int64)
     nm = 0
     for v in range(64):
@@ -688,7 +698,8 @@ def _rank_transforms(dt, do, used):
     qof = np.empty(nm, dtype=np.int64)
     gp = np.empty(nm, dtype=np.int64)
     qmask = np.zeros(4, dtype=np.int64)
-    cov = np.zeros((nm, 8), dtype=np.int64)
+    cov = np.zeros((nm, 8), dtype=np.int64)  # cov[j, r]: the vectors k that r(projection j) covers
+    best_cover = np.zeros((nm, 4, 8), dtype=np.int64)  # largest such projection from quadrant q
     for j in range(nm):
         qof[j] = _quadrant(mix[j])
         qmask[qof[j]] |= np.int64(1) << j
@@ -700,15 +711,16 @@ def _rank_transforms(dt, do, used):
             for k in range(nm):
                 m |= np.int64(((a & ~dt[mix[k]]) | (b & ~do[mix[k]])) == 0) << k
             cov[j, r] = m
+            m &= ~(np.int64(1) << j)
+            while m != 0:
+                k = trailing_zeros(m)
+                m &= m - 1
+                best_cover[k, qof[j], r] = max(best_cover[k, qof[j], r], gp[j])
     first = 0
     while first < 3 and not used[first]:
         first += 1
-    score = np.full(512, -1, dtype=np.int64)
+    pre = np.full(512, -1, dtype=np.int64)
     tr = np.zeros(4, dtype=np.int64)
-    cj = np.empty(nm, dtype=np.int64)
-    ub = np.empty(nm, dtype=np.int64)
-    stamp = np.empty(nm, dtype=np.int64)
-    cur = np.empty(nm, dtype=np.int64)
     for code in range(512):
         tr[1], tr[2], tr[3] = code & 7, (code >> 3) & 7, code >> 6
         skip = False
@@ -717,6 +729,27 @@ def _rank_transforms(dt, do, used):
                 skip = True
         if skip:
             continue
+        total = 0
+        for k in range(nm):
+            tk = tr[qof[k]]
+            b = 0
+            for q in range(4):
+                b = max(b, best_cover[k, q, RELATIVE[tk, tr[q]]])
+            total += b
+        pre[code] = total
+    order = np.argsort(-pre, kind="mergesort")
+    n_valid = 0
+    while n_valid < 512 and pre[order[n_valid]] >= 0:
+        n_valid += 1
+    cand = order[:min(n_pre, n_valid)]
+    score = np.empty(cand.shape[0], dtype=np.int64)
+    cj = np.empty(nm, dtype=np.int64)
+    ub = np.empty(nm, dtype=np.int64)
+    stamp = np.empty(nm, dtype=np.int64)
+    cur = np.empty(nm, dtype=np.int64)
+    for ci in range(cand.shape[0]):
+        code = cand[ci]
+        tr[1], tr[2], tr[3] = code & 7, (code >> 3) & 7, code >> 6
         for j in range(nm):
             ta = tr[qof[j]]
             c = 0
@@ -740,9 +773,7 @@ def _rank_transforms(dt, do, used):
                 while m != 0:
                     k = trailing_zeros(m)
                     m &= m - 1
-                    d = gp[bj] - cur[k]
-                    if d > 0:
-                        g += d
+                    g += max(gp[bj] - cur[k], 0)
                 ub[bj] = g
                 stamp[bj] = s
             if bj < 0:
@@ -754,8 +785,8 @@ def _rank_transforms(dt, do, used):
                 k = trailing_zeros(m)
                 m &= m - 1
                 cur[k] = max(cur[k], gp[bj])
-        score[code] = total
-    return score
+        score[ci] = total
+    return cand[np.argsort(-score, kind="mergesort")[:n_keep]]
 
 
 @njit(cache=True)
@@ -763,15 +794,11 @@ def _search_rank_top(dt, do, k_eval, level, final_level):
     """The ``k_eval`` best combinations by ``_rank_transforms`` scored by the codebook at
     ``level``; the winner re-encoded at ``final_level``."""
     used = _quadrant_used(dt, do)
-    score = _rank_transforms(dt, do, used)
-    order = np.argsort(-score, kind="mergesort")
+    order = _rank_transforms(dt, do, used, RANK_PRE, k_eval)
     tr = np.zeros(4, dtype=np.int64)
     best_v, best_tr, target = -1, np.zeros(4, dtype=np.int64), 0
     kinds, et, eo = np.full(N_ENTRIES, -1, dtype=np.int64), np.zeros(N_ENTRIES, dtype=np.int64), np.zeros(N_ENTRIES, dtype=np.int64)
-    for r in range(k_eval):
-        code = order[r]
-        if score[code] < 0:
-            break
+    for code in order:
         tr[1], tr[2], tr[3] = code & 7, (code >> 3) & 7, code >> 6
         v, target, k2, t2, o2 = _evaluate(dt, do, tr, 1, level)
         if v > best_v:
