@@ -154,7 +154,13 @@ def _greedy(cc, item_cnt, n_item):
     ngl = 0
     cur = np.zeros((4, 16), dtype=np.int64)
     gain = np.zeros((4, 32), dtype=np.int64)  # marginal gain of each code in each quadrant
+    missing = 0  # known cells not kept yet
+    for q in range(4):
+        for k in range(n_item[q]):
+            missing += KNOWN[cc[q, k]] * item_cnt[q, k]
     for _ in range(N_ENTRIES):
+        if missing == 0:
+            break
         gain[:] = 0
         for q in range(4):
             for k in range(n_item[q]):
@@ -179,6 +185,7 @@ def _greedy(cc, item_cnt, n_item):
                 best_gain, best_c, best_slot = tot, c, -1
         if best_gain == 0:
             break
+        missing -= best_gain
         if best_slot == -1:
             gl[ngl] = best_c
             ngl += 1
@@ -370,6 +377,7 @@ def _search_globals(item_code, item_cnt, n_item, target, cap):
     # the first pick in displayed space: shown[q, x] = quadrant q (untransformed) with entry x.
     # Quadrants 1..3 take the best transform of a candidate, so only each orbit's best counts.
     shown = np.zeros((4, 32), dtype=np.int64)
+    cover = np.zeros((4, 32), dtype=np.int64)  # cells entry x keeps of quadrant q (untransformed)
     full = np.zeros(4, dtype=np.int64)  # every known cell of the quadrant kept
     for q in range(4):
         n = n_item[q]
@@ -389,6 +397,7 @@ def _search_globals(item_code, item_cnt, n_item, target, cap):
                     ub += r * w[k]
                     if r > base_cur[q, k]:
                         lb += (r - base_cur[q, k]) * w[k]
+                cover[q, x] = ub - base[q]
                 if min(ub, full[q]) > (lb if q == 0 else max(lb, top)):
                     for k in range(n):
                         cur[k] = RETAINED[cc[8 * q, k], x]
@@ -424,6 +433,7 @@ def _search_globals(item_code, item_cnt, n_item, target, cap):
     lbs = np.zeros(32, dtype=np.int64)
     ubs = np.zeros(32, dtype=np.int64)
     q_ub = np.zeros(4, dtype=np.int64)
+    q_best = base.copy()  # each quadrant's best row value
     gl = np.zeros(N_GLOBAL, dtype=np.int64)
     ngl = 0
     done = np.zeros(CANDIDATES.shape[0], dtype=np.bool_)
@@ -448,13 +458,26 @@ def _search_globals(item_code, item_cnt, n_item, target, cap):
             if step > 0:  # score it: each quadrant's best transform with it and 2 locals
                 scored += 1
                 c = CANDIDATES[ci]
+                ub_tot = 0  # first a bound from c's cells alone, per quadrant and transform
+                for q in range(4):
+                    bu = q_best[q]
+                    for j in range(n_opts[q]):
+                        bu = max(bu, min(full[q], row_val[8 * q + j] + cover[q, TRANS_CODE[opts[q, j], c]]))
+                    ub_tot += bu
+                if ub_tot - value <= best_gain:
+                    bound[ci] = ub_tot - value
+                    continue
                 ub_tot = 0
                 for q in range(4):
                     n = n_item[q]
                     w = item_cnt[q]
-                    bu = 0
+                    bu = q_best[q]
                     for j in range(n_opts[q]):
                         r = 8 * q + j
+                        lbs[r] = 0
+                        ubs[r] = 0
+                        if row_val[r] + cover[q, TRANS_CODE[opts[q, j], c]] <= q_best[q]:
+                            continue  # even all of c's cells leave this row behind the best
                         lb = row_val[r]  # c added, locals kept
                         ub = row_val[r]  # c's gain over the globals alone
                         for k in range(n):
@@ -471,7 +494,7 @@ def _search_globals(item_code, item_cnt, n_item, target, cap):
                 # exact where it may matter, best bound first; stop once c cannot win the pick
                 for q in range(4):
                     n = n_item[q]
-                    bl = 0
+                    bl = q_best[q]
                     for j in range(n_opts[q]):
                         bl = max(bl, lbs[8 * q + j])
                     while ub_tot - value > best_gain:
@@ -533,6 +556,7 @@ def _search_globals(item_code, item_cnt, n_item, target, cap):
                         row_lo[r, :] = lo2
                         kept[r, :n] = cur[:n]
                         bq = max(bq, v)
+            q_best[q] = bq
             value += bq
     tr = np.zeros(4, dtype=np.int64)
     lo = np.zeros((4, N_LOCAL), dtype=np.int64)
