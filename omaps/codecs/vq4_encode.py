@@ -684,9 +684,11 @@ def _rank_transforms(dt, do, used, n_pre, n_keep):
     """The ``n_keep`` most promising transform combinations (codes t1 | t2 << 3 | t3 << 6), best
     first, by two cheap scores of the vectors' general-kind projections. A projection commutes
     with the transforms, so whether vector j's projection covers vector k depends only on their
-    relative transform: it is tabled once per map. First every combination is scored by the sum
-    over the vectors of the largest projection of another vector that covers it; the ``n_pre``
-    best by that are scored by the cells a greedy 13-entry codebook of projections keeps.
+    relative transform: it is tabled once per map. First every combination is scored by a sum
+    over the vectors: 64 x the largest projection of another vector that covers it (in cells),
+    plus the largest from each quadrant (that tells apart combinations that align quadrants only
+    in pairs); the ``n_pre`` best by that are scored by the cells that a greedy 13-entry codebook
+    of projections keeps.
     Skipped: a transform other than 0 on a quadrant without mixed vectors, or, with quadrant 0
     empty, on the first quadrant used (turning every quadrant alike changes nothing)."""
     mix = np.empty(64, dtype=np.int64)
@@ -734,8 +736,10 @@ def _rank_transforms(dt, do, used, n_pre, n_keep):
             tk = tr[qof[k]]
             b = 0
             for q in range(4):
-                b = max(b, best_cover[k, q, RELATIVE[tk, tr[q]]])
-            total += b
+                x = best_cover[k, q, RELATIVE[tk, tr[q]]]
+                b = max(b, x)
+                total += x
+            total += 64 * b
         pre[code] = total
     order = np.argsort(-pre, kind="mergesort")
     n_valid = 0
