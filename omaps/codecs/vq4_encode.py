@@ -13,12 +13,17 @@ and gives the sets to the entry kinds by dynamic programming. Transforms by coor
 
 ``best`` builds the codebook from a candidate pool -- each distinct vector and the conservative
 merge of each pair, projected onto every entry kind -- greedily by marginal gain (known cells
-kept), then swaps single entries while that keeps more cells. Transforms:
+kept), then swaps single entries while that keeps more cells. A candidate keeps the same cells of
+every vector it covers, so the pool is a list of 64-bit item masks and the gains are popcounts;
+the greedy is lazy (gains only fall: a candidate is re-scored only when its bucket is the top).
+Transforms:
   fast      quadrant by quadrant, the transform that best aligns its vectors with those placed;
-  medium    then coordinate descent, each combination scored by a greedy over the vectors alone;
-  thorough  every combination scored that way, the best 16 by the full codebook search, then
-            coordinate descent with it; the final codebook also tries merges of the vectors each
-            entry serves.
+  medium    every combination ranked by cheap coverage scores of the vectors' general-kind
+            projections (tabled per relative transform, ``_rank_transforms``), the best 5 scored
+            by the codebook search over the pair merges that keep at least half of a vector;
+  thorough  every combination scored by a greedy over the vectors alone, the best 16 by the full
+            codebook search, then coordinate descent with it; the final codebook also tries
+            merges of the vectors each entry serves.
 On the shared corpus the codebook is close to optimal for its transforms (simulated annealing
 over vector groupings found 0.7 % more of the lost cells); the transforms matter more.
 """
