@@ -30,11 +30,15 @@ from numba import njit
 from . import states
 from .errors import InputError
 
-__all__ = ["allocate", "upper_hull", "parse_bytes", "triangle_weights", "half_known", "PAIR_OPTIONS", "pair_option_bytes"]
+__all__ = ["HIT_LEVEL", "allocate", "upper_hull", "parse_bytes", "triangle_weights", "half_known", "PAIR_OPTIONS", "pair_option_bytes"]
 
 # What a pair may store under a budget, in the order of the tracer's per-pair format code
 # (``trace.lookups.mixed_map_state``): no map (all C), a raw N x N square, or a codec block.
 PAIR_OPTIONS = ("none", "sq1", "sq2", "sq4", "sq8", "sq16", "sq32", "sq64", "vq2", "vq4", "vq4x64")
+
+# Where a view's candidate hits are recorded (``trace.budget.view_samples``): the micro-triangle
+# at this subdivision level, so that a budget can value any coarser level by the hits it knows.
+HIT_LEVEL = 8
 
 _UNITS = {"": 1, "b": 1, "kib": 1024, "mib": 1024 ** 2, "gib": 1024 ** 3, "kb": 1000, "mb": 1000 ** 2,
           "gb": 1000 ** 3}

@@ -17,8 +17,10 @@ only spend less. Levels are offered up to ``max_level`` and no finer than
 from __future__ import annotations
 
 import numpy as np
+from numba import njit
 
 from .. import states
+from ..budget import HIT_LEVEL
 from ..bake import GROW_TEXEL, bake_micromaps, dynamic_levels
 from ..bake.micromap import check_uv_triangles, flag_table
 from ..scene.alpha import distinct_rows
@@ -30,56 +32,228 @@ __all__ = ["budget_levels", "FINEST_TEXELS"]
 FINEST_TEXELS = 0.25
 
 
+MERGE_MAX_LEVEL = 5  # merged (shared) micromaps are offered up to this level (1024 micro-triangles)
+MERGE_SHARES = (2, 4, 8, 16)  # a level's distinct contents merged into 1/2, 1/4, ... as many micromaps
+MERGE_MAX_WORK = 5e8  # contents^2 x micro-triangles: above it a level offers no merged variants
+VARIANTS = 1 + len(MERGE_SHARES)
+
+
+@njit(cache=True)
+def _merge_loss(a, wa, b, wb):
+    """Value lost when contents a and b (T/O/C rows, per-cell weights) share their meet."""
+    s = 0.0
+    for c in range(len(a)):
+        if a[c] != b[c]:
+            if a[c] != 2:
+                s += wa[c]
+            if b[c] != 2:
+                s += wb[c]
+    return s
+
+
+@njit(cache=True)
+def _agglomerate(cont, w):
+    """Greedy agglomeration of contents (K, n) with per-cell weights (K, n): repeatedly merge the
+    two clusters whose meet (cells where they agree, else C) loses the least value. Returns the
+    merges in order: (K - 1, 2) cluster indices (the first keeps the meet)."""
+    k = cont.shape[0]
+    a = cont.copy()
+    ww = w.copy()
+    alive = np.ones(k, np.bool_)
+    best = np.full(k, np.inf)
+    arg = np.full(k, -1, np.int64)
+    for i in range(k):
+        for j in range(i + 1, k):
+            s = _merge_loss(a[i], ww[i], a[j], ww[j])
+            if s < best[i]:
+                best[i] = s
+                arg[i] = j
+    out = np.empty((max(k - 1, 0), 2), np.int64)
+    for step in range(k - 1):
+        i = -1
+        for r in range(k):
+            if alive[r] and arg[r] >= 0 and (i < 0 or best[r] < best[i]):
+                i = r
+        j = arg[i]
+        out[step, 0] = i
+        out[step, 1] = j
+        for c in range(a.shape[1]):
+            if a[i, c] != a[j, c]:
+                a[i, c] = 2
+            ww[i, c] += ww[j, c]
+        alive[j] = False
+        best[j] = np.inf
+        arg[j] = -1
+        for r in range(k):  # rows whose best partner changed, and row i itself: recomputed
+            if alive[r] and (r == i or arg[r] == i or arg[r] == j):
+                best[r] = np.inf
+                arg[r] = -1
+                for q in range(r + 1, k):
+                    if alive[q]:
+                        s = _merge_loss(a[r], ww[r], a[q], ww[q])
+                        if s < best[r]:
+                            best[r] = s
+                            arg[r] = q
+        for r in range(i):  # row i's new meet may be the best partner of an earlier row
+            if alive[r]:
+                s = _merge_loss(a[r], ww[r], a[i], ww[i])
+                if s < best[r]:
+                    best[r] = s
+                    arg[r] = i
+    return out
+
+
+def _labels(k: int, merges: np.ndarray, clusters: int) -> np.ndarray:
+    """Cluster of each of k contents after the first k - clusters merges (labels 0..clusters-1)."""
+    parent = np.arange(k)
+    for i, j in merges[:k - clusters]:
+        parent[j] = i
+    for _ in range(k):  # flatten (chains are short; k passes bound them)
+        nxt = parent[parent]
+        if np.array_equal(nxt, parent):
+            break
+        parent = nxt
+    return np.unique(parent, return_inverse=True)[1].ravel()
+
+
 def _options(g, settings, budget: int):
-    """Per triangle its item (its distinct UV triangle), and per item the option bytes (I, L+1),
-    known fractions (I, L+1), weight (I,) and the content id of its stored micromap per level
-    (I, L+1; -1 for none): the packer stores one micromap per (level, content)."""
+    """Per triangle its item (its distinct UV triangle); per item and option column (level L
+    exact, then L's merged variants, ``VARIANTS`` columns a level) the bytes, the value, the
+    content id of the stored micromap (-1 for none; ids are per level) and the level; the total
+    weight; per column the merge, None or (cluster per item (-1: exact), meets, stored rows)."""
     max_level, special = settings.max_level, settings.special
     tris = check_uv_triangles(g.tris_uv) if len(g.tris_uv) else np.zeros((0, 3, 2))
     n = len(tris)
     weight = g.areas(tris) if g.weight is None else np.asarray(g.weight, np.float64)
     unknown = np.zeros(n, bool) if g.unknown is None else np.asarray(g.unknown, bool)
     reps, inv = distinct_rows(tris, unknown)
-    wsum = np.bincount(inv, weights=np.nan_to_num(weight), minlength=len(reps))
+    ni = len(reps)
+    wsum = np.bincount(inv, weights=np.nan_to_num(weight), minlength=ni)
     cap = dynamic_levels(tris[reps], g.test.width, g.test.height, FINEST_TEXELS, max_level)
     cap[unknown[reps]] = 0  # all unknown: nothing to gain at any level
     record = omm_format.TRIANGLE_RECORD.itemsize
-    nbytes = np.zeros((len(reps), max_level + 1), np.int64)
-    frac = np.zeros((len(reps), max_level + 1))
-    ids = np.full((len(reps), max_level + 1), -1, np.int64)
-    eff = np.zeros((len(reps), max_level + 1), np.int64)  # the level an option really bakes
+    cols = (max_level + 1) * VARIANTS
+    nbytes = np.zeros((ni, cols), np.int64)
+    ids = np.full((ni, cols), -1, np.int64)
+    eff = np.zeros((ni, cols), np.int64)  # the level an option really bakes
+    value = np.zeros((ni, cols))
+    merge = [None] * cols
+    hits = np.asarray(g.hits, np.int64) if g.hits is not None and len(g.hits) else np.zeros((0, 2), np.int64)
+    h_item = inv[hits[:, 0]]
     grid = g.test.grid()
     sat = flag_table(grid)
+
+    def price(rows3, stored, lvl):
+        """bytes, known count, and the known hits per row of T/O/C rows and their stored rows."""
+        known = (rows3 != states.C).sum(axis=1)
+        uniform = (stored == stored[:, :1]).all(axis=1)
+        fmt = np.where(known == 4 ** lvl, omm_format.FORMAT_2_STATE, omm_format.FORMAT_4_STATE)
+        b = np.where(fmt == omm_format.FORMAT_2_STATE, omm_format.micromap_bytes(lvl, omm_format.FORMAT_2_STATE),
+                     omm_format.micromap_bytes(lvl, omm_format.FORMAT_4_STATE)) + record
+        return np.where(uniform & special, 0, b), known
+
     for lvl in range(max_level + 1):
+        c0 = lvl * VARIANTS
         sel = np.flatnonzero(cap >= lvl)
         if omm_format.micromap_bytes(lvl, omm_format.FORMAT_2_STATE) + record > budget:
             sel = sel[:0]  # no micromap of this level fits the budget
         if len(sel):
+            nc = 4 ** lvl
             s3, starts = bake_micromaps(grid, tris[reps[sel]], lvl, GROW_TEXEL, sat)
             if g.unknown is not None:
                 s3.reshape(len(sel), -1)[unknown[reps[sel]]] = states.C
+            rows3 = s3.reshape(len(sel), nc)
             stored = resolve(s3, starts, lvl, g.test, tris[reps[sel]], settings.format_code, settings.promotion,
-                             settings.seed).reshape(len(sel), 4 ** lvl)  # what the packer stores
-            known = (s3.reshape(len(sel), -1) != states.C).sum(axis=1)
-            uniform = (stored == stored[:, :1]).all(axis=1)
-            fmt = np.where(known == 4 ** lvl, omm_format.FORMAT_2_STATE, omm_format.FORMAT_4_STATE)
-            b = np.where(fmt == omm_format.FORMAT_2_STATE, omm_format.micromap_bytes(lvl, omm_format.FORMAT_2_STATE),
-                         omm_format.micromap_bytes(lvl, omm_format.FORMAT_4_STATE)) + record
-            nbytes[sel, lvl] = np.where(uniform & special, 0, b)
-            frac[sel, lvl] = known / 4 ** lvl
-            _, content = np.unique(np.ascontiguousarray(stored).view(np.dtype((np.void, stored.shape[1]))).ravel(),
+                             settings.seed).reshape(len(sel), nc)  # what the packer stores
+            row = np.full(ni, -1, np.int64)
+            row[sel] = np.arange(len(sel))
+            hr = row[h_item]
+            hok = hr >= 0
+            h_sel, h_cell = hr[hok], hits[hok, 1] >> (2 * (HIT_LEVEL - lvl))
+
+            def values(states_of_sel):  # value of every selected item with these T/O/C rows
+                known = states_of_sel != states.C
+                v = wsum[sel] * known.sum(axis=1) / nc
+                return v + np.bincount(h_sel[known[h_sel, h_cell]], minlength=len(sel))
+
+            b, _ = price(rows3, stored, lvl)
+            nbytes[sel, c0] = b
+            value[sel, c0] = values(rows3)
+            eff[sel, c0:c0 + VARIANTS] = lvl
+            all_rows = [stored]
+            variants = _merged(rows3, stored, b, wsum[sel], h_sel, h_cell, lvl) if 1 <= lvl <= MERGE_MAX_LEVEL else []
+            for v in range(1, VARIANTS):
+                c = c0 + v
+                if v - 1 >= len(variants):
+                    nbytes[sel, c], value[sel, c] = nbytes[sel, c0], value[sel, c0]
+                    continue
+                label, meets = variants[v - 1]
+                rep = np.zeros(len(meets), np.int64)
+                rep[label[label >= 0][::-1]] = np.flatnonzero(label >= 0)[::-1]  # a member of each cluster
+                flat = np.ascontiguousarray(meets).ravel()
+                mrows = resolve(flat, np.arange(len(meets) + 1) * nc, lvl, g.test, tris[reps[sel[rep]]],
+                                settings.format_code, settings.promotion, settings.seed).reshape(len(meets), nc)
+                st3 = np.where(label[:, None] >= 0, meets[np.maximum(label, 0)], rows3)
+                st = np.where(label[:, None] >= 0, mrows[np.maximum(label, 0)], stored)
+                nbytes[sel, c], _ = price(st3, st, lvl)
+                value[sel, c] = values(st3)
+                all_rows.append(st)
+                merge[c] = (np.where(row >= 0, label[np.maximum(row, 0)], -1), meets, mrows)
+            allr = np.concatenate(all_rows)
+            _, content = np.unique(np.ascontiguousarray(allr).view(np.dtype((np.void, nc))).ravel(),
                                    return_inverse=True)
-            ids[sel, lvl] = np.where(nbytes[sel, lvl] > 0, content.ravel(), -1)
-            eff[sel, lvl] = lvl
-        rest = np.setdiff1d(np.arange(len(reps)), sel)  # not offered: as the level below
+            content = content.ravel().reshape(len(all_rows), len(sel))
+            for v in range(VARIANTS):
+                src = v if v < len(all_rows) else 0
+                ids[sel, c0 + v] = np.where(nbytes[sel, c0 + v] > 0, content[src], -1)
+        rest = np.setdiff1d(np.arange(ni), sel)  # not offered: as the level below
         if lvl and len(rest):
-            nbytes[rest, lvl] = nbytes[rest, lvl - 1]
-            frac[rest, lvl] = frac[rest, lvl - 1]
-            ids[rest, lvl] = ids[rest, lvl - 1]
-            eff[rest, lvl] = eff[rest, lvl - 1]
+            prev = c0 - VARIANTS  # the level below's exact column
+            nbytes[rest, c0:c0 + VARIANTS] = nbytes[rest, prev][:, None]
+            value[rest, c0:c0 + VARIANTS] = value[rest, prev][:, None]
+            ids[rest, c0:c0 + VARIANTS] = ids[rest, prev][:, None]
+            eff[rest, c0:c0 + VARIANTS] = eff[rest, prev][:, None]
         elif len(rest):
-            nbytes[rest, 0] = 0  # a budget below one level-0 micromap: uniform, so a special index
-    return inv, nbytes, frac, wsum, ids, eff
+            nbytes[rest, :VARIANTS] = 0  # a budget below one level-0 micromap: uniform, so a special index
+    total = float(wsum.sum()) + len(hits)
+    return inv, nbytes, value, total, ids, eff, merge
+
+
+def _merged(rows3, stored, nbytes, w, h_row, h_cell, lvl) -> list:
+    """Per share of ``MERGE_SHARES`` (while it leaves at least two micromaps), the stored rows'
+    clusters: (cluster per row, -1 for a row that stores nothing, and each cluster's meet: T or
+    O where all its rows agree, else C). Rows are clustered by their T/O/C content, weighted by
+    the value each cell holds (its rows' weights spread by area, plus their hits)."""
+    nc = rows3.shape[1]
+    paid = np.flatnonzero(nbytes > 0)
+    if len(paid) < 4:
+        return []
+    cont, cinv = np.unique(rows3[paid], axis=0, return_inverse=True)
+    cinv = cinv.ravel()
+    k = len(cont)
+    if k < 4 or float(k) * k * nc > MERGE_MAX_WORK:
+        return []
+    cw = np.zeros((k, nc))
+    np.add.at(cw, cinv, (w[paid] / nc)[:, None])
+    of_row = np.full(len(rows3), -1, np.int64)
+    of_row[paid] = cinv
+    hc = of_row[h_row]
+    np.add.at(cw, (hc[hc >= 0], h_cell[hc >= 0]), 1.0)
+    merges = _agglomerate(np.ascontiguousarray(cont), cw)
+    out = []
+    for share in MERGE_SHARES:
+        clusters = -(-k // share)
+        if clusters < 2:
+            break
+        lab = _labels(k, merges, clusters)
+        meets = np.full((clusters, nc), 255, np.uint8)
+        for c in range(k):  # the meet: cells where every member agrees keep their state
+            m = meets[lab[c]]
+            meets[lab[c]] = np.where(m == 255, cont[c], np.where(m == cont[c], m, states.C))
+        label = np.full(len(rows3), -1, np.int64)
+        label[paid] = lab[cinv]
+        out.append((label, meets))
+    return out
 
 
 def _groups(nbytes, ids, eff=None) -> tuple[np.ndarray, np.ndarray]:
@@ -102,19 +276,25 @@ def _stored(gid, gbytes, level) -> int:
 
 
 def _adopt(value, gid, gbytes, budget: int, start=None) -> tuple[np.ndarray, int]:
-    """Greedy over groups: repeatedly raise every item of the group with the most value per new
-    byte (a group already stored, or free, first) to the group's level, while the bytes stored
-    -- each group with a member once -- stay within the budget."""
+    """Greedy over groups: repeatedly move every item that gains by it to the group with the most
+    value per new byte (a group already stored, or free, first), while the bytes stored -- each
+    group with a member once -- stay within the budget. Items only ever gain."""
     n_items = len(value)
     level = np.zeros(n_items, np.int64) if start is None else np.array(start, np.int64)
-    col = np.arange(value.shape[1])[None, :]
     rows = np.arange(n_items)
     while True:
         ref = np.bincount(gid[rows, level], minlength=len(gbytes))
         stored = int(gbytes[ref > 0].sum())
         gain = value - value[rows, level][:, None]
-        up = (col > level[:, None]) & (gain > 0)
-        gsum = np.bincount(gid[up], gain[up], minlength=len(gbytes))
+        up = gain > 0
+        # an item counts once per group: its best option there
+        gi, ci = np.nonzero(up)
+        key = gid[gi, ci] * n_items + gi
+        order = np.lexsort((-gain[gi, ci], key))
+        first = np.ones(len(order), bool)
+        first[1:] = key[order][1:] != key[order][:-1]
+        pick = order[first]
+        gsum = np.bincount(gid[gi[pick], ci[pick]], gain[gi[pick], ci[pick]], minlength=len(gbytes))
         cost = np.where(ref > 0, 0, gbytes)
         ok = (gsum > 0) & (cost <= budget - stored)
         if not ok.any():
@@ -122,13 +302,13 @@ def _adopt(value, gid, gbytes, budget: int, start=None) -> tuple[np.ndarray, int
         free = ok & (cost == 0)
         score = np.where(free, gsum, -np.inf) if free.any() else np.where(ok, gsum / np.maximum(cost, 1), -np.inf)
         g = int(np.argmax(score))
-        movers = up & (gid == g)
-        moved = movers.any(axis=1)
-        level[moved] = value.shape[1] - 1 - np.argmax(movers[moved, ::-1], axis=1)  # its last option in g
+        sel = pick[gid[gi[pick], ci[pick]] == g]
+        level[gi[sel]] = ci[sel]
 
 
-def budget_levels(geometries, settings, budget: int) -> tuple[list[np.ndarray], dict]:
-    """Per geometry the level of each triangle, and a report (bytes stored, expected savings).
+def budget_levels(geometries, settings, budget: int) -> tuple[list[tuple[np.ndarray, dict]], dict]:
+    """Per geometry the level of each triangle and the merged micromaps it stores ({triangle:
+    (T/O/C meet, stored row)}), and a report (bytes stored, expected savings).
 
     Items that store the same micromap at a level share its bytes, so the choice is made per
     group of such items (``_adopt``); the bytes counted are exactly those the packer stores."""
@@ -136,27 +316,38 @@ def budget_levels(geometries, settings, budget: int) -> tuple[list[np.ndarray], 
     if not parts:
         return [], {"budget_bytes": int(budget), "stored_bytes": 0, "items": 0}
     nbytes = np.concatenate([p[1] for p in parts])
-    value = np.concatenate([p[3][:, None] * p[2] for p in parts])
+    value = np.concatenate([p[2] for p in parts])
     ids, off = [], 0  # content ids are per geometry (its own texture and promotion): never shared across
     for p in parts:
         ids.append(np.where(p[4] >= 0, p[4] + off, -1))
         off += int(p[4].max(initial=-1)) + 1
     eff = np.concatenate([p[5] for p in parts])
     gid, gbytes = _groups(nbytes, np.concatenate(ids), eff)
-    choice, stored = _adopt(value, gid, gbytes, int(budget))
-    # also from the finest uniform level that fits: the greedy never ends below a uniform bake
     rows = np.arange(len(value))
-    fits = [lvl for lvl in range(value.shape[1]) if _stored(gid, gbytes, np.full(len(value), lvl)) <= budget]
-    if fits:
-        c2, s2 = _adopt(value, gid, gbytes, int(budget), np.full(len(value), max(fits)))
-        if value[rows, c2].sum() > value[rows, choice].sum():
-            choice, stored = c2, s2
-    level = eff[np.arange(len(choice)), choice]
+    best, stored = _adopt(value, gid, gbytes, int(budget))
+    # also from the uniform columns that fit, the two most valuable: the greedy never ends below them
+    fits = [c for c in range(value.shape[1]) if _stored(gid, gbytes, np.full(len(value), c)) <= budget]
+    for c in sorted(fits, key=lambda c: -value[:, c].sum())[:2]:
+        c2, s2 = _adopt(value, gid, gbytes, int(budget), np.full(len(value), c))
+        if value[rows, c2].sum() > value[rows, best].sum():
+            best, stored = c2, s2
     out, k = [], 0
-    for p in parts:
-        out.append(level[k:k + len(p[1])][p[0]].astype(np.int64))
+    merged = 0
+    for g, p in zip(geometries, parts):
+        inv, choice = p[0], best[k:k + len(p[1])]
+        level = p[5][np.arange(len(choice)), choice]
+        over = {}
+        for c in np.unique(choice):
+            if p[6][c] is None:
+                continue
+            label, meets, mrows = p[6][c]
+            items = np.flatnonzero((choice == c) & (label >= 0))
+            for t in np.flatnonzero(np.isin(inv, items)):
+                over[int(t)] = (meets[label[inv[t]]], mrows[label[inv[t]]])
+            merged += len(items)
+        out.append((level[inv].astype(np.int64), over))
         k += len(p[1])
-    total = float(sum(p[3].sum() for p in parts))
-    return out, {"budget_bytes": int(budget), "stored_bytes": stored, "items": int(len(choice)),
-                 "expected_tests_saved_fraction": float(value[np.arange(len(choice)), choice].sum()) / total
-                 if total > 0 else 0.0}
+    total = float(sum(p[3] for p in parts))
+    return out, {"budget_bytes": int(budget), "stored_bytes": stored, "items": int(len(best)),
+                 "merged_items": merged,
+                 "expected_tests_saved_fraction": float(value[rows, best].sum()) / total if total > 0 else 0.0}

@@ -57,6 +57,9 @@ class Geometry:
     pair_of: np.ndarray | None = None
     corners: np.ndarray | None = None
     weight: np.ndarray | None = None  # (T,) expected candidate hits, for --budget (default: ``area``)
+    # (H, 2) int64 for --budget: candidate hits of a view (triangle, micro-triangle at budget.HIT_LEVEL),
+    # each worth one alpha test where its micro-triangle is known, on top of ``weight`` spread by area
+    hits: np.ndarray | None = None
 
     def areas(self, tris: np.ndarray) -> np.ndarray:
         """Weights of the known-area fraction: ``area``, else the triangles' texel areas."""
@@ -303,7 +306,7 @@ def build(geometries: list[Geometry], settings: OmmSettings = OmmSettings()) -> 
         tris = check_uv_triangles(g.tris_uv) if len(g.tris_uv) else np.zeros((0, 3, 2))
         grid = g.test.grid()
         sat = flag_table(grid)
-        levels = plan[gi] if plan is not None else _triangle_levels(g.test, tris, settings, n_map)
+        levels, merged = plan[gi] if plan is not None else (_triangle_levels(g.test, tris, settings, n_map), {})
         area = g.areas(tris)
         idx = np.empty(len(tris), dtype=np.int32)
         n_blocks = 0
@@ -324,8 +327,15 @@ def build(geometries: list[Geometry], settings: OmmSettings = OmmSettings()) -> 
             if g.unknown is not None:
                 for i in np.flatnonzero(g.unknown[a:b]):
                     s3[starts[i]:starts[i + 1]] = states.C
+            mine = [t for t in merged if a <= t < b]  # --budget: micromaps shared by merging (their meet)
+            for t in mine:
+                s3[starts[t - a]:starts[t - a + 1]] = merged[t][0]
             omm, tri_counts = resolve.resolve_counted(s3, starts, lv, g.test, tris[a:b], fmt, settings.promotion,
                                                       settings.seed)
+            for t in mine:  # one stored row for the whole group: its unknowns' hint codes too
+                row = merged[t][1]
+                omm[starts[t - a]:starts[t - a + 1]] = row
+                tri_counts[t - a, 3:] = np.bincount(np.where(merged[t][0] == states.C, row, 4), minlength=5)[:4]
             counts3 += tri_counts[:, :3].sum(axis=0)
             promoted += tri_counts[:, 3:].sum(axis=0)
             micro_total += len(s3)

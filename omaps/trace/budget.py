@@ -15,12 +15,12 @@ from __future__ import annotations
 import numpy as np
 
 from .. import states
-from ..budget import PAIR_OPTIONS, allocate, half_known, pair_option_bytes, triangle_weights
+from ..budget import HIT_LEVEL, PAIR_OPTIONS, allocate, half_known, pair_option_bytes, triangle_weights
 from ..codecs import get_codec
 from .maps import SchemeMaps, dedupe_maps, encode_maps, pair_square_states
 from .tables import T_COUNT, T_MAP_FORMAT, T_MAP_OFFSET
 
-__all__ = ["budget_maps", "view_weights", "INDEX_BYTES_PER_PAIR", "VIEW_PRIOR"]
+__all__ = ["budget_maps", "view_samples", "view_prior", "view_weights", "INDEX_BYTES_PER_PAIR", "VIEW_PRIOR"]
 
 INDEX_BYTES_PER_PAIR = 4  # a per-pair word: 4-bit format code + 28-bit offset in 16-byte units
 
@@ -84,32 +84,54 @@ def budget_maps(at, tests: dict, scheme, weights: np.ndarray, jobs: int = 1, pro
 
 
 VIEW_PRIOR = 0.05  # share of the view weights spread by area: pairs the coarse view misses still count
+HITS_PER_RAY = 16  # candidate hits per ray recorded by view_samples (beyond that, counts only)
 
 
-def view_weights(prep, cam: np.ndarray, w: int, h: int) -> np.ndarray:
-    """Per alpha triangle, its candidate hits in a trace of the camera's view at half the
-    resolution (one thread, every candidate counted, no map), plus ``VIEW_PRIOR`` of that total
-    spread by world area so that a pair the coarse view misses is not left without value."""
+def view_samples(prep, cam: np.ndarray, w: int, h: int) -> tuple[np.ndarray, np.ndarray | None]:
+    """Per alpha triangle its candidate hits in a trace of the camera's view at half the
+    resolution (one thread, every candidate counted, no map), and where they fell: (H, 2) int64
+    rows (alpha triangle, micro-triangle index at ``budget.HIT_LEVEL``), or None when there were
+    more than ``HITS_PER_RAY`` per ray."""
     import numba
 
     from .prepare import trace_scheme
 
     at = prep.alpha
-    counts = np.zeros(max(at.count, 1), np.int64)
-    sm = SchemeMaps("count", "count", 0, np.zeros(at.count, np.int32), np.zeros(1, np.uint8), 1, 0, 0, 0.0,
-                    extra={T_COUNT: counts})
+    n = at.count
+    hw, hh = max(1, w // 2), max(1, h // 2)
+    cap = HITS_PER_RAY * hw * hh
+    words = np.zeros(3 + n + cap, np.int64)
+    words[0], words[1] = n, cap
+    sm = SchemeMaps("count", "count", 0, np.zeros(n, np.int32), np.zeros(1, np.uint8), 1, 0, 0, 0.0,
+                    extra={T_COUNT: words})
     key = "\0count"
     prep.maps[key] = sm
     threads = numba.get_num_threads()
     try:
         numba.set_num_threads(1)
-        trace_scheme(prep, key, cam, max(1, w // 2), max(1, h // 2))
+        trace_scheme(prep, key, cam, hw, hh)
     finally:
         numba.set_num_threads(threads)
         del prep.maps[key]
-    area = triangle_weights(prep.scene, at)
-    c = counts[:at.count].astype(np.float64)
-    total = c.sum()
+    counts = words[3:3 + n].copy()
+    k = int(words[2])
+    if k > cap:
+        return counts, None
+    keys = words[3 + n:3 + n + k]
+    return counts, np.stack([keys >> (2 * HIT_LEVEL), keys & ((1 << (2 * HIT_LEVEL)) - 1)], axis=1)
+
+
+def view_prior(counts: np.ndarray, area: np.ndarray) -> np.ndarray:
+    """``VIEW_PRIOR`` of the view's candidate hits spread by world area (per alpha triangle), so
+    that a triangle the coarse view misses is not left without value."""
+    total = float(counts.sum())
     if total == 0 or area.sum() == 0:
-        return area if total == 0 else c
-    return c + VIEW_PRIOR * total * area / area.sum()
+        return area if total == 0 else np.zeros(len(area))
+    return VIEW_PRIOR * total * area / area.sum()
+
+
+def view_weights(prep, cam: np.ndarray, w: int, h: int) -> np.ndarray:
+    """Per alpha triangle, its candidate hits in a trace of the camera's view at half the
+    resolution (``view_samples``) plus ``view_prior``."""
+    counts, _ = view_samples(prep, cam, w, h)
+    return counts + view_prior(counts.astype(np.float64), triangle_weights(prep.scene, prep.alpha))

@@ -13,6 +13,7 @@ import numpy as np
 from numba import carray, njit
 
 from .. import birdcurve, pair, states
+from ..budget import HIT_LEVEL
 from ..codecs import vq2_block, vq4_block
 from ..codecs.raw import read_state
 from ..sampling import sample_texture
@@ -85,10 +86,17 @@ def stored_micromap_state(table, tri, b1, b2):
 
 @njit(cache=True)
 def counting_state(table, tri, b1, b2):
-    """No map (every candidate C), counting each triangle's candidate hits: ``trace.budget``'s
-    view weights. Run on one thread: the counts are plain increments."""
+    """No map (every candidate C), counting each triangle's candidate hits and recording where
+    they fall: ``trace.budget``'s view weights. The int64 words: triangles n, record capacity,
+    hits recorded, n counts, then per hit ``tri << 2 * HIT_LEVEL | micro-triangle at HIT_LEVEL``.
+    Run on one thread: plain increments."""
     c = i64_ptr(table[T_COUNT])
-    c[tri] += 1
+    n = c[0]
+    c[3 + tri] += 1
+    k = c[2]
+    if k < c[1]:
+        c[3 + n + k] = (np.int64(tri) << (2 * HIT_LEVEL)) | birdcurve.bary_to_index(b1, b2, HIT_LEVEL)
+    c[2] = k + 1
     return states.C
 
 
