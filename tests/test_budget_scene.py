@@ -172,3 +172,103 @@ def _leaf():
     alpha = (((x - 0.5) / 0.42) ** 2 + ((y - 0.5) / 0.3) ** 2 < 1).astype(np.uint8) * 255
     alpha[(np.abs(y - 0.5) < 0.02)] = 0  # a vein cut through it
     return "leaf", alpha
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.integers(4, 12), st.sampled_from([1, 2]), st.integers(0, 2 ** 31))
+def test_merged_micromaps_are_meets_of_their_members(n_rows, level, seed):
+    rng = np.random.default_rng(seed)
+    n = 4 ** level
+    base = rng.integers(0, 3, (3, n)).astype(np.uint8)  # a few patterns, members perturbed: clusters to find
+    rows3 = base[rng.integers(0, 3, n_rows)]
+    flip = rng.random(rows3.shape) < 0.2
+    rows3 = np.where(flip, rng.integers(0, 3, rows3.shape), rows3).astype(np.uint8)
+    nbytes = np.where(rng.random(n_rows) < 0.9, 20, 0)
+    hits = rng.integers(0, n_rows, 30)
+    cells = rng.integers(0, n, 30)
+    for label, meets in omm_budget._merged(rows3, rows3, nbytes, rng.random(n_rows), hits, cells, level):
+        assert (label[nbytes == 0] == -1).all() and (label[nbytes > 0] >= 0).all()
+        assert len(np.unique(label[label >= 0])) == len(meets) < len(np.unique(rows3[nbytes > 0], axis=0))
+        for c, m in enumerate(meets):
+            members = rows3[label == c]
+            agree = (members == members[0]).all(axis=0)
+            # the meet: a member's state where every member agrees, unknown elsewhere -- never another state
+            np.testing.assert_array_equal(m, np.where(agree, members[0], states.C))
+
+
+def test_omm_budget_no_special_below_one_micromap_is_an_input_error(tmp_path):
+    from PIL import Image
+
+    _, alpha = _leaf()
+    Image.fromarray(alpha).save(tmp_path / "leaf.png")
+    uvs = np.array([[[0.1, 0.1], [0.9, 0.1], [0.1, 0.9]], [[0.2, 0.2], [0.8, 0.3], [0.3, 0.7]]])
+    np.save(tmp_path / "uvs.npy", uvs)
+    out = tmp_path / "o8"  # below one level-0 micromap (1 byte) and its record (8): it cannot be priced as free
+    assert main(["omm", str(tmp_path / "leaf.png"), str(tmp_path / "uvs.npy"), "-o", str(out),
+                 "--budget", "8", "--no-special", "--quiet"]) == 2
+    assert not out.exists()
+    for budget in (9, 40):  # the two level-0 micromaps are both all unknown: one stored, shared
+        assert main(["omm", str(tmp_path / "leaf.png"), str(tmp_path / "uvs.npy"), "-o", str(tmp_path / f"{budget}"),
+                     "--budget", str(budget), "--no-special", "--quiet"]) == 0
+        st_ok = json.loads((tmp_path / f"{budget}" / "omm.json").read_text())["statistics"]
+        assert 9 <= st_ok["data_and_record_bytes"] <= budget and st_ok["special_indices"] == {k: 0 for k in st_ok["special_indices"]}
+
+
+def _recount(summary_dir):
+    """Bytes of the micromaps an OMM folder stores, from its records alone."""
+    from omaps.omm import files
+    from omaps.omm import format as omm_format
+
+    res = files.read(str(summary_dir))
+    return sum(omm_format.micromap_bytes(int(r["level"]), int(r["format"])) + omm_format.TRIANGLE_RECORD.itemsize
+               for r in res.triangles), res
+
+
+def test_omm_budget_merges_within_the_bytes_and_stays_exact(tmp_path):
+    from PIL import Image
+
+    from omaps.coverage import micro_fractions
+
+    _, alpha = _leaf()
+    Image.fromarray(alpha).save(tmp_path / "leaf.png")
+    rng = np.random.default_rng(11)
+    centre = rng.random((120, 1, 2)) * 0.6 + 0.2
+    uvs = centre + (rng.random((120, 3, 2)) - 0.5) * 0.3
+    np.save(tmp_path / "uvs.npy", uvs)
+    budget = 200  # far below a level-3 bake of 120 triangles: merging must serve
+    assert main(["omm", str(tmp_path / "leaf.png"), str(tmp_path / "uvs.npy"), "-o", str(tmp_path / "b"),
+                 "--budget", str(budget), "--max-level", "4", "--quiet"]) == 0
+    summary = json.loads((tmp_path / "b" / "omm.json").read_text())
+    recount, res = _recount(tmp_path / "b")
+    assert recount == summary["statistics"]["data_and_record_bytes"] == summary["budget"]["stored_bytes"] <= budget
+    assert summary["budget"]["merged_items"] > 0 and summary["budget"]["weights"] == "area"
+    # every known micro-triangle against the alpha test's own coverage (no baker involved)
+    idx = res.index
+    levels = np.where(idx >= 0, res.triangles["level"][np.maximum(idx, 0)], 0).astype(np.int64)
+    from omaps.alpha_test import StateRule
+    from omaps.texture import load_alpha
+
+    test = StateRule("cutoff").alpha_test(load_alpha(str(tmp_path / "leaf.png")), "linear", "wrap")
+    frac = micro_fractions(test, uvs, levels)
+    st_all = np.concatenate([np.broadcast_to(res.triangle_states(t), (4 ** levels[t],)) for t in range(len(uvs))])
+    assert not np.any((st_all == 1) & (frac < 1.0)) and not np.any((st_all == 0) & (frac > 0.0))
+    assert main(["omm", "--verify", str(tmp_path / "b")]) == 0
+
+
+@needs_scenes
+def test_omm_budget_view_weights_on_palm(tmp_path):
+    out = tmp_path / "palm.glb"
+    assert main(["omm", str(SCENES / "palm.glb"), "-o", str(out), "--budget", "3000", "--max-level", "4",
+                 "--weights", "view", "--size", "64", "--quiet"]) == 0
+    from omaps.omm import gltf_io
+
+    res = gltf_io.read_gltf(str(out))
+    b = res.summary["budget"]
+    assert b["weights"] == "view" and b["hits"] > 0 and b["size"] == [64, 64]
+    assert len(res.data) + res.triangles.nbytes == b["stored_bytes"] <= 3000
+    assert main(["omm", "--verify", str(out)]) == 0
+    tr = tmp_path / "t.json"
+    assert main(["trace", str(out), "--schemes", "omm", "--size", "48", "--quiet", "--json", str(tr)]) == 0
+    assert json.loads(tr.read_text())["schemes"]["omm"]["differing_pixels"] == 0
+    assert main(["omm", str(SCENES / "palm.glb"), "-o", str(tmp_path / "x.glb"), "--weights", "view",
+                 "--quiet"]) == 2  # view weights without a budget

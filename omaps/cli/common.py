@@ -74,6 +74,18 @@ def show_progress(quiet: bool = False) -> bool:
     return sys.stderr.isatty()
 
 
+def parse_size(text: str) -> tuple[int, int]:
+    parts = str(text).lower().split("x")
+    try:
+        w = int(parts[0])
+        h = int(parts[1]) if len(parts) == 2 else w
+    except (ValueError, IndexError):
+        raise InputError(f"--size must be W or WxH, got {text!r}") from None
+    if len(parts) > 2 or not (1 <= w <= 8192 and 1 <= h <= 8192):
+        raise InputError(f"--size must be W or WxH with sides 1..8192, got {text!r}")
+    return w, h
+
+
 def check_jobs(jobs) -> None:
     if jobs is not None and jobs < 1:
         raise InputError(f"--jobs must be >= 1, got {jobs}")

@@ -9,7 +9,7 @@ import time
 from ..atomic import Outputs
 from ..errors import InputError
 from ..names import OMM_FORMATS, PROMOTIONS
-from .common import add_codec_options, add_material_options, check_jobs, material_rules, show_progress
+from .common import add_codec_options, add_material_options, check_jobs, material_rules, parse_size, show_progress
 
 GLTF_EXTENSIONS = (".gltf", ".glb")
 
@@ -41,7 +41,12 @@ def add_parser(sub) -> None:
                     help="per triangle the level (and 2-state where its micromap has no unknown, else 4-state) "
                          "that saves the most expected any-hit calls per byte of micromap data + records, every "
                          "triangle within BYTES (1263936, 1.2MiB, 800KiB); weights: world area x instances "
-                         "(a scene), texel area (a texture)")
+                         "(a scene), texel area (a texture); see --weights")
+    lv.add_argument("--weights", choices=("area", "view"), default="area",
+                    help="--budget's weights: area (world area x instances, the default) or view: where the "
+                         "candidate hits of a one-thread trace of the scene's default camera (as omaps trace "
+                         "chooses it for --size) at half the resolution fall, plus 5%% of them spread by area")
+    lv.add_argument("--size", default="512", metavar="W[xH]", help="--weights view: the view's image size (512)")
     f = o.add_argument_group("states")
     f.add_argument("--format", choices=list(OMM_FORMATS), default="4state",
                    help="4state (conservative, unknown runs the any-hit shader) or 2state (default 4state)")
@@ -134,7 +139,17 @@ def cmd_omm(a) -> int:
         outputs.folder(a.output, "-o", omm_format.SUMMARY_FILE)  # before the work, not after
     settings = _settings(a)
     t0 = time.perf_counter()
-    geoms, skipped, warned = inputs.load_geometries(spec)
+    view, view_info = None, None
+    if a.weights == "view":  # the tracer's library (not its command) counts where the view's hits fall
+        if settings.budget is None or spec["kind"] != "gltf":
+            raise InputError("--weights view needs --budget and a glTF scene")
+        from ..scene import load_scene
+        from ..trace.budget import scene_view_samples
+
+        w, h = parse_size(a.size)
+        weights, hits, cam = scene_view_samples(load_scene(spec["path"]), material_rules(a), w, h)
+        view, view_info = (weights, hits), {"weights": "view", "size": [w, h], "camera": cam, "hits": int(len(hits))}
+    geoms, skipped, warned = inputs.load_geometries(spec, view)
     if show_progress(a.quiet):
         from tqdm import tqdm  # only for the bar (its import costs 25 ms of the start)
 
@@ -143,6 +158,8 @@ def cmd_omm(a) -> int:
     else:
         result = build(geoms, settings)
     dt = time.perf_counter() - t0
+    if "budget" in result.summary:
+        result.summary["budget"].update(view_info or {"weights": "area"})
     extra = {"input": spec, "skipped_primitives": skipped, "warnings": warned}
     with outputs.writing():
         if to_gltf:

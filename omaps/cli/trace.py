@@ -18,7 +18,8 @@ from ..atomic import Outputs, write_text
 from ..errors import InputError
 from ..schemes import TRACE_KINDS, parse_schemes
 from ..trace.camera import DEFAULT_LIGHT
-from .common import add_codec_options, add_material_options, check_jobs, material_rules, print_table, show_progress
+from .common import (add_codec_options, add_material_options, check_jobs, material_rules, parse_size,
+                     print_table, show_progress)
 
 DEFAULT_SCHEMES = "none,tri3,sq16,vq2,vq4,vq4x64"
 
@@ -109,18 +110,6 @@ def bind_camera_value(argv: list[str]) -> list[str]:
         out.append(a)
         i += 1
     return out
-
-
-def parse_size(text: str) -> tuple[int, int]:
-    parts = str(text).lower().split("x")
-    try:
-        w = int(parts[0])
-        h = int(parts[1]) if len(parts) == 2 else w
-    except (ValueError, IndexError):
-        raise InputError(f"--size must be W or WxH, got {text!r}") from None
-    if len(parts) > 2 or not (1 <= w <= 8192 and 1 <= h <= 8192):
-        raise InputError(f"--size must be W or WxH with sides 1..8192, got {text!r}")
-    return w, h
 
 
 def _floats(text: str, n: int, what: str) -> np.ndarray:

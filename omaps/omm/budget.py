@@ -21,6 +21,7 @@ from numba import njit
 
 from .. import states
 from ..budget import HIT_LEVEL
+from ..errors import InputError
 from ..bake import GROW_TEXEL, bake_micromaps, dynamic_levels
 from ..bake.micromap import check_uv_triangles, flag_table
 from ..scene.alpha import distinct_rows
@@ -156,6 +157,10 @@ def _options(g, settings, budget: int):
         c0 = lvl * VARIANTS
         sel = np.flatnonzero(cap >= lvl)
         if omm_format.micromap_bytes(lvl, omm_format.FORMAT_2_STATE) + record > budget:
+            if lvl == 0 and not special and n:
+                raise InputError(f"the budget of {budget} bytes is below one level-0 micromap "
+                                 f"({omm_format.micromap_bytes(0, omm_format.FORMAT_2_STATE) + record} bytes with its "
+                                 f"record), and without special indices every triangle stores one")
             sel = sel[:0]  # no micromap of this level fits the budget
         if len(sel):
             nc = 4 ** lvl
@@ -331,6 +336,9 @@ def budget_levels(geometries, settings, budget: int) -> tuple[list[tuple[np.ndar
         c2, s2 = _adopt(value, gid, gbytes, int(budget), np.full(len(value), c))
         if value[rows, c2].sum() > value[rows, best].sum():
             best, stored = c2, s2
+    if stored > budget:  # without special indices even the coarsest micromaps may not fit
+        raise InputError(f"the budget of {budget} bytes is below the {stored} bytes the coarsest micromaps need "
+                         f"(without special indices every triangle stores one)")
     out, k = [], 0
     merged = 0
     for g, p in zip(geometries, parts):

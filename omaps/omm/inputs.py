@@ -87,16 +87,17 @@ def load_uvs(path) -> np.ndarray:
         raise InputError(exc.problem, path) from None
 
 
-def load_geometries(spec: dict) -> tuple[list[Geometry], list[dict], list[str]]:
-    """(geometries, skipped primitives, warnings) of an input spec."""
+def load_geometries(spec: dict, view=None) -> tuple[list[Geometry], list[dict], list[str]]:
+    """(geometries, skipped primitives, warnings) of an input spec. ``view``: a scene's --budget
+    weights and hits per alpha triangle (``trace.budget.scene_view_samples``) instead of area."""
     if spec["kind"] == "texture":
         tex = load_alpha(spec["texture"], spec.get("channel"))
         test = StateRule("cutoff", cutoff=spec["cutoff"]).alpha_test(tex, spec["filter"], spec["wrap"])
         return [Geometry(os.path.basename(spec["texture"]), test, load_uvs(spec["uvs"]))], [], []
-    return _gltf_geometries(spec)
+    return _gltf_geometries(spec, view)
 
 
-def _gltf_geometries(spec):
+def _gltf_geometries(spec, view=None):
     from ..budget import triangle_weights
     from ..scene import alpha_triangles, load_scene
 
@@ -104,7 +105,10 @@ def _gltf_geometries(spec):
                           spec.get("blend_cutoff", 0.5))
     scene = load_scene(spec["path"])
     at = alpha_triangles(scene, rules)
-    weight = triangle_weights(scene, at)  # --budget's: world area x instances
+    weight = triangle_weights(scene, at) if view is None else view[0]  # --budget's: world area x instances
+    hits = None if view is None else np.asarray(view[1], np.int64).reshape(-1, 2)
+    if len(weight) != at.count:
+        raise InputError(f"{len(weight)} view weights for {at.count} alpha triangles", spec["path"])
     tested = scene.alpha_tested(rules)
     skipped = list(scene.skipped)
     geoms = []
@@ -129,9 +133,16 @@ def _gltf_geometries(spec):
             tex = scene.textures[mat.texture] if mat.texture >= 0 else None
             if tex is not None and tex.problem is not None:
                 info["problem"] = tex.problem
+            local = None
+            if hits is not None:  # the hits on these rows, by their index among them
+                pos = np.full(at.count, -1, np.int64)
+                pos[rows] = np.arange(len(rows))
+                mine = hits[pos[hits[:, 0]] >= 0]
+                local = np.stack([pos[mine[:, 0]], mine[:, 1]], axis=1)
             geoms.append(Geometry(f"{mesh.name} (mesh {p.mesh}, primitive {p.index})", test, at.uv[rows],
                                   area=p.areas[at.local[rows]], unknown=at.unknown[rows], info=info,
-                                  pair_of=pair_of.ravel(), corners=at.corners[rows], weight=weight[rows]))
+                                  pair_of=pair_of.ravel(), corners=at.corners[rows], weight=weight[rows],
+                                  hits=local))
     if not geoms:
         raise InputError("no alpha-tested primitive in the scene "
                          f"({len(skipped)} skipped: {', '.join(sorted({s['reason'] for s in skipped})) or 'none'})",

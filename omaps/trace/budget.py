@@ -20,7 +20,7 @@ from ..codecs import get_codec
 from .maps import SchemeMaps, dedupe_maps, encode_maps, pair_square_states
 from .tables import T_COUNT, T_MAP_FORMAT, T_MAP_OFFSET
 
-__all__ = ["budget_maps", "view_samples", "view_prior", "view_weights", "INDEX_BYTES_PER_PAIR", "VIEW_PRIOR"]
+__all__ = ["budget_maps", "scene_view_samples", "view_samples", "view_prior", "view_weights", "INDEX_BYTES_PER_PAIR", "VIEW_PRIOR"]
 
 INDEX_BYTES_PER_PAIR = 4  # a per-pair word: 4-bit format code + 28-bit offset in 16-byte units
 
@@ -135,3 +135,24 @@ def view_weights(prep, cam: np.ndarray, w: int, h: int) -> np.ndarray:
     resolution (``view_samples``) plus ``view_prior``."""
     counts, _ = view_samples(prep, cam, w, h)
     return counts + view_prior(counts.astype(np.float64), triangle_weights(prep.scene, prep.alpha))
+
+
+def scene_view_samples(scene, rules, w: int, h: int, camera=None) -> tuple[np.ndarray, np.ndarray, dict]:
+    """A scene's view weights for ``omaps omm --budget --weights view``: per alpha triangle the
+    weight spread by area (``view_prior``; all of the counts when the hits were too many to
+    record), the recorded hits (``view_samples``) and the camera's description. ``camera``: a
+    ``trace.Camera``; default: the tracer's default camera for a ``w`` x ``h`` image."""
+    from ..schemes import parse_schemes
+    from .camera import choose_default_camera
+    from .prepare import prepare
+
+    prep = prepare(scene, parse_schemes("none"), rules)
+    if camera is None:
+        camera, info = choose_default_camera(prep, w, h)
+    else:
+        info = {"chosen": "given"}
+    counts, hits = view_samples(prep, camera.basis(w, h), w, h)
+    prior = view_prior(counts.astype(np.float64), triangle_weights(scene, prep.alpha))
+    if hits is None:
+        return counts + prior, np.zeros((0, 2), np.int64), info
+    return prior, hits, info
