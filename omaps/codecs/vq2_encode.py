@@ -29,6 +29,7 @@ from .vec2 import INVERSE_T, KNOWN, RETAINED, TRANS_CODE
 from .vq2_block import N_ENTRIES, N_GLOBAL, N_LOCAL, SIZE, VQ2Block, quadrant_of_vector
 
 
+CAP_FAST, CAP_MEDIUM = 3, 99  # candidates scored per pick of a global entry after the first
 EXHAUSTIVE = 3  # effort number of the issue-14 baseline (``medium`` before): the greedy codebook
 # for every distinct transform combination; encode_many_arrays(maps, 1, EXHAUSTIVE)
 
@@ -576,26 +577,6 @@ def _search_globals(item_code, item_cnt, n_item, target, cap):
 
 
 @njit(cache=True)
-def _search_best(item_code, item_cnt, n_item, target, effort):
-    tr = np.zeros(4, dtype=np.int64)
-    cc = _canonical(item_code, n_item, tr)
-    best_val, gl, ngl, lo, nlo = _greedy(cc, item_cnt, n_item)
-    best_tr = tr.copy()
-    if best_val < target and effort != EXHAUSTIVE:
-        v, tr, g2, n2, l2, m2 = _search_globals(item_code, item_cnt, n_item, target, 2 if effort == 0 else 99)
-        if v > best_val:
-            best_val, gl, ngl, lo, nlo = v, g2, n2, l2, m2
-            best_tr[:] = tr
-    if best_val < target and effort >= 2:
-        best_val, gl, ngl, lo, nlo = _search_exhaustive(item_code, item_cnt, n_item, target, gl, ngl, lo,
-                                                        nlo, best_tr, best_val)
-    if effort == 2 and best_val < target:
-        cc = _canonical(item_code, n_item, best_tr)
-        best_val, gl, ngl, lo, nlo = _refine(cc, item_cnt, n_item, gl, ngl, lo, nlo, target, 4)
-    return best_tr, gl, ngl, lo, nlo
-
-
-@njit(cache=True)
 def _naive_fill(cc, item_cnt, n_item):
     """The deck's naive compressor for one transform combination: take vectors with the fewest
     C states first (then the most frequent), into a local slot when only one quadrant uses
@@ -711,31 +692,93 @@ def _assemble(codes, tr, gl, ngl, lo, nlo):
 
 
 @njit(cache=True)
-def encode_arrays(m, encoder, effort):
-    """Numba entry point: 16x16 map -> (indices, codebook, transforms). encoder 0 paper, 1 best."""
+def _prepare(m):
+    """A map's displayed codes, per-quadrant items, its known cells (non-uniform vectors), and
+    the greedy codebook with every quadrant untransformed (the search's start)."""
     codes = vector_codes(m)
     item_code, item_cnt, n_item = quadrant_items(codes)
     target = 0
     for q in range(4):
         for k in range(n_item[q]):
             target += item_cnt[q, k] * KNOWN[item_code[q, k]]
-    if encoder == 0:
-        tr, gl, ngl, lo, nlo = _search_paper(item_code, item_cnt, n_item)
-    else:
-        tr, gl, ngl, lo, nlo = _search_best(item_code, item_cnt, n_item, target, effort)
-    indices, codebook = _assemble(codes, tr, gl, ngl, lo, nlo)
-    return indices, codebook, tr
+    return codes, item_code, item_cnt, n_item, target
 
 
+# One compiled entry per search, each a flat loop (a kernel's cached code holds every kernel it
+# calls, so nesting entries would compile the searches again per level): effort fast / medium
+# (``_encode_best``), thorough / EXHAUSTIVE (``_encode_exhaustive``), and the deck's encoder.
 @njit(cache=True)
-def encode_many_arrays(maps, encoder, effort):
+def _encode_best(maps, cap):
     n = maps.shape[0]
     idx = np.zeros((n, 64), dtype=np.int64)
     cb = np.zeros((n, N_ENTRIES), dtype=np.int64)
-    tr = np.zeros((n, 4), dtype=np.int64)
+    trs = np.zeros((n, 4), dtype=np.int64)
     for i in range(n):
-        idx[i], cb[i], tr[i] = encode_arrays(maps[i], encoder, effort)
-    return idx, cb, tr
+        codes, item_code, item_cnt, n_item, target = _prepare(maps[i])
+        tr = np.zeros(4, dtype=np.int64)
+        val, gl, ngl, lo, nlo = _greedy(item_code, item_cnt, n_item)
+        if val < target:
+            v, t2, g2, n2, l2, m2 = _search_globals(item_code, item_cnt, n_item, target, cap)
+            if v > val:
+                tr, gl, ngl, lo, nlo = t2, g2, n2, l2, m2
+        idx[i], cb[i] = _assemble(codes, tr, gl, ngl, lo, nlo)
+        trs[i] = tr
+    return idx, cb, trs
+
+
+@njit(cache=True)
+def _encode_exhaustive(maps, thorough):
+    n = maps.shape[0]
+    idx = np.zeros((n, 64), dtype=np.int64)
+    cb = np.zeros((n, N_ENTRIES), dtype=np.int64)
+    trs = np.zeros((n, 4), dtype=np.int64)
+    for i in range(n):
+        codes, item_code, item_cnt, n_item, target = _prepare(maps[i])
+        tr = np.zeros(4, dtype=np.int64)
+        val, gl, ngl, lo, nlo = _greedy(item_code, item_cnt, n_item)
+        if thorough and val < target:
+            v, t2, g2, n2, l2, m2 = _search_globals(item_code, item_cnt, n_item, target, CAP_MEDIUM)
+            if v > val:
+                val, tr, gl, ngl, lo, nlo = v, t2, g2, n2, l2, m2
+        if val < target:
+            val, gl, ngl, lo, nlo = _search_exhaustive(item_code, item_cnt, n_item, target, gl, ngl, lo, nlo,
+                                                       tr, val)
+        if thorough and val < target:
+            val, gl, ngl, lo, nlo = _refine(_canonical(item_code, n_item, tr), item_cnt, n_item, gl, ngl, lo,
+                                            nlo, target, 4)
+        idx[i], cb[i] = _assemble(codes, tr, gl, ngl, lo, nlo)
+        trs[i] = tr
+    return idx, cb, trs
+
+
+@njit(cache=True)
+def _encode_paper(maps):
+    n = maps.shape[0]
+    idx = np.zeros((n, 64), dtype=np.int64)
+    cb = np.zeros((n, N_ENTRIES), dtype=np.int64)
+    trs = np.zeros((n, 4), dtype=np.int64)
+    for i in range(n):
+        codes, item_code, item_cnt, n_item, target = _prepare(maps[i])
+        tr, gl, ngl, lo, nlo = _search_paper(item_code, item_cnt, n_item)
+        idx[i], cb[i] = _assemble(codes, tr, gl, ngl, lo, nlo)
+        trs[i] = tr
+    return idx, cb, trs
+
+
+def encode_many_arrays(maps, encoder: int, effort: int):
+    """(n, 16, 16) uint8 maps -> (indices (n, 64), codebooks (n, 11), transforms (n, 4)).
+    ``encoder`` 0 paper, 1 best; ``effort`` 0 fast, 1 medium, 2 thorough or ``EXHAUSTIVE``."""
+    if encoder == 0:
+        return _encode_paper(maps)
+    if effort >= 2:
+        return _encode_exhaustive(maps, effort == 2)
+    return _encode_best(maps, CAP_FAST if effort == 0 else CAP_MEDIUM)
+
+
+def encode_arrays(m, encoder: int, effort: int):
+    """One 16x16 map: ``encode_many_arrays`` of it alone."""
+    idx, cb, tr = encode_many_arrays(np.ascontiguousarray(m, dtype=np.uint8)[None], encoder, effort)
+    return idx[0], cb[0], tr[0]
 
 
 def encode(map16, encoder: str = "best", effort: str = "medium") -> VQ2Block:
