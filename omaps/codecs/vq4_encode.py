@@ -256,7 +256,7 @@ def _covers(ct, co, it, io):
     return cov, pc
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _marginal(cov, pc, c, cur, w):
     """Cells candidate c adds to the items' current best counts ``cur``."""
     s = 0
@@ -289,7 +289,7 @@ def _weight_planes(w):
     return planes
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _weight(x, planes):
     s = 0
     for b in range(planes.shape[0]):
@@ -389,7 +389,11 @@ def _swap(cov, pc, ck, w, chosen, target, max_passes):
     cur = np.zeros(n, dtype=np.int64)
     below = np.zeros(17, dtype=np.int64)  # below[p]: the items whose count is under p
     planes = _weight_planes(w)
-    first = np.searchsorted(ck, np.arange(N_KINDS + 1))  # candidates are sorted by kind
+    first = np.zeros(N_KINDS + 1, dtype=np.int64)  # candidates are sorted by kind
+    for c in range(ck.shape[0]):
+        first[ck[c] + 1] += 1
+    for k in range(N_KINDS):
+        first[k + 1] += first[k]
     value = _value_without(cov, pc, chosen, -1, w, cur)
     for _ in range(max_passes):
         improved = False
@@ -746,7 +750,7 @@ def _rank_transforms(dt, do, used, n_pre, n_keep):
                 total += x
             total += 64 * b
         pre[code] = total
-    order = np.argsort(-pre, kind="mergesort")
+    order = np.argsort(-512 * pre + np.arange(512))  # ties by code
     n_valid = 0
     while n_valid < 512 and pre[order[n_valid]] >= 0:
         n_valid += 1
@@ -795,79 +799,55 @@ def _rank_transforms(dt, do, used, n_pre, n_keep):
                 m &= m - 1
                 cur[k] = max(cur[k], gp[bj])
         score[ci] = total
-    return cand[np.argsort(-score, kind="mergesort")[:n_keep]]
+    return cand[np.argsort(-512 * score + np.arange(cand.shape[0]))[:n_keep]]  # ties by the first score
 
 
 @njit(cache=True)
-def _search_rank_top(dt, do, k_eval, level, final_level):
-    """The ``k_eval`` best combinations by ``_rank_transforms`` scored by the codebook at
-    ``level``; the winner re-encoded at ``final_level``."""
-    used = _quadrant_used(dt, do)
-    order = _rank_transforms(dt, do, used, RANK_PRE, k_eval)
-    tr = np.zeros(4, dtype=np.int64)
-    best_v, best_tr, target = -1, np.zeros(4, dtype=np.int64), 0
-    kinds, et, eo = np.full(N_ENTRIES, -1, dtype=np.int64), np.zeros(N_ENTRIES, dtype=np.int64), np.zeros(N_ENTRIES, dtype=np.int64)
-    for code in order:
-        tr[1], tr[2], tr[3] = code & 7, (code >> 3) & 7, code >> 6
-        v, target, k2, t2, o2 = _evaluate(dt, do, tr, 1, level)
-        if v > best_v:
-            best_v, kinds, et, eo = v, k2, t2, o2
-            best_tr[:] = tr
-        if best_v == target:
-            break
-    if final_level != level and best_v < target:
-        best_v, target, kinds, et, eo = _evaluate(dt, do, best_tr, 1, final_level)
-    return best_tr, kinds, et, eo
-
-
-@njit(cache=True)
-def _search(dt, do, encoder, start, cd_level, cd_passes, final_level):
-    """Transforms and codebook. Start from the identity (0), ``_aligned_transforms`` (1) or the
-    ranking of every combination (3); coordinate descent over quadrants 1..3 scored by the
-    codebook at ``cd_level``; the winner re-encoded at ``final_level``."""
-    if start == 3:  # rank every combination cheaply, refine the best few
-        return _search_ranked(dt, do, cd_level, cd_passes, final_level)
-    if start == 4:  # rank every combination by the coverage greedy, the best cd_passes at cd_level
-        return _search_rank_top(dt, do, cd_passes, cd_level, final_level)
-    used = _quadrant_used(dt, do)
-    start_tr = _aligned_transforms(dt, do) if start == 1 else np.zeros(4, dtype=np.int64)
-    for q in range(4):
-        if not used[q]:
-            start_tr[q] = 0
-    return _descend(dt, do, encoder, start_tr, used, cd_level, cd_passes, final_level)[1:]
-
-
-@njit(cache=True)
-def _search_ranked(dt, do, level, passes, final_level):
-    """Every transform combination scored by the items-only greedy; the TOP_K best re-scored at
-    ``level``; ``passes`` of coordinate descent at ``level`` from the winner; re-encoded at
-    ``final_level``."""
+def _search(dt, do, encoder, start, level, passes, final_level):
+    """Transforms and codebook, (transforms, kinds, T masks, O masks). Start from the identity
+    (0) or ``_aligned_transforms`` (1), then ``passes`` of coordinate descent over quadrants 1..3
+    scored by the codebook at ``level``; or (3) score every combination by the greedy over the
+    vectors alone, the TOP_K best at ``level``, then ``passes`` of coordinate descent; or (4)
+    score the ``passes`` best by ``_rank_transforms`` at ``level``. The winner is re-encoded at
+    ``final_level``. One function, not one per start: numba re-optimises a kernel's whole call
+    tree each level up, so a flat search compiles faster."""
     used = _quadrant_used(dt, do)
     tr = np.zeros(4, dtype=np.int64)
+    best_tr = np.zeros(4, dtype=np.int64)
+    best_v, target = -1, 0
+    kinds = np.full(N_ENTRIES, -1, dtype=np.int64)
+    et = np.zeros(N_ENTRIES, dtype=np.int64)
+    eo = np.zeros(N_ENTRIES, dtype=np.int64)
     score = np.full(512, -1, dtype=np.int64)
-    for code in range(512):
-        tr[1], tr[2], tr[3] = code & 7, (code >> 3) & 7, code >> 6
-        if (not used[1] and tr[1]) or (not used[2] and tr[2]) or (not used[3] and tr[3]):
-            continue
-        score[code] = _evaluate(dt, do, tr, 1, 0)[0]
-    order = np.argsort(-score)
-    best_v, best_tr = -1, np.zeros(4, dtype=np.int64)
-    for r in range(TOP_K):
-        code = order[r]
-        if score[code] < 0:
-            break
-        tr[1], tr[2], tr[3] = code & 7, (code >> 3) & 7, code >> 6
-        v = _evaluate(dt, do, tr, 1, level)[0]
-        if v > best_v:
-            best_v, best_tr[:] = v, tr
-    return _descend(dt, do, 1, best_tr, used, level, passes, final_level)[1:]
-
-
-@njit(cache=True)
-def _descend(dt, do, encoder, best_tr, used, cd_level, cd_passes, final_level):
-    tr = best_tr.copy()
-    best_v, target, kinds, et, eo = _evaluate(dt, do, tr, encoder, cd_level)
-    for _ in range(cd_passes):
+    if start >= 3:
+        if start == 3:  # every combination scored cheaply, the best few at level
+            for code in range(512):
+                tr[1], tr[2], tr[3] = code & 7, (code >> 3) & 7, code >> 6
+                if (not used[1] and tr[1]) or (not used[2] and tr[2]) or (not used[3] and tr[3]):
+                    continue
+                score[code] = _evaluate(dt, do, tr, 1, 0)[0]
+            order = np.argsort(-score)[:TOP_K]
+        else:
+            order = _rank_transforms(dt, do, used, RANK_PRE, passes)
+            passes = 0
+        for code in order:
+            if start == 3 and score[code] < 0:
+                break
+            tr[1], tr[2], tr[3] = code & 7, (code >> 3) & 7, code >> 6
+            v, tg, k2, t2, o2 = _evaluate(dt, do, tr, encoder, level)
+            if v > best_v:
+                best_v, target, kinds, et, eo = v, tg, k2, t2, o2
+                best_tr[:] = tr
+            if start == 4 and best_v == target:
+                break
+    else:
+        if start == 1:
+            best_tr = _aligned_transforms(dt, do)
+        for q in range(4):
+            if not used[q]:
+                best_tr[q] = 0
+        best_v, target, kinds, et, eo = _evaluate(dt, do, best_tr, encoder, level)
+    for _ in range(passes):  # coordinate descent
         improved = False
         for q in range(1, 4):
             if not used[q]:
@@ -877,16 +857,16 @@ def _descend(dt, do, encoder, best_tr, used, cd_level, cd_passes, final_level):
                     continue
                 tr[:] = best_tr
                 tr[q] = t
-                v, tg, k2, t2, o2 = _evaluate(dt, do, tr, encoder, cd_level)
+                v, tg, k2, t2, o2 = _evaluate(dt, do, tr, encoder, level)
                 if v > best_v:
                     best_v, target, kinds, et, eo = v, tg, k2, t2, o2
                     best_tr[:] = tr
                     improved = True
         if not improved:
             break
-    if final_level != cd_level and best_v < target:
+    if final_level != level and best_v < target:
         best_v, target, kinds, et, eo = _evaluate(dt, do, best_tr, encoder, final_level)
-    return best_v, best_tr, kinds, et, eo
+    return best_tr, kinds, et, eo
 
 
 @njit(cache=True)
@@ -917,34 +897,28 @@ def _assemble(dt, do, tr, kinds, et, eo):
 
 
 @njit(cache=True)
-def encode_arrays(m, encoder, effort):
-    """Numba entry point: 32x32 map -> (indices, entries, transforms). encoder 0 paper, 1 best."""
-    dt, do = displayed_masks(m)
-    if encoder == 0:
-        tr, kinds, et, eo = _search(dt, do, 0, 0, 0, 2, 0)
-    else:
-        tr, kinds, et, eo = _search(dt, do, 1, SEARCH[effort, 0], SEARCH[effort, 1], SEARCH[effort, 2],
-                                    SEARCH[effort, 3])
-    indices, entries = _assemble(dt, do, tr, kinds, et, eo)
-    return indices, entries, tr
-
-
-@njit(cache=True)
 def encode_many_arrays(maps, encoder, effort):
+    """Numba entry point: 32x32 maps -> (indices, entries, transforms). encoder 0 paper, 1 best."""
     n = maps.shape[0]
     idx = np.zeros((n, 64), dtype=np.int64)
     ent = np.zeros((n, N_ENTRIES), dtype=np.int64)
     tr = np.zeros((n, 4), dtype=np.int64)
     for i in range(n):
-        idx[i], ent[i], tr[i] = encode_arrays(maps[i], encoder, effort)
+        dt, do = displayed_masks(maps[i])
+        if encoder == 0:
+            tr[i], kinds, et, eo = _search(dt, do, 0, 0, 0, 2, 0)
+        else:
+            tr[i], kinds, et, eo = _search(dt, do, 1, SEARCH[effort, 0], SEARCH[effort, 1], SEARCH[effort, 2],
+                                           SEARCH[effort, 3])
+        idx[i], ent[i] = _assemble(dt, do, tr[i], kinds, et, eo)
     return idx, ent, tr
 
 
 def encode(map32, encoder: str = "best", effort: str = "medium") -> VQ4Block:
     """Encode a 32x32 map into a symbolic VQ4 block (conservative: only O->C, T->C)."""
     e, f = check_options("VQ4", encoder, effort)
-    idx, ent, tr = encode_arrays(check_maps(map32, SIZE, "VQ4"), e, f)
-    return VQ4Block(idx, ent, tr)
+    idx, ent, tr = encode_many_arrays(check_maps(map32, SIZE, "VQ4")[None], e, f)
+    return VQ4Block(idx[0], ent[0], tr[0])
 
 
 def encode_many(maps32, encoder: str = "best", effort: str = "medium") -> list[VQ4Block]:
