@@ -16,6 +16,7 @@ from numba import njit
 
 from . import states
 from .bilinear import POLY_MAX, cell_flag, point_flag
+from .flag_table import box_counts
 from .sampling import cell_index
 
 
@@ -91,6 +92,78 @@ def polygon_flags(flags, mixed, values, bounds, period_x, period_y, poly, grow=0
             acc |= f
             if acc == 3:
                 return acc
+    return acc
+
+
+@njit(cache=True, inline="always")
+def _vertex_flags(grid, poly, k, grow):
+    flags, mixed, values, bounds, period_x, period_y = grid
+    acc = 0
+    for i in range(k):
+        acc |= point_flag(flags, mixed, values, bounds, period_x, period_y, poly[i, 0], poly[i, 1], grow)
+    return acc
+
+
+@njit(cache=True)
+def polygon_flags_table(sat, grid, poly, k, grow, buf_a, buf_b):
+    """``polygon_flags`` of convex polygon ``poly[:k]``, the same arithmetic (row bands,
+    x-extents, growth) and the same flag, with each row's cell span counted in O(1) from the
+    summed-area table ``sat`` (``flag_table.flag_table``); only a span holding mixed bilinear
+    cells is walked cell by cell. ``grid``: ``FootprintGrid.kernel_args()``; ``buf_a``, ``buf_b``
+    (POLY_MAX, 2) scratch for ``bilinear.cell_flag``."""
+    flags, mixed, values, bounds, period_x, period_y = grid
+    ymin = poly[0, 1]
+    ymax = poly[0, 1]
+    for i in range(1, k):
+        ymin = min(ymin, poly[i, 1])
+        ymax = max(ymax, poly[i, 1])
+    acc = 0
+    points_done = False
+    if grow > 0.0 and mixed.shape[0] > 0:
+        # grown, every vertex's cell is in a row span below, so its flag is part of the OR: read
+        # first (cheap), a region across the cut-off is C before any row is counted. (Ungrown, a
+        # vertex on a row's lower edge lies outside the spans: then only after a mixed span.)
+        points_done = True
+        acc = _vertex_flags(grid, poly, k, grow)
+        if acc == 3:
+            return 3
+    for r in range(int(math.floor(ymin - grow)), int(math.ceil(ymax + grow))):
+        b0 = max(float(r) - grow, ymin)
+        b1 = min(float(r + 1) + grow, ymax)
+        if b1 < b0 or (b1 == b0 and grow == 0.0):
+            continue
+        xmin = np.inf
+        xmax = -np.inf
+        for i in range(k):
+            j = i + 1 if i + 1 < k else 0
+            xmin, xmax = edge_extent(poly[i, 0], poly[i, 1], poly[j, 0], poly[j, 1], b0, b1, xmin, xmax)
+        xmin -= grow
+        xmax += grow
+        if not xmax > xmin:
+            continue
+        c0 = int(math.floor(xmin))
+        c1 = int(math.ceil(xmax))
+        nt, no, nm, n = box_counts(sat, r, r + 1, c0, c1, period_y, period_x)
+        if nt > nm:  # cells other than mixed ones with the T bit
+            acc |= 1
+        if no > nm:
+            acc |= 2
+        if nm > 0 and acc != 3:  # the mixed cells, each decided on its own
+            if not points_done:  # the vertices' own flags first (as ``polygon_flags``)
+                points_done = True
+                acc |= _vertex_flags(grid, poly, k, grow)
+                if acc == 3:
+                    return 3
+            hc, wc = flags.shape
+            row = cell_index(r, hc, period_y)
+            for c in range(c0, c1):
+                col = cell_index(c, wc, period_x)
+                if mixed[row, col]:
+                    acc |= cell_flag(values, bounds, period_x, period_y, row, col, poly, k, c, r, grow, buf_a, buf_b)
+                    if acc == 3:
+                        return 3
+        if acc == 3:
+            return 3
     return acc
 
 

@@ -43,16 +43,16 @@ import numba
 import numpy as np
 from numba import njit, prange
 
-from ..bilinear import POLY_MAX, cell_flag, point_flag
+from ..bilinear import POLY_MAX
 from ..birdcurve import MAX_LEVEL
 from ..errors import InputError
-from ..raster import edge_extent
-from ..sampling import FootprintGrid, cell_index
+from ..flag_table import MARGIN, box_counts, flag_table
+from ..raster import polygon_flags_table
+from ..sampling import FootprintGrid
 
 __all__ = ["bake_micromaps", "bake_micromap_rows", "dynamic_levels", "micro_starts", "check_level",
            "check_uv_triangles", "flag_table", "GROW_TEXEL", "MAX_LEVEL"]
 
-MARGIN = 1e-9  # relative widening of node boxes; float rounding of the coordinates is ~1e-15
 # Growth of every region of real geometry, in texels: a hit's region (from barycentrics) and its
 # texel (from interpolated UVs) are two floating-point computations of one point, so a hit on a
 # region edge that is also a texel edge could otherwise read a texel the region did not count.
@@ -78,159 +78,18 @@ def check_uv_triangles(tris_uv) -> np.ndarray:
     return t
 
 
-def flag_table(grid: FootprintGrid) -> np.ndarray:
-    """Summed-area table (Hc+1, Wc+1, 3) int32 of the T bit (plane 0), the O bit (plane 1) and
-    mixed cells (plane 2, ``FootprintGrid.mixed``; none unless the grid is exact): ``sat[y, x, k]``
-    counts the cells above row y and left of column x with bit k."""
-    return _flag_table(grid.flags, grid.mixed)
-
-
-@njit(cache=True)
-def _flag_table(flags, mixed):
-    h, w = flags.shape
-    has_mixed = mixed.shape[0] > 0
-    sat = np.zeros((h + 1, w + 1, 3), dtype=np.int32)
-    for y in range(h):
-        rt = 0
-        ro = 0
-        rm = 0
-        for x in range(w):
-            f = flags[y, x]
-            rt += f & 1
-            ro += (f >> 1) & 1
-            if has_mixed:
-                rm += mixed[y, x]
-            sat[y + 1, x + 1, 0] = sat[y, x + 1, 0] + rt
-            sat[y + 1, x + 1, 1] = sat[y, x + 1, 1] + ro
-            sat[y + 1, x + 1, 2] = sat[y, x + 1, 2] + rm
-    return sat
-
-
 @njit(cache=True, inline="always")
-def _axis_ranges(c0, c1, size, period):
-    """Unaddressed cell range [c0, c1) as up to two ranges of stored cells [a0, b0), [a1, b1)."""
-    if c0 >= 0 and c1 <= size:  # inside the grid every mode reads the cells as they are
-        return c0, c1, 0, 0
-    if period == 0:  # clamp: the distinct cells the range reads
-        lo = min(max(c0, 0), size - 1)
-        hi = min(max(c1 - 1, 0), size - 1)
-        return lo, hi + 1, 0, 0
-    if c1 - c0 >= period:
-        return 0, period, 0, 0
-    a = c0 % period
-    if a < 0:
-        a += period
-    b = a + (c1 - c0)
-    if b <= period:
-        return a, b, 0, 0
-    return a, period, 0, b - period
-
-
-@njit(cache=True, inline="always")
-def _rect(sat, y0, y1, x0, x1, k):
-    return sat[y1, x1, k] - sat[y0, x1, k] - sat[y1, x0, k] + sat[y0, x0, k]
-
-
-@njit(cache=True, inline="always")
-def _box(sat, r0, r1, c0, c1, period_y, period_x):
-    """(cells with the T bit, with the O bit, mixed cells, distinct cells) of the box
-    [c0,c1)x[r0,r1)."""
-    ya0, yb0, ya1, yb1 = _axis_ranges(r0, r1, sat.shape[0] - 1, period_y)
-    xa0, xb0, xa1, xb1 = _axis_ranges(c0, c1, sat.shape[1] - 1, period_x)
-    nt = _rect(sat, ya0, yb0, xa0, xb0, 0)
-    no = _rect(sat, ya0, yb0, xa0, xb0, 1)
-    nm = _rect(sat, ya0, yb0, xa0, xb0, 2)
-    if xb1 > xa1:  # the x range wraps around the period
-        nt += _rect(sat, ya0, yb0, xa1, xb1, 0)
-        no += _rect(sat, ya0, yb0, xa1, xb1, 1)
-        nm += _rect(sat, ya0, yb0, xa1, xb1, 2)
-    if yb1 > ya1:
-        nt += _rect(sat, ya1, yb1, xa0, xb0, 0)
-        no += _rect(sat, ya1, yb1, xa0, xb0, 1)
-        nm += _rect(sat, ya1, yb1, xa0, xb0, 2)
-        if xb1 > xa1:
-            nt += _rect(sat, ya1, yb1, xa1, xb1, 0)
-            no += _rect(sat, ya1, yb1, xa1, xb1, 1)
-            nm += _rect(sat, ya1, yb1, xa1, xb1, 2)
-    n = (yb0 - ya0 + yb1 - ya1) * (xb0 - xa0 + xb1 - xa1)
-    return nt, no, nm, n
-
-
-@njit(cache=True, inline="always")
-def _points_flag(flags, mixed, values, bounds, period_x, period_y, x0, y0, x1, y1, x2, y2, grow, tri):
-    """OR of the three vertices' own flags (``bilinear.point_flag``); stores the triangle in
-    ``tri`` (3, 2) as the polygon ``bilinear.cell_flag`` clips."""
-    acc = point_flag(flags, mixed, values, bounds, period_x, period_y, x0, y0, grow)
-    acc |= point_flag(flags, mixed, values, bounds, period_x, period_y, x1, y1, grow)
-    acc |= point_flag(flags, mixed, values, bounds, period_x, period_y, x2, y2, grow)
+def _leaf_flag(sat, grid, x0, y0, x1, y1, x2, y2, grow, scratch):
+    """OR of the flags of the cells a micro-triangle (grown by ``grow``) overlaps (0: no area):
+    ``raster.polygon_flags_table`` on the triangle. ``scratch`` (2 * POLY_MAX + 3, 2)."""
+    tri = scratch[2 * POLY_MAX:]
     tri[0, 0] = x0
     tri[0, 1] = y0
     tri[1, 0] = x1
     tri[1, 1] = y1
     tri[2, 0] = x2
     tri[2, 1] = y2
-    return acc
-
-
-@njit(cache=True)
-def _leaf_flag(sat, grid, x0, y0, x1, y1, x2, y2, grow, scratch):
-    """OR of the flags of the cells a micro-triangle (grown by ``grow``) overlaps (0: no area):
-    ``raster.polygon_flags``' arithmetic, each row's cell span read in O(1) unless it holds mixed
-    cells. ``grid``: ``FootprintGrid.kernel_args()``; ``scratch`` (2 * POLY_MAX + 3, 2)."""
-    flags, mixed, values, bounds, period_x, period_y = grid
-    points_done = False
-    tri = scratch[2 * POLY_MAX:]
-    ymin = min(y0, min(y1, y2))
-    ymax = max(y0, max(y1, y2))
-    acc = 0
-    if grow > 0.0 and mixed.shape[0] > 0:
-        # grown, every vertex's cell is in a row span below, so its flag is part of the OR: read
-        # first (cheap), a leaf across the cut-off is C before any row is counted. (Ungrown, a
-        # vertex on a row's lower edge lies outside the spans: then only after a mixed span.)
-        points_done = True
-        acc = _points_flag(flags, mixed, values, bounds, period_x, period_y, x0, y0, x1, y1, x2, y2, grow, tri)
-        if acc == 3:
-            return 3
-    for r in range(int(math.floor(ymin - grow)), int(math.ceil(ymax + grow))):
-        b0 = max(float(r) - grow, ymin)
-        b1 = min(float(r + 1) + grow, ymax)
-        if b1 < b0 or (b1 == b0 and grow == 0.0):
-            continue
-        xmin = np.inf
-        xmax = -np.inf
-        xmin, xmax = edge_extent(x0, y0, x1, y1, b0, b1, xmin, xmax)
-        xmin, xmax = edge_extent(x1, y1, x2, y2, b0, b1, xmin, xmax)
-        xmin, xmax = edge_extent(x2, y2, x0, y0, b0, b1, xmin, xmax)
-        xmin -= grow
-        xmax += grow
-        if not xmax > xmin:
-            continue
-        c0 = int(math.floor(xmin))
-        c1 = int(math.ceil(xmax))
-        nt, no, nm, n = _box(sat, r, r + 1, c0, c1, period_y, period_x)
-        if nt > nm:  # cells other than mixed ones with the T bit
-            acc |= 1
-        if no > nm:
-            acc |= 2
-        if nm > 0 and acc != 3:  # the mixed cells, each decided on its own
-            if not points_done:  # the vertices' own flags first (``raster.polygon_flags`` does the same)
-                points_done = True
-                acc |= _points_flag(flags, mixed, values, bounds, period_x, period_y, x0, y0, x1, y1, x2, y2, grow,
-                                    tri)
-                if acc == 3:
-                    return 3
-            hc, wc = flags.shape
-            row = cell_index(r, hc, period_y)
-            for c in range(c0, c1):
-                col = cell_index(c, wc, period_x)
-                if mixed[row, col]:
-                    acc |= cell_flag(values, bounds, period_x, period_y, row, col, tri, 3, c, r, grow,
-                                     scratch[:POLY_MAX], scratch[POLY_MAX:2 * POLY_MAX])
-                    if acc == 3:
-                        return 3
-        if acc == 3:
-            return 3
-    return acc
+    return polygon_flags_table(sat, grid, tri, 3, grow, scratch[:POLY_MAX], scratch[POLY_MAX:2 * POLY_MAX])
 
 
 @njit(cache=True, inline="always")
@@ -293,7 +152,7 @@ def _bake_one(sat, grid, tri, level, w, h, offset, grow, out, st_l, st_k, st_v, 
             c1 = int(math.ceil(max(x0, max(x1, x2)) + margin))
             r0 = int(math.floor(min(y0, min(y1, y2)) - margin))
             r1 = int(math.ceil(max(y0, max(y1, y2)) + margin))
-            nt, no, nm, nc = _box(sat, r0, r1, c0, c1, period_y, period_x)
+            nt, no, nm, nc = box_counts(sat, r0, r1, c0, c1, period_y, period_x)
             if no == 0:
                 state = 0  # T
             elif nt == 0:

@@ -27,13 +27,17 @@ Example::
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from numba import njit, prange
 
 from .. import raster, states
+from ..bilinear import POLY_MAX
 from ..errors import InputError
 from ..pair import pair_weights
 from ..sampling import FootprintGrid
+from ..flag_table import MARGIN, box_counts, flag_table
 
 __all__ = ["bake_pair_squares", "bake_pair_flags", "or_downsample", "flags_to_states", "MAX_SQUARE",
            "check_square_size"]
@@ -78,55 +82,137 @@ def _area2(poly, k):
     return a
 
 
+@njit(cache=True, inline="always")
+def _texel_point(uv, b, tri, s, t, w, h, off):
+    """Texel coordinates (plus the grid offset) of square point (s, t) through triangle ``tri``'s
+    affine UV map (its corners' UVs at ``uv[b:b + 3]``)."""
+    w0, w1, w2 = pair_weights(tri, s, t)
+    u = w0 * uv[b, 0] + w1 * uv[b + 1, 0] + w2 * uv[b + 2, 0]
+    vv = w0 * uv[b, 1] + w1 * uv[b + 1, 1] + w2 * uv[b + 2, 1]
+    return u * w + off, vv * h + off
+
+
 @njit(cache=True)
-def _pair_flags(flags, mixed, values, bounds, px, py, off, w, h, uv, has_b, n, grow, out):
-    """Flags (n, n) of one pair's square map into ``out``."""
+def _cell_flag(sat, grid, off, w, h, uv, tri, n, i, j, grow, rect, poly, pts, buf_a, buf_b):
+    """Flag of triangle ``tri``'s part of cell (i, j) (0 when the part has no area)."""
+    s0 = i / n
+    s1 = (i + 1) / n
+    t0 = j / n
+    t1 = (j + 1) / n
+    rect[0, 0] = s0
+    rect[0, 1] = t0
+    rect[1, 0] = s1
+    rect[1, 1] = t0
+    rect[2, 0] = s1
+    rect[2, 1] = t1
+    rect[3, 0] = s0
+    rect[3, 1] = t1
+    if tri == 0:
+        k = _clip(rect, 4, 1.0, -1.0, 0.0, poly)  # s - t >= 0
+    else:
+        k = _clip(rect, 4, -1.0, 1.0, 0.0, poly)  # t - s >= 0
+    if k < 3 or abs(_area2(poly, k)) <= 0.0:
+        return 0
+    for v in range(k):
+        pts[v, 0], pts[v, 1] = _texel_point(uv, 3 * tri, tri, poly[v, 0], poly[v, 1], w, h, off)
+    return raster.polygon_flags_table(sat, grid, pts, k, grow, buf_a, buf_b)
+
+
+MIN_TREE_AREA = 1e-3  # texel area below which an ungrown triangle is baked cell by cell
+STACK = 64  # blocks pending: 3 more per level down (7 levels at most), plus the root
+
+
+@njit(cache=True)
+def _pair_flags(sat, grid, off, w, h, uv, has_b, n, grow, out):
+    """Flags (n, n) of one pair's square map ORed into ``out`` (zeros on entry).
+
+    Each triangle's part is walked as a quadtree of cell blocks: when the box around a block's
+    image in texture space (``flag_table.box_counts``) holds only T, only O, or only unmixed C
+    cells, every cell of the block in that triangle reads exactly that flag, as ``_cell_flag``
+    would find it cell by cell (each part has area, so it reads at least one cell of the box);
+    otherwise the block splits, down to single cells rasterised by ``_cell_flag``."""
     rect = np.empty((4, 2))
     poly = np.empty((8, 2))
     pts = np.empty((8, 2))
-    for j in range(n):
-        for i in range(n):
-            s0 = i / n
-            s1 = (i + 1) / n
-            t0 = j / n
-            t1 = (j + 1) / n
-            rect[0, 0] = s0
-            rect[0, 1] = t0
-            rect[1, 0] = s1
-            rect[1, 1] = t0
-            rect[2, 0] = s1
-            rect[2, 1] = t1
-            rect[3, 0] = s0
-            rect[3, 1] = t1
-            acc = 0
-            for tri in range(2):
-                if tri == 1 and not has_b:
-                    continue
-                if tri == 0:
-                    if i < j:
-                        continue  # wholly above the diagonal
-                    k = _clip(rect, 4, 1.0, -1.0, 0.0, poly)  # s - t >= 0
-                else:
-                    if i > j:
-                        continue
-                    k = _clip(rect, 4, -1.0, 1.0, 0.0, poly)  # t - s >= 0
-                if k < 3 or abs(_area2(poly, k)) <= 0.0:
-                    continue
-                b = 3 * tri
-                for v in range(k):
-                    w0, w1, w2 = pair_weights(tri, poly[v, 0], poly[v, 1])
-                    u = w0 * uv[b, 0] + w1 * uv[b + 1, 0] + w2 * uv[b + 2, 0]
-                    vv = w0 * uv[b, 1] + w1 * uv[b + 1, 1] + w2 * uv[b + 2, 1]
-                    pts[v, 0] = u * w + off
-                    pts[v, 1] = vv * h + off
-                acc |= raster.polygon_flags(flags, mixed, values, bounds, px, py, pts[:k], grow)
-            out[j, i] = acc
+    buf_a = np.empty((POLY_MAX, 2))
+    buf_b = np.empty((POLY_MAX, 2))
+    st_i = np.empty(STACK, np.int64)
+    st_j = np.empty(STACK, np.int64)
+    st_n = np.empty(STACK, np.int64)
+    py = grid[5]
+    px = grid[4]
+    for tri in range(2):
+        if tri == 1 and not has_b:
+            break
+        b = 3 * tri
+        ax, ay = _texel_point(uv, b, tri, 0.0, 0.0, w, h, off)
+        bx, by = _texel_point(uv, b, tri, 1.0, 1.0, w, h, off)
+        cx, cy = _texel_point(uv, b, tri, 1.0 - tri, float(tri), w, h, off)
+        area = 0.5 * abs((bx - ax) * (cy - ay) - (by - ay) * (cx - ax))
+        tree = grow > 0.0 or area >= MIN_TREE_AREA  # ungrown, every cell's part then has area
+        scale = 1.0
+        scale = max(scale, max(abs(ax), abs(ay)))
+        scale = max(scale, max(abs(bx), abs(by)))
+        scale = max(scale, max(abs(cx), abs(cy)))
+        margin = MARGIN * scale + grow
+        st_i[0] = 0
+        st_j[0] = 0
+        st_n[0] = n
+        top = 1
+        while top > 0:
+            top -= 1
+            i0 = st_i[top]
+            j0 = st_j[top]
+            m = st_n[top]
+            # the block's cells in this triangle: i >= j for A, i <= j for B
+            if (tri == 0 and i0 + m - 1 < j0) or (tri == 1 and i0 > j0 + m - 1):
+                continue
+            if m == 1:
+                out[j0, i0] |= _cell_flag(sat, grid, off, w, h, uv, tri, n, i0, j0, grow, rect, poly, pts, buf_a, buf_b)
+                continue
+            f = 0
+            if tree:
+                xmin = np.inf
+                xmax = -np.inf
+                ymin = np.inf
+                ymax = -np.inf
+                for corner in range(4):
+                    s = (i0 + (corner & 1) * m) / n
+                    t = (j0 + (corner >> 1) * m) / n
+                    x, y = _texel_point(uv, b, tri, s, t, w, h, off)
+                    xmin = min(xmin, x)
+                    xmax = max(xmax, x)
+                    ymin = min(ymin, y)
+                    ymax = max(ymax, y)
+                c0 = int(math.floor(xmin - margin))
+                c1 = int(math.ceil(xmax + margin))
+                r0 = int(math.floor(ymin - margin))
+                r1 = int(math.ceil(ymax + margin))
+                nt, no, nm, nc = box_counts(sat, r0, r1, c0, c1, py, px)
+                if no == 0:
+                    f = 1
+                elif nt == 0:
+                    f = 2
+                elif nt == nc and no == nc and nm == 0:
+                    f = 3
+            if f:
+                for j in range(j0, j0 + m):
+                    for i in range(i0, i0 + m):
+                        if (tri == 0 and i >= j) or (tri == 1 and i <= j):
+                            out[j, i] |= f
+                continue
+            half = m // 2
+            for c in range(3, -1, -1):
+                st_i[top] = i0 + (c & 1) * half
+                st_j[top] = j0 + (c >> 1) * half
+                st_n[top] = half
+                top += 1
 
 
 @njit(cache=True, parallel=True)
-def _bake_pairs(flags, mixed, values, bounds, px, py, off, w, h, uv, has_b, n, grow, out):
+def _bake_pairs(sat, grid, off, w, h, uv, has_b, n, grow, out):
     for p in prange(uv.shape[0]):
-        _pair_flags(flags, mixed, values, bounds, px, py, off, w, h, uv[p], has_b[p], n, grow, out[p])
+        _pair_flags(sat, grid, off, w, h, uv[p], has_b[p], n, grow, out[p])
 
 
 def bake_pair_flags(grid: FootprintGrid, corner_uv, has_b, n: int, grow: float = 0.0) -> np.ndarray:
@@ -138,7 +224,7 @@ def bake_pair_flags(grid: FootprintGrid, corner_uv, has_b, n: int, grow: float =
         raise InputError("pair corner UVs must be finite")
     out = np.zeros((len(uv), n, n), np.uint8)
     if len(uv):
-        _bake_pairs(*grid.kernel_args(), float(grid.offset), float(grid.width),
+        _bake_pairs(flag_table(grid), grid.kernel_args(), float(grid.offset), float(grid.width),
                     float(grid.height), uv, hb, n, float(grow), out)
     return out
 

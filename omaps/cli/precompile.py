@@ -31,8 +31,8 @@ __all__ = ["FAMILIES", "uncached", "families_for", "announce", "start_ahead", "f
 # core of the 2-core reference machine: numba's compile events, summed per family, of the palm
 # trace command and of omaps eval)
 FAMILIES = {
-    "square": (("omaps.raster", "omaps.bake.square"), 10),
-    "micromap": (("omaps.bake.micromap",), 6),
+    "square": (("omaps.flag_table", "omaps.raster", "omaps.bake.square"), 10),
+    "micromap": (("omaps.flag_table", "omaps.raster", "omaps.bake.micromap"), 6),
     "trace": (("omaps.trace.rays", "omaps.scene.pairing"), 10),
     "vq2": (("omaps.codecs.vq2_encode",), 12),
     "vq4": (("omaps.codecs.vq4_encode",), 45),

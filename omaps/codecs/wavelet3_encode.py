@@ -210,8 +210,12 @@ PASSES = {"fast": 0, "medium": 1, "thorough": 3}  # coordinate-descent passes ov
 
 def _encode_one(m, passes: int) -> Wavelet3Block:
     """The better of identity transforms and ``aligned_transforms``, then ``passes`` passes of
-    coordinate descent: each quadrant 1..3 in turn tries its 7 other transforms."""
+    coordinate descent: each quadrant 1..3 in turn tries its 7 other transforms. It stops as soon
+    as every known cell is kept (no transform can do better: most real maps are that simple)."""
+    known = int((m != states.C).sum())
     best, blk = _encode_with(m, np.zeros(4, np.int64))
+    if best >= known:
+        return blk
     tr = aligned_transforms(m)
     if tr.any():
         t2, b2 = _encode_with(m, tr)
@@ -222,14 +226,14 @@ def _encode_one(m, passes: int) -> Wavelet3Block:
         improved = False
         for q in range(1, 4):
             for t in range(8):
-                if t == tr[q]:
+                if t == tr[q] or best >= known:
                     continue
                 trial = tr.copy()
                 trial[q] = t
                 v, b = _encode_with(m, trial)
                 if v > best:
                     best, blk, tr, improved = v, b, trial, True
-        if not improved:
+        if not improved or best >= known:
             break
     return blk
 
