@@ -283,32 +283,32 @@ def _stored(gid, gbytes, level) -> int:
 def _adopt(value, gid, gbytes, budget: int, start=None) -> tuple[np.ndarray, int]:
     """Greedy over groups: repeatedly move every item that gains by it to the group with the most
     value per new byte (a group already stored, or free, first), while the bytes stored -- each
-    group with a member once -- stay within the budget. Items only ever gain."""
-    n_items = len(value)
+    group with a member once -- stay within the budget. Items only ever gain. (An item's options
+    in one group store the same micromap, so they are worth the same: one of them counts.)"""
+    n_items, n_cols = value.shape
     level = np.zeros(n_items, np.int64) if start is None else np.array(start, np.int64)
     rows = np.arange(n_items)
+    order = np.argsort(gid, axis=1, kind="stable")
+    srt = np.take_along_axis(gid, order, axis=1)
+    first = np.ones(gid.shape, bool)
+    first[:, 1:] = srt[:, 1:] != srt[:, :-1]
+    keep = np.zeros(gid.shape, bool)
+    np.put_along_axis(keep, order, first, axis=1)
     while True:
         ref = np.bincount(gid[rows, level], minlength=len(gbytes))
         stored = int(gbytes[ref > 0].sum())
         gain = value - value[rows, level][:, None]
-        up = gain > 0
-        # an item counts once per group: its best option there
-        gi, ci = np.nonzero(up)
-        key = gid[gi, ci] * n_items + gi
-        order = np.lexsort((-gain[gi, ci], key))
-        first = np.ones(len(order), bool)
-        first[1:] = key[order][1:] != key[order][:-1]
-        pick = order[first]
-        gsum = np.bincount(gid[gi[pick], ci[pick]], gain[gi[pick], ci[pick]], minlength=len(gbytes))
+        up = keep & (gain > 0)
+        gsum = np.bincount(gid[up], gain[up], minlength=len(gbytes))
         cost = np.where(ref > 0, 0, gbytes)
         ok = (gsum > 0) & (cost <= budget - stored)
         if not ok.any():
             return level, stored
         free = ok & (cost == 0)
         score = np.where(free, gsum, -np.inf) if free.any() else np.where(ok, gsum / np.maximum(cost, 1), -np.inf)
-        g = int(np.argmax(score))
-        sel = pick[gid[gi[pick], ci[pick]] == g]
-        level[gi[sel]] = ci[sel]
+        movers = up & (gid == int(np.argmax(score)))
+        moved = movers.any(axis=1)
+        level[moved] = np.argmax(movers[moved], axis=1)  # its one option in the group
 
 
 def budget_levels(geometries, settings, budget: int) -> tuple[list[tuple[np.ndarray, dict]], dict]:
