@@ -28,6 +28,8 @@ from .options import ENCODERS, EFFORTS, check_maps, check_options  # noqa: F401 
 from .vec2 import INVERSE_T, KNOWN, RETAINED, TRANS_CODE
 from .vq2_block import N_ENTRIES, N_GLOBAL, N_LOCAL, SIZE, VQ2Block, quadrant_of_vector
 
+__all__ = ["encode", "encode_many", "encode_arrays", "encode_many_arrays", "vector_codes", "EXHAUSTIVE",
+           "ENCODERS", "EFFORTS"]
 
 CAP_FAST, CAP_MEDIUM = 3, 99  # candidates scored per pick of a global entry after the first
 EXHAUSTIVE = 3  # effort number of the issue-14 baseline (``medium`` before): the greedy codebook
@@ -789,6 +791,7 @@ def encode(map16, encoder: str = "best", effort: str = "medium") -> VQ2Block:
 
 
 def encode_many(maps16, encoder: str = "best", effort: str = "medium") -> list[VQ2Block]:
+    """Encode (n, 16, 16) maps (or one) into symbolic VQ2 blocks, as ``encode`` does each."""
     e, f = check_options("VQ2", encoder, effort)
     m = check_maps(maps16, SIZE, "VQ2").reshape(-1, SIZE, SIZE)
     idx, cb, tr = encode_many_arrays(m, e, f)
