@@ -272,3 +272,24 @@ def test_omm_budget_view_weights_on_palm(tmp_path):
     assert json.loads(tr.read_text())["schemes"]["omm"]["differing_pixels"] == 0
     assert main(["omm", str(SCENES / "palm.glb"), "-o", str(tmp_path / "x.glb"), "--weights", "view",
                  "--quiet"]) == 2  # view weights without a budget
+
+
+def test_trace_budget_reuses_the_runs_flags_and_blocks(tmp_path):
+    from omaps.schemes import parse_schemes
+    from omaps.trace import prepare
+    from omaps.trace.budget import budget_maps
+
+    rng = np.random.default_rng(2)
+    alpha = (rng.random((32, 32)) < 0.5).astype(np.uint8) * 255
+    alpha[:, :12] = 255
+    scene = load_scene(str(write_quad_gltf(tmp_path / "q.gltf", alpha, nodes=[{}, {"translation": [3, 0, 0]}])))
+    schemes = parse_schemes("none,vq2,vq4,budget:100")
+    prep = prepare(scene, schemes)
+    assert any(k[0] == "encode" and k[1] == "vq4" for k in prep.cache) and ("pair_flags", 64) in prep.cache
+    w = triangle_weights(scene, prep.alpha)
+    b = schemes[-1]
+    shared = budget_maps(prep.alpha, prep.tests, b, w, cache=prep.cache)
+    alone = budget_maps(prep.alpha, prep.tests, b, w)
+    assert np.array_equal(shared.data, alone.data) and np.array_equal(shared.rows, alone.rows)
+    assert shared.info == alone.info and shared.map_bytes <= 100
+    assert not prepare(scene, parse_schemes("none,vq4")).cache  # nothing kept without a budget to use it

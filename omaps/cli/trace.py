@@ -208,7 +208,9 @@ def cmd_trace(a) -> int:
         t0 = time.perf_counter()
         weights = view_weights(prep, cam, w, h) if a.weights == "view" else triangle_weights(scene, prep.alpha)
         for s in budgets:
-            prep.maps[s.name] = budget_maps(prep.alpha, prep.tests, s, weights, default_jobs(a.jobs), progress)
+            prep.maps[s.name] = budget_maps(prep.alpha, prep.tests, s, weights, default_jobs(a.jobs), progress,
+                                            cache=prep.cache)
+        prep.cache.clear()  # the uniform schemes' flags and blocks: only the budgets re-use them
         prep.timings["budget_s"] = time.perf_counter() - t0
     diag = float(np.linalg.norm(bounds[1] - bounds[0]))
     tnear = trace.SHADOW_TNEAR * diag

@@ -17,7 +17,7 @@ import numpy as np
 from .. import states
 from ..budget import HIT_LEVEL, PAIR_OPTIONS, allocate, half_known, pair_option_bytes, triangle_weights
 from ..codecs import get_codec
-from .maps import SchemeMaps, dedupe_maps, encode_maps, pair_square_states
+from .maps import SchemeMaps, dedupe_maps, encode_cached, pair_square_states
 from .tables import T_COUNT, T_MAP_FORMAT, T_MAP_OFFSET
 
 __all__ = ["budget_maps", "scene_view_samples", "view_samples", "view_prior", "view_weights", "INDEX_BYTES_PER_PAIR", "VIEW_PRIOR"]
@@ -26,10 +26,11 @@ INDEX_BYTES_PER_PAIR = 4  # a per-pair word: 4-bit format code + 28-bit offset i
 
 
 def budget_maps(at, tests: dict, scheme, weights: np.ndarray, jobs: int = 1, progress: bool = False,
-                options=PAIR_OPTIONS) -> SchemeMaps:
-    """The budget scheme's maps for the alpha triangles ``at`` with per-triangle ``weights``."""
+                options=PAIR_OPTIONS, cache: dict | None = None) -> SchemeMaps:
+    """The budget scheme's maps for the alpha triangles ``at`` with per-triangle ``weights``.
+    ``cache``: the run's ``Prepared.cache``: flags baked and maps encoded by its uniform schemes."""
     sizes = sorted({get_codec(o).map_size for o in options if o != "none"})
-    pair_states, pair_inverse = pair_square_states(at, tests, sizes)
+    pair_states, pair_inverse = pair_square_states(at, tests, sizes, cache)
     n_pairs = len(at.pair_first)
     w_a = weights[at.pair_first]
     w_b = np.where(at.pair_second >= 0, weights[np.maximum(at.pair_second, 0)], 0.0)
@@ -41,7 +42,7 @@ def budget_maps(at, tests: dict, scheme, weights: np.ndarray, jobs: int = 1, pro
             continue
         codec = get_codec(o)
         uniq, inv_u = dedupe_maps(pair_states[codec.map_size])
-        blocks, dec = encode_maps(codec, uniq, scheme.encoder, scheme.effort, jobs, progress)
+        blocks, dec = encode_cached(codec, uniq, scheme.encoder, scheme.effort, jobs, progress, cache)
         rows = inv_u[pair_inverse]
         half = half_known(dec)[rows]
         value[:, k] = w_a * half[:, 0] + w_b * half[:, 1]

@@ -10,6 +10,7 @@ shared by its instances, as a BLAS shares it.
 
 from __future__ import annotations
 
+import hashlib
 import os
 from dataclasses import dataclass, field
 
@@ -19,11 +20,13 @@ from tqdm import tqdm
 from .. import states
 from ..bake import GROW_TEXEL, bake_micromaps, bake_pair_flags, or_downsample
 from ..bake.square import flags_to_states
+from ..budget import PAIR_OPTIONS
+from ..codecs import get_codec
 from ..codecs.raw import pack_states
 from ..scene.alpha import AlphaTriangles, distinct_rows, pair_corner_uvs
 from ..workers import encode_maps as parallel_encode
 
-__all__ = ["SchemeMaps", "build_scheme_maps", "default_jobs", "dedupe_maps"]
+__all__ = ["SchemeMaps", "build_scheme_maps", "encode_cached", "default_jobs", "dedupe_maps"]
 
 
 @dataclass
@@ -74,6 +77,19 @@ def encode_maps(codec, maps_: np.ndarray, encoder, effort, jobs: int = 1, progre
         bar.close()
 
 
+def encode_cached(codec, maps_: np.ndarray, encoder, effort, jobs: int = 1, progress: bool = False,
+                  cache: dict | None = None):
+    """``encode_maps``, remembered in ``cache`` (a run's dict) by codec, encoder, effort and the
+    maps' bytes: a budget scheme re-uses what the uniform schemes of the same run encoded."""
+    if cache is None:
+        return encode_maps(codec, maps_, encoder, effort, jobs, progress)
+    m = np.ascontiguousarray(maps_)
+    key = ("encode", codec.name, encoder, effort, m.shape, hashlib.blake2b(m.view(np.uint8)).hexdigest())
+    if key not in cache:
+        cache[key] = encode_maps(codec, m, encoder, effort, jobs, progress)
+    return cache[key]
+
+
 def _pair_flags(at: AlphaTriangles, tests: dict, n: int):
     """Flags (D, n, n) of the distinct pairs, and every pair's distinct index."""
     uv, has_b, mat = pair_corner_uvs(at)
@@ -101,25 +117,35 @@ def micromap_states(at: AlphaTriangles, tests: dict, level: int):
     return out, inverse
 
 
-def pair_square_states(at: AlphaTriangles, tests: dict, sizes) -> tuple[dict, np.ndarray]:
-    """States of the distinct pairs' square maps at each size, and every pair's distinct index."""
+def pair_square_states(at: AlphaTriangles, tests: dict, sizes, cache: dict | None = None) -> tuple[dict, np.ndarray]:
+    """States of the distinct pairs' square maps at each size, and every pair's distinct index.
+    ``cache``: a run's dict (``Prepared.cache``) keeping the baked flags for later schemes."""
     finest = max(sizes)
-    flags, inverse = _pair_flags(at, tests, finest)
+    key = ("pair_flags", finest)
+    if cache is not None and key in cache:
+        flags, inverse = cache[key]
+    else:
+        flags, inverse = _pair_flags(at, tests, finest)
+        if cache is not None:
+            cache[key] = (flags, inverse)
     return {n: flags_to_states(flags if n == finest else or_downsample(flags, finest // n)) for n in sizes}, inverse
 
 
 def build_scheme_maps(at: AlphaTriangles, tests: dict, schemes, jobs: int = 1,
-                      progress: bool = False, scene=None) -> dict[str, SchemeMaps]:
+                      progress: bool = False, scene=None, cache: dict | None = None) -> dict[str, SchemeMaps]:
     """Bake and store every scheme's maps. ``tests``: material -> ``AlphaTest``; ``schemes``:
     ``omaps.schemes.Scheme`` objects (kinds none, micromap, square, and stored: read from
     ``scene``'s file by ``trace.stored``)."""
+    all_schemes = schemes
+    if not any(s.kind == "budget" for s in schemes):
+        cache = None  # nothing would re-use what it holds
     schemes = [s for s in schemes if s.kind != "budget"]  # built once weights are known (trace.budget)
     stored = [s for s in schemes if s.kind == "stored"]
     if stored:
         from .stored import stored_maps
 
         read = {s.name: stored_maps(at, scene, s) for s in stored}
-        rest = build_scheme_maps(at, tests, [s for s in schemes if s.kind != "stored"], jobs, progress)
+        rest = build_scheme_maps(at, tests, [s for s in schemes if s.kind != "stored"], jobs, progress, cache=cache)
         return {s.name: read[s.name] if s.name in read else rest[s.name] for s in schemes}
     if not at.count:  # nothing alpha-tested: no maps, the filter is never called
         return {s.name: SchemeMaps(s.name, s.kind, s.level if s.kind == "micromap" else (s.map_size or 0),
@@ -129,7 +155,10 @@ def build_scheme_maps(at: AlphaTriangles, tests: dict, schemes, jobs: int = 1,
     n_pairs = len(at.pair_first)
     squares = [s for s in schemes if s.kind == "square"]
     if squares:
-        pair_states, pair_inverse = pair_square_states(at, tests, {s.codec.map_size for s in squares})
+        sizes = {s.codec.map_size for s in squares}
+        if any(s.kind == "budget" for s in all_schemes):  # bake once at the budget's finest size too
+            sizes |= {get_codec(o).map_size for o in PAIR_OPTIONS if o != "none"}
+        pair_states, pair_inverse = pair_square_states(at, tests, sizes, cache)
     for s in schemes:
         if s.kind == "none":
             out[s.name] = SchemeMaps(s.name, "none", 0, np.zeros(at.count, np.int32), np.zeros(1, np.uint8), 1, 0, 0,
@@ -145,7 +174,7 @@ def build_scheme_maps(at: AlphaTriangles, tests: dict, schemes, jobs: int = 1,
             codec = s.codec
             uniq, inv_u = dedupe_maps(pair_states[codec.map_size])
             pair_rows = inv_u[pair_inverse]  # every pair -> its distinct map
-            blocks, decoded = encode_maps(codec, uniq, s.encoder, s.effort, jobs, progress)
+            blocks, decoded = encode_cached(codec, uniq, s.encoder, s.effort, jobs, progress, cache)
             known = float(np.mean((decoded != states.C).reshape(len(decoded), -1).mean(axis=1)[pair_rows]))
             out[s.name] = SchemeMaps(s.name, "square", codec.map_size, pair_rows[at.pair].astype(np.int32),
                                      blocks.ravel().copy(), codec.block_bytes, n_pairs * codec.block_bytes, len(uniq),

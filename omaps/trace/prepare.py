@@ -4,7 +4,7 @@ Embree scene once; then trace any scheme (``trace_scheme``)."""
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -32,6 +32,7 @@ class Prepared:
     opaque_tris: list  # per mesh: merged triangle indices of geometry 0, in primID order
     timings: dict
     device: object = None
+    cache: dict = field(default_factory=dict)  # pair flags and encoded maps, for budget schemes (trace.budget)
 
 
 def prepare(scene, schemes, rules: MaterialRules = MaterialRules(), jobs: int = 1, progress: bool = False,
@@ -58,7 +59,8 @@ def prepare(scene, schemes, rules: MaterialRules = MaterialRules(), jobs: int = 
     timings["pair_s"] = time.perf_counter() - t0
     t0 = time.perf_counter()
     tests = {int(m): scene.alpha_test(int(m), rules) for m in np.unique(at.material)}
-    maps_ = build_scheme_maps(at, tests, schemes, jobs, progress, scene)
+    cache: dict = {}
+    maps_ = build_scheme_maps(at, tests, schemes, jobs, progress, scene, cache)
     timings["bake_encode_s"] = time.perf_counter() - t0
     t0 = time.perf_counter()
     device = embree.Device(embree_config)
@@ -73,7 +75,7 @@ def prepare(scene, schemes, rules: MaterialRules = MaterialRules(), jobs: int = 
     timings["bvh_s"] = time.perf_counter() - t0
     proto_of = np.array([mi for mi, _ in scene.instances], np.int32)
     return Prepared(scene, rules, tests, at, maps_, bvh, base_tables(tests, len(scene.materials), at, proto_of),
-                    proto_of, opaque_tris, timings, device)
+                    proto_of, opaque_tris, timings, device, cache)
 
 
 @dataclass
