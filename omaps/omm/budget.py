@@ -1,16 +1,21 @@
 """``omaps omm --budget BYTES``: per triangle the subdivision level (and 2- or 4-state format)
 that saves the most expected any-hit calls for the micromap bytes, every geometry together
-within the budget (``omaps.budget.allocate``).
+within the budget.
 
-An option is a level L of the triangle's micromap, as the micromap baker bakes it. Its value is
-the triangle's weight (``Geometry.weight``: world area times instances for a scene, texel area
-for a texture and UVs) times its known fraction at L (micro-triangles split the triangle into
-equal areas). Its bytes are what the engine stores: nothing for a uniform micromap (a special
+An option is a level L of the triangle's micromap, as the micromap baker bakes it (exact), or,
+for L in 1..``MERGE_MAX_LEVEL``, a *merged* one: the level's distinct T/O/C contents clustered
+(``_agglomerate``: the two clusters whose meet loses the least value first) into 1/2, 1/4, ...
+as many (``MERGE_SHARES``), each member storing its cluster's meet -- T or O where every member
+agrees, C elsewhere. A meet only turns known micro-triangles unknown, so it is as conservative as
+the bake, and one micromap serves the whole cluster. An option's value is the triangle's weight
+(``Geometry.weight``: world area times instances for a scene, texel area for a texture and UVs)
+times its known fraction, plus one per recorded view hit (``Geometry.hits``) in a known
+micro-triangle. Its bytes are what the engine stores: nothing for a uniform micromap (a special
 index), else the micromap's data plus its 8-byte triangle record; a micromap with no unknown
 micro-triangle is stored 2-state (1 bit each, exactly as the 4-state map says), the others
-4-state. Triangles with identical UVs share one micromap, so the allocation is per distinct
-triangle with the weights of its copies summed; the packer's reuse of identical micromaps can
-only spend less. Levels are offered up to ``max_level`` and no finer than
+4-state. Triangles with identical UVs are one item; items storing the same micromap at a level
+form a group whose bytes are paid once, and a greedy over groups (``_adopt``) chooses; the bytes
+it counts are the packer's own. Levels are offered up to ``max_level`` and no finer than
 ``FINEST_TEXELS`` texels per micro-triangle edge (finer ones read the same footprint cells).
 """
 
