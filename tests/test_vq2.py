@@ -255,7 +255,8 @@ def test_corpus_acceptance(corpus_maps):
             sav.append(known_fraction(d))
         result[name] = np.mean(sav)
     print(f"\nVQ2 on {len(corpus_maps)} textures: sq16 {sq:.4f} tri3 {tri3:.4f} paper {result['paper']:.4f} "
-          f"best {result['best']:.4f} exhaustive {result['exhaustive']:.4f}; best/tri3 {result['best'] / tri3:.3f}, best/sq16 {result['best'] / sq:.4f}")
+          f"best {result['best']:.4f} exhaustive {result['exhaustive']:.4f}; best/tri3 {result['best'] / tri3:.3f}, "
+          f"best/sq16 {result['best'] / sq:.4f}")
     assert result["best"] >= 1.30 * tri3
     assert result["best"] >= 0.97 * sq
     assert result["best"] > result["paper"]

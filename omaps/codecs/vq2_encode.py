@@ -14,9 +14,9 @@ time (a lazy greedy: a candidate's gain from the previous pick bounds its next o
 by every quadrant taking its best transform and 2 greedy locals; the first pick is scored in
 displayed space (a quadrant with transform t and global g is the untransformed quadrant with
 t(g)). ``medium`` (default) runs this search; ``fast`` caps the candidates scored per pick;
-``thorough`` also runs the greedy over every transform combination that gives distinct canonical
-vectors (``medium`` before issue 14, ``EXHAUSTIVE``) and then swaps codebook entries while that
-keeps more cells. Every effort keeps the best block it has seen and stops once one is lossless.
+``thorough`` starts from ``medium``'s block, runs the greedy over every transform combination
+that gives distinct canonical vectors (``medium`` before issue 14, ``EXHAUSTIVE``) and then swaps
+codebook entries while that keeps more cells. Every effort keeps the best block it has seen and stops once one is lossless.
 """
 
 from __future__ import annotations
@@ -729,7 +729,9 @@ def _encode_best(maps, cap):
 
 
 @njit(cache=True)
-def _encode_exhaustive(maps, thorough):
+def _encode_exhaustive(maps, start_cb, start_tr, thorough):
+    """EXHAUSTIVE from the untransformed greedy block; thorough from the better of that and the
+    given start blocks (medium's: its kernel is not linked here, which halves this compile)."""
     n = maps.shape[0]
     idx = np.zeros((n, 64), dtype=np.int64)
     cb = np.zeros((n, N_ENTRIES), dtype=np.int64)
@@ -739,9 +741,13 @@ def _encode_exhaustive(maps, thorough):
         tr = np.zeros(4, dtype=np.int64)
         val, gl, ngl, lo, nlo = _greedy(item_code, item_cnt, n_item)
         if thorough and val < target:
-            v, t2, g2, n2, l2, m2 = _search_globals(item_code, item_cnt, n_item, target, CAP_MEDIUM)
+            g2 = start_cb[i, :N_GLOBAL].copy()
+            l2 = start_cb[i, N_GLOBAL:].copy().reshape(4, N_LOCAL)
+            m2 = np.full(4, N_LOCAL, dtype=np.int64)  # unused entries hold code 0, which keeps nothing
+            v = _value(_canonical(item_code, n_item, start_tr[i]), item_cnt, n_item, g2, N_GLOBAL, l2, m2)
             if v > val:
-                val, tr, gl, ngl, lo, nlo = v, t2, g2, n2, l2, m2
+                val, gl, ngl, lo, nlo = v, g2, N_GLOBAL, l2, m2
+                tr[:] = start_tr[i]
         if val < target:
             val, gl, ngl, lo, nlo = _search_exhaustive(item_code, item_cnt, n_item, target, gl, ngl, lo, nlo,
                                                        tr, val)
@@ -772,8 +778,12 @@ def encode_many_arrays(maps, encoder: int, effort: int):
     ``encoder`` 0 paper, 1 best; ``effort`` 0 fast, 1 medium, 2 thorough or ``EXHAUSTIVE``."""
     if encoder == 0:
         return _encode_paper(maps)
-    if effort >= 2:
-        return _encode_exhaustive(maps, effort == 2)
+    if effort == 2:  # thorough: medium's blocks, then the exhaustive search and swaps from them
+        _, cb, tr = _encode_best(maps, CAP_MEDIUM)
+        return _encode_exhaustive(maps, cb, tr, True)
+    if effort == EXHAUSTIVE:
+        n = len(maps)
+        return _encode_exhaustive(maps, np.zeros((n, N_ENTRIES), np.int64), np.zeros((n, 4), np.int64), False)
     return _encode_best(maps, CAP_FAST if effort == 0 else CAP_MEDIUM)
 
 
