@@ -20,7 +20,9 @@ def test_families_of_commands():
     assert families_for(ns(command="eval", schemes="vq2-paper,vq4x64-fast")) == ["square", "vq2", "vq4"]
     assert families_for(ns(command="trace", schemes="none,vq4")) == ["trace", "square", "vq4"]
     assert families_for(ns(command="trace", schemes="none,file:vq4,omm")) == ["trace"]
-    assert families_for(ns(command="trace", schemes="budget:1MiB")) == ["trace", "square", "vq2", "vq4"]
+    assert families_for(ns(command="trace", schemes="budget:1MiB")) == ["trace", "square", "vq2", "vq4", "budget"]
+    assert families_for(ns(command="omm", inputs=["a.glb"], expand=False, source="texture", budget=900)) == [
+        "micromap", "omm", "budget"]
     assert families_for(ns(command="omm", inputs=["a.glb"], expand=False, source="texture")) == ["micromap", "omm"]
     assert families_for(ns(command="omm", inputs=["a.glb"], expand=False, source="vq2")) == [
         "micromap", "omm", "square", "vq2"]
@@ -28,7 +30,7 @@ def test_families_of_commands():
     assert families_for(ns(command="encode", codec="vq4x64")) == ["square", "vq4"]
     assert families_for(ns(command="bake", scheme="tri4")) == ["micromap"]
     assert families_for(ns(command="decode", codec="vq4")) == []
-    assert all(f in FAMILIES for f in ["square", "micromap", "trace", "vq2", "vq4", "omm"])
+    assert all(f in FAMILIES for f in ["square", "micromap", "trace", "vq2", "vq4", "omm", "budget"])
 
 
 def test_empty_cache_is_announced_once_and_compiled_kernels_are_found(tmp_path):

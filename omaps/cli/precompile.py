@@ -34,13 +34,14 @@ FAMILIES = {
     "square": (("omaps.flag_table", "omaps.raster", "omaps.bake.square"), 10),
     "micromap": (("omaps.flag_table", "omaps.raster", "omaps.bake.micromap"), 6),
     "trace": (("omaps.trace.rays", "omaps.scene.pairing"), 10),
-    "vq2": (("omaps.codecs.vq2_encode",), 12),
-    "vq4": (("omaps.codecs.vq4_encode",), 45),
+    "vq2": (("omaps.codecs.vq2_encode",), 10),
+    "vq4": (("omaps.codecs.vq4_encode",), 30),
     "omm": (("omaps.omm.resolve", "omaps.omm.format"), 6),
+    "budget": (("omaps.budget", "omaps.omm.budget"), 10),
 }
 # what the README's first command compiles ahead, beside its own evaluation (which compiles
 # "square" and "micromap"): two processes, the longest family alone
-AHEAD = (("vq4",), ("trace", "vq2", "omm"))
+AHEAD = (("vq4",), ("trace", "vq2", "omm", "budget"))
 
 
 def _module_cached(name: str) -> bool:
@@ -76,7 +77,7 @@ def _scheme_families(text) -> list[str]:
     for name in str(text or "").lower().split(","):
         name = name.strip()
         if name.startswith("budget:"):
-            out += ["square", "vq2", "vq4"]
+            out += ["square", "vq2", "vq4", "budget"]
         elif re.match(r"sq\d+$", name):
             out.append("square")
         elif re.match(r"tri\d+$", name):
@@ -98,6 +99,8 @@ def families_for(args) -> list[str]:
         out = ["trace"] + _scheme_families(args.schemes)
     elif cmd == "omm" and getattr(args, "inputs", None) and not getattr(args, "expand", False):
         out = ["micromap", "omm"] + _scheme_families(getattr(args, "source", ""))
+        if getattr(args, "budget", None) is not None:
+            out.append("budget")
     elif cmd == "encode":
         out = _scheme_families(args.codec)
     elif cmd == "bake":
@@ -232,6 +235,8 @@ def warm(families) -> None:
             "vq4": [trace + ["--schemes", "none,vq4,vq4x64"],
                     ["eval", leaf, "--quiet", "--jobs", "1", "--schemes", "vq4,vq4x64"]],
             "omm": [["omm", scene, "-o", os.path.join(tmp, "omm"), "--quiet", "--threads", "1"]],
+            "budget": [["omm", scene, "-o", os.path.join(tmp, "omm_budget"), "--quiet", "--threads", "1",
+                        "--budget", "200"], trace + ["--schemes", "none,budget:1KiB"]],
         }
         failed = []
         for f in families:  # one family failing (no Embree, say) leaves the others compiled
