@@ -54,6 +54,8 @@ class Codec:
     # numba @njit (data: uint8[block_bytes], x, y) -> state of cell (x, y), reading only the bits it
     # needs; callable from other numba code (the tracer's any-hit filter)
     lookup: Callable
+    # (P, block_bytes) uint8 -> (P, N, N) maps in compiled code; None: ``_decode`` block by block
+    _decode_many: Callable[[np.ndarray], np.ndarray] | None = None
 
     @property
     def compressed(self) -> bool:
@@ -100,7 +102,10 @@ class Codec:
         return self._decode(b)
 
     def decode_many(self, blocks) -> np.ndarray:
+        """Blocks (P, block_bytes) (or their bytes, concatenated) -> their maps (P, N, N)."""
         b = np.ascontiguousarray(blocks, dtype=np.uint8).reshape(-1, self.block_bytes)
+        if self._decode_many is not None:
+            return self._decode_many(b)
         out = np.empty((len(b), self.map_size, self.map_size), np.uint8)
         for i, row in enumerate(b):
             out[i] = self._decode(row.tobytes())
@@ -116,15 +121,19 @@ def _raw(n: int) -> Codec:
     def enc(maps, encoder, effort):
         return pack_states(maps.reshape(len(maps), -1))
 
-    def dec(data):
-        m = unpack_states(np.frombuffer(data, np.uint8), n * n)[0].reshape(n, n)
-        if m.max() > states.C:  # the one 2-bit code that is no state: a corrupt map, not a guess
-            j, i = np.argwhere(m > states.C)[0]
-            raise InputError(f"cell ({i}, {j}) of the sq{n} map holds code {m[j, i]}, which is no state "
+    def dec_many(blocks):
+        m = unpack_states(blocks, n * n).reshape(-1, n, n)
+        if m.max(initial=0) > states.C:  # the one 2-bit code that is no state: a corrupt map, not a guess
+            k, j, i = np.argwhere(m > states.C)[0]
+            where = f" (map {k})" if len(m) > 1 else ""
+            raise InputError(f"cell ({i}, {j}) of the sq{n} map{where} holds code {m[k, j, i]}, which is no state "
                              "(0 T, 1 O, 2 C)")
         return m
 
-    return Codec(f"sq{n}", n, 2 * n * n, row_bytes(n * n), (), (), None, None, enc, dec, square_lookup(n))
+    def dec(data):
+        return dec_many(np.frombuffer(data, np.uint8)[None])[0]
+
+    return Codec(f"sq{n}", n, 2 * n * n, row_bytes(n * n), (), (), None, None, enc, dec, square_lookup(n), dec_many)
 
 
 def _vq(name: str) -> Codec:
@@ -133,16 +142,14 @@ def _vq(name: str) -> Codec:
     else:
         from . import vq4_block as block, vq4_encode as encoder
     x64 = name == "vq4x64"
-
-    def enc(maps, e, f):
-        if x64:
-            return np.stack([np.frombuffer(encoder.encode_x64(m, e, f), np.uint8) for m in maps])
-        return np.stack([np.frombuffer(b.pack(), np.uint8) for b in encoder.encode_many(maps, e, f)])
-
+    # maps -> bytes in bulk: the encoder's fields packed by the block module in compiled code,
+    # decoded again (the conservativeness check) the same way, with no block objects in between
+    enc = encoder.encode_blocks_x64 if x64 else encoder.encode_blocks
     size = block.X64_SIZE if x64 else block.SIZE
     nbytes = block.X64_BYTES if x64 else block.BLOCK_BYTES
     return Codec(name, size, 8 * nbytes, nbytes, ENCODERS, tuple(EFFORTS), "best", "medium", enc,
-                 block.decode_x64 if x64 else block.decode, block.lookup_x64 if x64 else block.lookup)
+                 block.decode_x64 if x64 else block.decode, block.lookup_x64 if x64 else block.lookup,
+                 block.decode_many_x64 if x64 else block.decode_many)
 
 
 def _synth(name: str) -> Codec:

@@ -13,6 +13,18 @@ Physical block (32 bytes, bits numbered as in ``bits.py``):
 
 Index 0, 1, 2: uniform T, O, C (the state codes themselves); 3, 4, 5: global entries 0..2;
 6, 7: the quadrant's local entries. Every 256-bit pattern is a valid block.
+
+Many blocks at once (compiled, no block objects): ``pack_many`` (fields -> bytes),
+``unpack_many`` (bytes -> fields) and ``decode_many`` (bytes -> maps). ``VQ2Block`` packs and
+unpacks through them.
+
+Example::
+
+    >>> import numpy as np
+    >>> idx = np.zeros((1, 64), np.int64); idx[0, 0] = 2  # vector 0 uniform C, the rest T
+    >>> data = pack_many(idx, np.zeros((1, 11), np.int64), np.zeros((1, 4), np.int64))
+    >>> data.shape, int(data[0, 0]), decode_many(data)[0, :2, :3].tolist()
+    ((1, 32), 2, [[2, 2, 0], [2, 2, 0]])
 """
 
 from __future__ import annotations
@@ -23,7 +35,8 @@ import numpy as np
 from numba import njit
 
 from .. import states
-from .bits import as_block, get_bits, put_bits
+from . import bits
+from .bits import as_block
 from .vec2 import CODE_STATES, FWD2, INV2
 
 BLOCK_BYTES = 32
@@ -32,6 +45,10 @@ INDEX_BITS, INDEX_POS = 3, 0
 CODE_BITS, CODEBOOK_POS = 5, 192
 N_GLOBAL, N_LOCAL, N_ENTRIES = 3, 2, 11
 TRANSFORM_BITS, TRANSFORM_POS = 3, 247
+# the block's fields in ``pack_many``'s order: 64 indices, 11 codebook entries, transforms of quadrants 1..3
+FIELD_POS = np.concatenate([INDEX_POS + INDEX_BITS * np.arange(64), CODEBOOK_POS + CODE_BITS * np.arange(N_ENTRIES),
+                            TRANSFORM_POS + TRANSFORM_BITS * np.arange(3)]).astype(np.int64)
+FIELD_BITS = np.array([INDEX_BITS] * 64 + [CODE_BITS] * N_ENTRIES + [TRANSFORM_BITS] * 3, dtype=np.int64)
 
 
 @njit(cache=True, inline="always")
@@ -65,22 +82,13 @@ class VQ2Block:
             raise ValueError("field out of range")
 
     def pack(self) -> bytes:
-        b = np.zeros(BLOCK_BYTES, dtype=np.uint8)
-        for v in range(64):
-            put_bits(b, INDEX_POS + INDEX_BITS * v, INDEX_BITS, int(self.indices[v]))
-        for s in range(N_ENTRIES):
-            put_bits(b, CODEBOOK_POS + CODE_BITS * s, CODE_BITS, int(self.codebook[s]))
-        for q in range(1, 4):
-            put_bits(b, TRANSFORM_POS + TRANSFORM_BITS * (q - 1), TRANSFORM_BITS, int(self.transforms[q]))
-        return b.tobytes()
+        """The physical block (32 bytes)."""
+        return pack_many(self.indices[None], self.codebook[None], self.transforms[None])[0].tobytes()
 
     @classmethod
     def unpack(cls, data) -> "VQ2Block":
-        b = as_block(data, BLOCK_BYTES, "a VQ2 block")
-        idx = [get_bits(b, INDEX_POS + INDEX_BITS * v, INDEX_BITS) for v in range(64)]
-        cb = [get_bits(b, CODEBOOK_POS + CODE_BITS * s, CODE_BITS) for s in range(N_ENTRIES)]
-        tr = [get_bits(b, TRANSFORM_POS + TRANSFORM_BITS * (q - 1), TRANSFORM_BITS) for q in range(1, 4)]
-        return cls(np.array(idx), np.array(cb), np.array(tr))
+        idx, cb, tr = unpack_many(as_block(data, BLOCK_BYTES, "a VQ2 block")[None])
+        return cls(idx[0], cb[0], tr[0])
 
     def decode(self) -> np.ndarray:
         """The 16x16 map (``map[y, x]``)."""
@@ -102,6 +110,31 @@ class VQ2Block:
 def decode(data) -> np.ndarray:
     """Physical block (32 bytes) to its 16x16 map."""
     return VQ2Block.unpack(data).decode()
+
+
+def pack_many(indices, codebook, transforms) -> np.ndarray:
+    """Symbolic fields of n blocks -> their physical blocks (n, 32) uint8: ``indices`` (n, 64) in
+    0..7, ``codebook`` (n, 11) 5-bit codes, ``transforms`` (n, 4) with column 0 all 0, or (n, 3)
+    for quadrants 1..3. ValueError for a field out of range."""
+    tr = np.asarray(transforms, dtype=np.int64)
+    if tr.ndim == 2 and tr.shape[1] == 4:
+        if np.any(tr[:, 0] != 0):
+            raise ValueError("transforms: the top-left quadrant's (column 0) must be 0")
+        tr = tr[:, 1:]
+    idx, cb = np.asarray(indices, dtype=np.int64), np.asarray(codebook, dtype=np.int64)
+    if idx.ndim != 2 or cb.ndim != 2 or tr.ndim != 2 or not len(idx) == len(cb) == len(tr):
+        raise ValueError(f"fields of n blocks: indices (n, 64), codebook (n, 11), transforms (n, 4); got shapes "
+                         f"{idx.shape}, {cb.shape}, {tr.shape}")
+    return bits.pack_many(np.concatenate([idx, cb, tr], axis=1), FIELD_POS, FIELD_BITS, BLOCK_BYTES)
+
+
+def unpack_many(blocks):
+    """Physical blocks (n, 32) uint8 -> (indices (n, 64), codebook (n, 11), transforms (n, 4)), int64,
+    transforms[:, 0] = 0."""
+    f = bits.unpack_many(blocks, FIELD_POS, FIELD_BITS)
+    tr = np.zeros((len(f), 4), dtype=np.int64)
+    tr[:, 1:] = f[:, 64 + N_ENTRIES:]
+    return f[:, :64], f[:, 64:64 + N_ENTRIES], tr
 
 
 # _CODE_POS[i, q]: bit position of the codebook entry index i selects in quadrant q (i >= 3; rows
@@ -139,3 +172,22 @@ def lookup_batch(blocks, block_ids, xs, ys):
     for i in range(xs.shape[0]):
         out[i] = lookup(blocks[block_ids[i]], xs[i], ys[i])
     return out
+
+
+@njit(cache=True)
+def _decode_many(blocks):
+    out = np.empty((blocks.shape[0], SIZE, SIZE), dtype=np.uint8)
+    for i in range(blocks.shape[0]):
+        for y in range(SIZE):
+            for x in range(SIZE):
+                out[i, y, x] = lookup(blocks[i], x, y)
+    return out
+
+
+def decode_many(blocks) -> np.ndarray:
+    """Physical blocks (n, 32) uint8 -> their 16x16 maps (n, 16, 16): ``lookup`` of every cell,
+    compiled (the same maps as ``decode`` of each)."""
+    b = np.ascontiguousarray(blocks, dtype=np.uint8)
+    if b.ndim != 2 or b.shape[1] != BLOCK_BYTES:
+        raise ValueError(f"VQ2 blocks must be (n, {BLOCK_BYTES}) bytes, got shape {b.shape}")
+    return _decode_many(b)

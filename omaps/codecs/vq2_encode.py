@@ -26,9 +26,9 @@ from numba import njit
 
 from .options import ENCODERS, EFFORTS, check_maps, check_options  # noqa: F401 (re-exported)
 from .vec2 import INVERSE_T, KNOWN, RETAINED, TRANS_CODE
-from .vq2_block import N_ENTRIES, N_GLOBAL, N_LOCAL, SIZE, VQ2Block, quadrant_of_vector
+from .vq2_block import N_ENTRIES, N_GLOBAL, N_LOCAL, SIZE, VQ2Block, pack_many, quadrant_of_vector
 
-__all__ = ["encode", "encode_many", "encode_arrays", "encode_many_arrays", "vector_codes", "EXHAUSTIVE",
+__all__ = ["encode", "encode_many", "encode_blocks", "encode_arrays", "encode_many_arrays", "vector_codes", "EXHAUSTIVE",
            "ENCODERS", "EFFORTS"]
 
 CAP_FAST, CAP_MEDIUM = 3, 99  # candidates scored per pick of a global entry after the first
@@ -798,6 +798,13 @@ def encode(map16, encoder: str = "best", effort: str = "medium") -> VQ2Block:
     e, f = check_options("VQ2", encoder, effort)
     idx, cb, tr = encode_arrays(check_maps(map16, SIZE, "VQ2"), e, f)
     return VQ2Block(idx, cb, tr)
+
+
+def encode_blocks(maps16, encoder: str = "best", effort: str = "medium") -> np.ndarray:
+    """Encode (n, 16, 16) maps (or one) straight to their physical blocks (n, 32) uint8, packed in
+    bulk (no block objects): the bytes ``encode_many``'s blocks pack to."""
+    e, f = check_options("VQ2", encoder, effort)
+    return pack_many(*encode_many_arrays(check_maps(maps16, SIZE, "VQ2").reshape(-1, SIZE, SIZE), e, f))
 
 
 def encode_many(maps16, encoder: str = "best", effort: str = "medium") -> list[VQ2Block]:

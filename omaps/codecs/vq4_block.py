@@ -16,6 +16,18 @@ Physical block (64 bytes, bits numbered as in ``bits.py``):
 Index 0, 1, 2: uniform T, O, C; index i >= 3: entry i - 3. Every 512-bit pattern is a valid block.
 ``vq4x64`` stores the 64x64 map's 32x32 quadrants (top-left, top-right, bottom-left,
 bottom-right) as four consecutive blocks.
+
+Many blocks at once (compiled, no block objects): ``pack_many`` (fields -> bytes),
+``unpack_many`` (bytes -> fields), ``decode_many`` and ``decode_many_x64`` (bytes -> maps).
+``VQ4Block`` packs and unpacks through them.
+
+Example::
+
+    >>> import numpy as np
+    >>> idx = np.zeros((1, 64), np.int64); idx[0, 1] = 1  # vector 1 uniform O, the rest T
+    >>> data = pack_many(idx, np.zeros((1, 13), np.int64), np.zeros((1, 4), np.int64))
+    >>> data.shape, int(data[0, 0]), decode_many(data)[0, 0, 2:6].tolist()
+    ((1, 64), 16, [0, 0, 1, 1])
 """
 
 from __future__ import annotations
@@ -26,7 +38,8 @@ import numpy as np
 from numba import njit
 
 from .. import states
-from .bits import as_block, get_bits, put_bits
+from . import bits
+from .bits import as_block
 from .vec4 import CFLAG_BIT, FWD4, INV4, KIND_BITS, PALETTE_BIT, entry_pattern, pattern_states
 
 BLOCK_BYTES = 64
@@ -48,6 +61,10 @@ for _i in range(3, 16):
     _BITS[_i] = (ENTRY_POS[_i - 3] + CFLAG_BIT[_k][_e]) | ((ENTRY_POS[_i - 3] + PALETTE_BIT[_k][_e]) << 16)
 
 X64_SIZE, X64_BYTES = 64, 4 * BLOCK_BYTES
+# the block's fields in ``pack_many``'s order: 64 indices, 13 codebook entries, transforms of quadrants 1..3
+FIELD_POS = np.concatenate([INDEX_POS + INDEX_BITS * np.arange(64), ENTRY_POS,
+                            TRANSFORM_POS + TRANSFORM_BITS * np.arange(3)]).astype(np.int64)
+FIELD_BITS = np.concatenate([[INDEX_BITS] * 64, KIND_BITS[ENTRY_KIND], [TRANSFORM_BITS] * 3]).astype(np.int64)
 
 
 @dataclass
@@ -72,22 +89,13 @@ class VQ4Block:
             raise ValueError("codebook entry out of range for its kind")
 
     def pack(self) -> bytes:
-        b = np.zeros(BLOCK_BYTES, dtype=np.uint8)
-        for v in range(64):
-            put_bits(b, INDEX_POS + INDEX_BITS * v, INDEX_BITS, int(self.indices[v]))
-        for j in range(N_ENTRIES):
-            put_bits(b, int(ENTRY_POS[j]), int(KIND_BITS[ENTRY_KIND[j]]), int(self.entries[j]))
-        for q in range(1, 4):
-            put_bits(b, TRANSFORM_POS + TRANSFORM_BITS * (q - 1), TRANSFORM_BITS, int(self.transforms[q]))
-        return b.tobytes()
+        """The physical block (64 bytes)."""
+        return pack_many(self.indices[None], self.entries[None], self.transforms[None])[0].tobytes()
 
     @classmethod
     def unpack(cls, data) -> "VQ4Block":
-        b = as_block(data, BLOCK_BYTES, "a VQ4 block")
-        idx = [get_bits(b, INDEX_POS + INDEX_BITS * v, INDEX_BITS) for v in range(64)]
-        ent = [get_bits(b, int(ENTRY_POS[j]), int(KIND_BITS[ENTRY_KIND[j]])) for j in range(N_ENTRIES)]
-        tr = [get_bits(b, TRANSFORM_POS + TRANSFORM_BITS * (q - 1), TRANSFORM_BITS) for q in range(1, 4)]
-        return cls(np.array(idx), np.array(ent), np.array(tr))
+        idx, ent, tr = unpack_many(as_block(data, BLOCK_BYTES, "a VQ4 block")[None])
+        return cls(idx[0], ent[0], tr[0])
 
     def vector_states(self, index: int) -> np.ndarray:
         """Stored (untransformed) 4x4 states of an index value."""
@@ -112,6 +120,31 @@ class VQ4Block:
 def decode(data) -> np.ndarray:
     """Physical block (64 bytes) to its 32x32 map."""
     return VQ4Block.unpack(data).decode()
+
+
+def pack_many(indices, entries, transforms) -> np.ndarray:
+    """Symbolic fields of n blocks -> their physical blocks (n, 64) uint8: ``indices`` (n, 64) in
+    0..15, ``entries`` (n, 13) codes of the kinds in ENTRY_KIND, ``transforms`` (n, 4) with column
+    0 all 0, or (n, 3) for quadrants 1..3. ValueError for a field out of range."""
+    tr = np.asarray(transforms, dtype=np.int64)
+    if tr.ndim == 2 and tr.shape[1] == 4:
+        if np.any(tr[:, 0] != 0):
+            raise ValueError("transforms: the top-left quadrant's (column 0) must be 0")
+        tr = tr[:, 1:]
+    idx, ent = np.asarray(indices, dtype=np.int64), np.asarray(entries, dtype=np.int64)
+    if idx.ndim != 2 or ent.ndim != 2 or tr.ndim != 2 or not len(idx) == len(ent) == len(tr):
+        raise ValueError(f"fields of n blocks: indices (n, 64), entries (n, 13), transforms (n, 4); got shapes "
+                         f"{idx.shape}, {ent.shape}, {tr.shape}")
+    return bits.pack_many(np.concatenate([idx, ent, tr], axis=1), FIELD_POS, FIELD_BITS, BLOCK_BYTES)
+
+
+def unpack_many(blocks):
+    """Physical blocks (n, 64) uint8 -> (indices (n, 64), entries (n, 13), transforms (n, 4)), int64,
+    transforms[:, 0] = 0."""
+    f = bits.unpack_many(blocks, FIELD_POS, FIELD_BITS)
+    tr = np.zeros((len(f), 4), dtype=np.int64)
+    tr[:, 1:] = f[:, 64 + N_ENTRIES:]
+    return f[:, :64], f[:, 64:64 + N_ENTRIES], tr
 
 
 def decode_x64(data) -> np.ndarray:
@@ -186,3 +219,39 @@ def lookup_batch_x64(maps, map_ids, xs, ys):
     for i in range(xs.shape[0]):
         out[i] = lookup_x64_at(flat, X64_BYTES * map_ids[i], xs[i], ys[i])
     return out
+
+
+@njit(cache=True)
+def _decode_many(data, n, size):
+    """Maps (n, size, size) of ``size`` x ``size`` cells each read by ``lookup_at`` (size 32) or
+    ``lookup_x64_at`` (size 64) from consecutive rows of flat ``data``."""
+    out = np.empty((n, size, size), dtype=np.uint8)
+    nbytes = data.shape[0] // max(n, 1)
+    for i in range(n):
+        for y in range(size):
+            for x in range(size):
+                if size == SIZE:
+                    out[i, y, x] = lookup_at(data, nbytes * i, x, y)
+                else:
+                    out[i, y, x] = lookup_x64_at(data, nbytes * i, x, y)
+    return out
+
+
+def _rows(blocks, nbytes, name):
+    b = np.ascontiguousarray(blocks, dtype=np.uint8)
+    if b.ndim != 2 or b.shape[1] != nbytes:
+        raise ValueError(f"{name} must be (n, {nbytes}) bytes, got shape {b.shape}")
+    return b
+
+
+def decode_many(blocks) -> np.ndarray:
+    """Physical blocks (n, 64) uint8 -> their 32x32 maps (n, 32, 32): ``lookup`` of every cell,
+    compiled (the same maps as ``decode`` of each)."""
+    b = _rows(blocks, BLOCK_BYTES, "VQ4 blocks")
+    return _decode_many(b.reshape(-1), len(b), SIZE)
+
+
+def decode_many_x64(maps) -> np.ndarray:
+    """VQ4x64 maps (n, 256) uint8 -> their 64x64 maps (n, 64, 64), as ``decode_x64`` of each."""
+    b = _rows(maps, X64_BYTES, "VQ4x64 maps")
+    return _decode_many(b.reshape(-1), len(b), X64_SIZE)

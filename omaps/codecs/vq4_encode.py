@@ -38,7 +38,7 @@ from numba.extending import intrinsic
 from .. import states
 from .options import ENCODERS, EFFORTS, check_maps, check_options  # noqa: F401 (re-exported)
 from .vec4 import FULL, FWD4, GENERAL, INV4, entry_code, popcount16, project, transform_mask, untransform_mask
-from .vq4_block import ENTRY_KIND, N_ENTRIES, SIZE, VQ4Block
+from .vq4_block import ENTRY_KIND, N_ENTRIES, SIZE, X64_BYTES, X64_SIZE, VQ4Block, pack_many
 
 N_KINDS = 4
 TOP_K = 16
@@ -921,6 +921,13 @@ def encode(map32, encoder: str = "best", effort: str = "medium") -> VQ4Block:
     return VQ4Block(idx[0], ent[0], tr[0])
 
 
+def encode_blocks(maps32, encoder: str = "best", effort: str = "medium") -> np.ndarray:
+    """Encode (n, 32, 32) maps (or one) straight to their physical blocks (n, 64) uint8, packed in
+    bulk (no block objects): the bytes ``encode_many``'s blocks pack to."""
+    e, f = check_options("VQ4", encoder, effort)
+    return pack_many(*encode_many_arrays(check_maps(maps32, SIZE, "VQ4").reshape(-1, SIZE, SIZE), e, f))
+
+
 def encode_many(maps32, encoder: str = "best", effort: str = "medium") -> list[VQ4Block]:
     e, f = check_options("VQ4", encoder, effort)
     m = check_maps(maps32, SIZE, "VQ4").reshape(-1, SIZE, SIZE)
@@ -929,11 +936,20 @@ def encode_many(maps32, encoder: str = "best", effort: str = "medium") -> list[V
 
 
 def split_x64(map64) -> np.ndarray:
-    """The four 32x32 quadrants of a 64x64 map, in vq4x64 block order."""
+    """The four 32x32 quadrants of a 64x64 map, in vq4x64 block order; of (n, 64, 64) maps, their
+    4n quadrants, map by map."""
     m = check_maps(map64, 2 * SIZE, "VQ4x64")
-    return m.reshape(2, SIZE, 2, SIZE).transpose(0, 2, 1, 3).reshape(4, SIZE, SIZE)
+    return m.reshape(-1, 2, SIZE, 2, SIZE).transpose(0, 1, 3, 2, 4).reshape(-1, SIZE, SIZE)
+
+
+def encode_blocks_x64(maps64, encoder: str = "best", effort: str = "medium") -> np.ndarray:
+    """(n, 64, 64) maps (or one) -> their VQ4x64 maps (n, 256) uint8, four blocks each, in bulk."""
+    return encode_blocks(split_x64(maps64), encoder, effort).reshape(-1, X64_BYTES)
 
 
 def encode_x64(map64, encoder: str = "best", effort: str = "medium") -> bytes:
     """A 64x64 map as four VQ4 blocks (256 bytes)."""
-    return b"".join(b.pack() for b in encode_many(split_x64(map64), encoder, effort))
+    m = check_maps(map64, X64_SIZE, "VQ4x64")
+    if m.size != X64_SIZE * X64_SIZE:
+        raise ValueError(f"encode_x64 encodes one 64x64 map, got shape {m.shape} (encode_blocks_x64 takes many)")
+    return encode_blocks_x64(m, encoder, effort)[0].tobytes()
