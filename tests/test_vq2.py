@@ -14,7 +14,7 @@ from omaps.alpha_test import StateRule
 from omaps.bake import bake_pair_triangles, bake_square, known_fraction
 from omaps.cli import main
 from omaps.codecs import vq2_block, vq2_encode
-from omaps.codecs.options import EFFORTS
+from omaps.codecs.options import EFFORTS, ENCODERS
 from omaps.codecs.vq2_block import VQ2Block
 from omaps.sampling import footprint_grid
 from omaps.texture import load_alpha
@@ -220,6 +220,115 @@ def test_format_worked_example():
     np.testing.assert_array_equal(m[0:2, 2:4], [[O, C], [O, C]])
     np.testing.assert_array_equal(m[0:2, 8:10], [[C, T], [C, T]])  # rotated a quarter turn
     assert m[6, 6] == C and m[15, 15] == O and (m == T).sum() == 240
+
+
+# ---- many blocks at once (issue 14: maps -> bytes in bulk) -----------------------------------
+
+def reference_pack(indices, codebook, transforms) -> bytes:
+    """Packer written from docs/FORMAT.md alone: one big integer, fields OR-ed in at their bits
+    (the per-field packer ``VQ2Block.pack`` had before issue 14)."""
+    x = 0
+    for v in range(64):
+        x |= int(indices[v]) << (3 * v)
+    for s in range(11):
+        x |= int(codebook[s]) << (192 + 5 * s)
+    for q in (1, 2, 3):
+        x |= int(transforms[q]) << (247 + 3 * (q - 1))
+    return x.to_bytes(32, "little")
+
+
+@st.composite
+def symbolic_blocks(draw):
+    """n random symbolic blocks: every field anywhere in its range (transforms[:, 0] = 0)."""
+    n = draw(st.integers(1, 6))
+    idx = draw(arrays(np.int64, (n, 64), elements=st.integers(0, 7)))
+    cb = draw(arrays(np.int64, (n, 11), elements=st.integers(0, 31)))
+    tr = draw(arrays(np.int64, (n, 4), elements=st.integers(0, 7)))
+    tr[:, 0] = 0
+    return idx, cb, tr
+
+
+@settings(max_examples=200, deadline=None)
+@given(symbolic_blocks())
+def test_bulk_pack_is_the_formats_packing(fields):
+    idx, cb, tr = fields
+    got = vq2_block.pack_many(idx, cb, tr)
+    assert got.shape == (len(idx), 32) and got.dtype == np.uint8
+    for i in range(len(idx)):
+        want = reference_pack(idx[i], cb[i], tr[i])
+        assert got[i].tobytes() == want
+        assert VQ2Block(idx[i], cb[i], tr[i]).pack() == want
+    np.testing.assert_array_equal(vq2_block.pack_many(idx, cb, tr[:, 1:]), got)  # quadrants 1..3 alone
+    for a, b in zip(vq2_block.unpack_many(got), (idx, cb, tr)):
+        np.testing.assert_array_equal(a, b)
+
+
+@settings(max_examples=100, deadline=None)
+@given(st.lists(st.binary(min_size=32, max_size=32), min_size=1, max_size=5))
+def test_bulk_decode_and_unpack_of_any_bytes(datas):
+    blocks = np.frombuffer(b"".join(datas), np.uint8).reshape(-1, 32)
+    maps = vq2_block.decode_many(blocks)
+    idx, cb, tr = vq2_block.unpack_many(blocks)
+    for i, data in enumerate(datas):
+        np.testing.assert_array_equal(maps[i], reference_decode(data))
+        assert reference_pack(idx[i], cb[i], tr[i]) == data
+    np.testing.assert_array_equal(vq2_block.pack_many(idx, cb, tr), blocks)
+
+
+def test_bulk_pack_rejects_fields_out_of_range():
+    idx, cb, tr = np.zeros((2, 64), np.int64), np.zeros((2, 11), np.int64), np.zeros((2, 4), np.int64)
+    for arr, k, v in [(idx, (1, 5), 8), (cb, (0, 10), 32), (tr, (1, 3), 8), (idx, (0, 0), -1)]:
+        bad = arr.copy()
+        bad[k] = v
+        args = [bad if a is arr else a for a in (idx, cb, tr)]
+        with pytest.raises(ValueError, match="does not fit"):
+            vq2_block.pack_many(*args)
+    tr1 = tr.copy()
+    tr1[0, 0] = 1
+    with pytest.raises(ValueError, match="top-left"):
+        vq2_block.pack_many(idx, cb, tr1)
+    with pytest.raises(ValueError, match="32"):
+        vq2_block.decode_many(np.zeros((2, 31), np.uint8))
+
+
+def _tile_maps(paths, size, tile=64, limit=300):
+    """The size x size map of every tile x tile texel tile of some real textures (bench/common.py's
+    maps), without all-T / all-O ones."""
+    rule = StateRule()
+    out = []
+    for p in paths:
+        s = rule.classify(load_alpha(p))
+        for y in range(0, s.shape[0] - tile + 1, tile):
+            for x in range(0, s.shape[1] - tile + 1, tile):
+                m = bake_square(footprint_grid(s[y:y + tile, x:x + tile]), size)
+                if len(np.unique(m)) > 1:
+                    out.append(m)
+    return np.stack(out[:: max(1, len(out) // limit)][:limit])
+
+
+@pytest.fixture(scope="module")
+def tile_maps16():
+    return _tile_maps(REAL[::8], 16)
+
+
+@needs_shared
+@pytest.mark.parametrize("encoder, effort", [("paper", "medium"), ("best", "fast"), ("best", "medium"),
+                                             ("best", "thorough")])
+def test_codec_bytes_are_the_packed_blocks_on_tile_maps(tile_maps16, encoder, effort):
+    """What eval / trace / omm store (the registry's ``encode_many``, packed and decoded in bulk)
+    is, byte for byte, the encoder's symbolic blocks packed field by field, and decodes to the
+    format's maps."""
+    from omaps.codecs import get_codec
+
+    maps = tile_maps16 if effort != "thorough" else tile_maps16[::5]
+    blocks, decoded = get_codec("vq2").encode_many(maps, encoder, effort)
+    e, f = ENCODERS.index(encoder), EFFORTS[effort]
+    idx, cb, tr = vq2_encode.encode_many_arrays(maps, e, f)
+    assert [b.tobytes() for b in blocks] == [reference_pack(idx[i], cb[i], tr[i]) for i in range(len(maps))]
+    np.testing.assert_array_equal(blocks, vq2_encode.encode_blocks(maps, encoder, effort))
+    for i in range(0, len(maps), 7):
+        np.testing.assert_array_equal(decoded[i], reference_decode(blocks[i].tobytes()))
+    assert states.is_conservative(maps, decoded)
 
 
 # ---- the corpus acceptance --------------------------------------------------------------------
