@@ -219,6 +219,88 @@ def test_x64_encodes_quadrants():
                                       vq4_encode.encode(q, "best", "fast").decode())
 
 
+# ---- many blocks at once (issue 14: maps -> bytes in bulk) -----------------------------------
+
+ENTRY_BITS = [17, 17, 17, 18, 18] + [20] * 8  # docs/FORMAT.md's codebook
+
+
+def reference_pack(indices, entries, transforms) -> bytes:
+    """Packer written from docs/FORMAT.md alone: one big integer, fields OR-ed in at their bits
+    (the per-field packer ``VQ4Block.pack`` had before issue 14)."""
+    x = 0
+    for v in range(64):
+        x |= int(indices[v]) << (4 * v)
+    for j in range(13):
+        x |= int(entries[j]) << (256 + sum(ENTRY_BITS[:j]))
+    for q in (1, 2, 3):
+        x |= int(transforms[q]) << (503 + 3 * (q - 1))
+    return x.to_bytes(64, "little")
+
+
+@st.composite
+def symbolic_blocks(draw):
+    """n random symbolic blocks: every field anywhere in its range (transforms[:, 0] = 0)."""
+    n = draw(st.integers(1, 6))
+    idx = draw(arrays(np.int64, (n, 64), elements=st.integers(0, 15)))
+    ent = np.array([[draw(st.integers(0, (1 << w) - 1)) for w in ENTRY_BITS] for _ in range(n)], np.int64)
+    tr = draw(arrays(np.int64, (n, 4), elements=st.integers(0, 7)))
+    tr[:, 0] = 0
+    return idx, ent, tr
+
+
+@settings(max_examples=200, deadline=None)
+@given(symbolic_blocks())
+def test_bulk_pack_is_the_formats_packing(fields):
+    idx, ent, tr = fields
+    got = vq4_block.pack_many(idx, ent, tr)
+    assert got.shape == (len(idx), 64) and got.dtype == np.uint8
+    for i in range(len(idx)):
+        want = reference_pack(idx[i], ent[i], tr[i])
+        assert got[i].tobytes() == want
+        assert VQ4Block(idx[i], ent[i], tr[i]).pack() == want
+    np.testing.assert_array_equal(vq4_block.pack_many(idx, ent, tr[:, 1:]), got)  # quadrants 1..3 alone
+    for a, b in zip(vq4_block.unpack_many(got), (idx, ent, tr)):
+        np.testing.assert_array_equal(a, b)
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.lists(st.binary(min_size=256, max_size=256), min_size=1, max_size=3))
+def test_bulk_decode_and_unpack_of_any_bytes(datas):
+    maps64 = np.frombuffer(b"".join(datas), np.uint8).reshape(-1, 256)
+    blocks = maps64.reshape(-1, 64)
+    maps = vq4_block.decode_many(blocks)
+    idx, ent, tr = vq4_block.unpack_many(blocks)
+    for i in range(len(blocks)):
+        data = blocks[i].tobytes()
+        np.testing.assert_array_equal(maps[i], reference_decode(data))
+        assert reference_pack(idx[i], ent[i], tr[i]) == data
+    np.testing.assert_array_equal(vq4_block.pack_many(idx, ent, tr), blocks)
+    got64 = vq4_block.decode_many_x64(maps64)
+    for i, data in enumerate(datas):
+        np.testing.assert_array_equal(got64[i], vq4_block.decode_x64(data))
+        for k in range(4):  # the x64 map's quadrant k is its block k
+            y, x = 32 * (k >> 1), 32 * (k & 1)
+            np.testing.assert_array_equal(got64[i, y:y + 32, x:x + 32], maps[4 * i + k])
+
+
+def test_bulk_pack_rejects_fields_out_of_range():
+    idx, ent, tr = np.zeros((2, 64), np.int64), np.zeros((2, 13), np.int64), np.zeros((2, 4), np.int64)
+    for arr, k, v in [(idx, (1, 5), 16), (ent, (0, 2), 1 << 17), (ent, (1, 4), 1 << 18), (ent, (0, 12), 1 << 20),
+                      (tr, (1, 3), 8), (ent, (0, 0), -1)]:
+        bad = arr.copy()
+        bad[k] = v
+        args = [bad if a is arr else a for a in (idx, ent, tr)]
+        with pytest.raises(ValueError, match="does not fit"):
+            vq4_block.pack_many(*args)
+    ent[0, 12] = (1 << 20) - 1  # the widest entry's largest code fits
+    assert vq4_block.pack_many(idx, ent, tr).shape == (2, 64)
+    tr[0, 0] = 1
+    with pytest.raises(ValueError, match="top-left"):
+        vq4_block.pack_many(idx, ent, tr)
+    with pytest.raises(ValueError, match="256"):
+        vq4_block.decode_many_x64(np.zeros((1, 64), np.uint8))
+
+
 # ---- the corpus acceptance --------------------------------------------------------------------
 
 REAL = real_textures(min_size=64)
@@ -260,6 +342,52 @@ def test_corpus_acceptance(corpus_maps):
     assert best[1] >= 1.14 * sq[32]
     for other in (res["paper", "medium"], res["best", "fast"]):
         assert best[0] > other[0] and best[1] > other[1]
+
+
+def _tile_maps(paths, size, tile=64, limit=200):
+    """The size x size map of every tile x tile texel tile of some real textures (bench/common.py's
+    maps), without all-T / all-O ones."""
+    rule = StateRule()
+    out = []
+    for p in paths:
+        s = rule.classify(load_alpha(p))
+        for y in range(0, s.shape[0] - tile + 1, tile):
+            for x in range(0, s.shape[1] - tile + 1, tile):
+                m = bake_square(footprint_grid(s[y:y + tile, x:x + tile]), size)
+                if len(np.unique(m)) > 1:
+                    out.append(m)
+    return np.stack(out[:: max(1, len(out) // limit)][:limit])
+
+
+@pytest.fixture(scope="module")
+def tile_maps32():
+    return _tile_maps(REAL[::8], 32)
+
+
+@needs_shared
+@pytest.mark.parametrize("encoder, effort", [("paper", "medium"), ("best", "fast"), ("best", "medium"),
+                                             ("best", "thorough")])
+def test_codec_bytes_are_the_packed_blocks_on_tile_maps(tile_maps32, encoder, effort):
+    """What eval / trace / omm store (the registry's ``encode_many``, packed and decoded in bulk)
+    is, byte for byte, the encoder's symbolic blocks packed field by field, and decodes to the
+    format's maps; a vq4x64 map is its four quadrants' blocks."""
+    from omaps.codecs import get_codec
+    from omaps.codecs.options import EFFORTS, ENCODERS
+
+    maps = tile_maps32 if encoder == "best" and effort != "thorough" else tile_maps32[::5]
+    blocks, decoded = get_codec("vq4").encode_many(maps, encoder, effort)
+    idx, ent, tr = vq4_encode.encode_many_arrays(maps, ENCODERS.index(encoder), EFFORTS[effort])
+    assert [b.tobytes() for b in blocks] == [reference_pack(idx[i], ent[i], tr[i]) for i in range(len(maps))]
+    np.testing.assert_array_equal(blocks, vq4_encode.encode_blocks(maps, encoder, effort))
+    for i in range(0, len(maps), 9):
+        np.testing.assert_array_equal(decoded[i], reference_decode(blocks[i].tobytes()))
+    assert states.is_conservative(maps, decoded)
+    n = len(maps) // 4
+    m64 = maps[:4 * n].reshape(n, 2, 2, 32, 32).transpose(0, 1, 3, 2, 4).reshape(n, 64, 64)
+    b64, d64 = get_codec("vq4x64").encode_many(m64, encoder, effort)
+    np.testing.assert_array_equal(b64, blocks[:4 * n].reshape(n, 256))
+    assert b64[0].tobytes() == vq4_encode.encode_x64(m64[0], encoder, effort)
+    np.testing.assert_array_equal(d64[:, 32:, :32], decoded[2:4 * n:4])
 
 
 # ---- CLI -------------------------------------------------------------------------------------
