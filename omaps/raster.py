@@ -40,6 +40,26 @@ def edge_extent(ax, ay, bx, by, y0, y1, xmin, xmax):
     return min(xmin, min(xl, xh)), max(xmax, max(xl, xh))
 
 
+@njit(cache=True, inline="always")
+def row_span(poly, k, r, grow, ymin, ymax):
+    """Cell columns [c0, c1) that convex polygon ``poly[:k]`` (y-range [ymin, ymax]), grown by
+    ``grow``, overlaps in the row band [r, r+1]; (0, 0) when none."""
+    y0 = max(float(r) - grow, ymin)
+    y1 = min(float(r + 1) + grow, ymax)
+    if y1 < y0 or (y1 == y0 and grow == 0.0):
+        return 0, 0
+    xmin = np.inf
+    xmax = -np.inf
+    for i in range(k):
+        j = i + 1 if i + 1 < k else 0
+        xmin, xmax = edge_extent(poly[i, 0], poly[i, 1], poly[j, 0], poly[j, 1], y0, y1, xmin, xmax)
+    xmin -= grow
+    xmax += grow
+    if not xmax > xmin:
+        return 0, 0
+    return int(math.floor(xmin)), int(math.ceil(xmax))
+
+
 @njit(cache=True)
 def polygon_flags(flags, mixed, values, bounds, period_x, period_y, poly, grow=0.0):
     """OR of the flags of every cell overlapped by convex polygon ``poly`` (K, 2) given in cell
@@ -62,21 +82,11 @@ def polygon_flags(flags, mixed, values, bounds, period_x, period_y, poly, grow=0
     buf_b = np.empty((0, 2))
     acc = 0
     for r in range(int(math.floor(ymin - grow)), int(math.ceil(ymax + grow))):
-        y0 = max(float(r) - grow, ymin)
-        y1 = min(float(r + 1) + grow, ymax)
-        if y1 < y0 or (y1 == y0 and grow == 0.0):
-            continue
-        xmin = np.inf
-        xmax = -np.inf
-        for i in range(k):
-            xmin, xmax = edge_extent(poly[i, 0], poly[i, 1], poly[(i + 1) % k, 0], poly[(i + 1) % k, 1], y0, y1,
-                                     xmin, xmax)
-        xmin -= grow
-        xmax += grow
-        if not xmax > xmin:
+        c0, c1 = row_span(poly, k, r, grow, ymin, ymax)
+        if c1 <= c0:
             continue
         row = cell_index(r, hc, period_y)
-        for c in range(int(math.floor(xmin)), int(math.ceil(xmax))):
+        for c in range(c0, c1):
             col = cell_index(c, wc, period_x)
             f = flags[row, col]
             if exact and mixed[row, col]:
@@ -128,21 +138,9 @@ def polygon_flags_table(sat, grid, poly, k, grow, buf_a, buf_b):
         if acc == 3:
             return 3
     for r in range(int(math.floor(ymin - grow)), int(math.ceil(ymax + grow))):
-        b0 = max(float(r) - grow, ymin)
-        b1 = min(float(r + 1) + grow, ymax)
-        if b1 < b0 or (b1 == b0 and grow == 0.0):
+        c0, c1 = row_span(poly, k, r, grow, ymin, ymax)
+        if c1 <= c0:
             continue
-        xmin = np.inf
-        xmax = -np.inf
-        for i in range(k):
-            j = i + 1 if i + 1 < k else 0
-            xmin, xmax = edge_extent(poly[i, 0], poly[i, 1], poly[j, 0], poly[j, 1], b0, b1, xmin, xmax)
-        xmin -= grow
-        xmax += grow
-        if not xmax > xmin:
-            continue
-        c0 = int(math.floor(xmin))
-        c1 = int(math.ceil(xmax))
         nt, no, nm, n = box_counts(sat, r, r + 1, c0, c1, period_y, period_x)
         if nt > nm:  # cells other than mixed ones with the T bit
             acc |= 1

@@ -102,3 +102,30 @@ def as_block(data, nbytes: int, name: str = "block") -> np.ndarray:
     if b.shape != (nbytes,):
         raise ValueError(f"{name} must be {nbytes} bytes, got {b.size}")
     return b
+
+
+def pack_block_fields(indices, entries, transforms, pos, width, nbytes: int) -> np.ndarray:
+    """A VQ codec's symbolic fields of n blocks -> physical blocks (n, nbytes) uint8: ``indices``
+    (n, 64), ``entries`` (n, E), ``transforms`` (n, 4) with column 0 all 0, or (n, 3) for quadrants
+    1..3, in that order at the codec's field positions ``pos`` and widths ``width`` (64 + E + 3
+    fields). ValueError for a field out of range or a wrong shape."""
+    tr = np.asarray(transforms, dtype=np.int64)
+    if tr.ndim == 2 and tr.shape[1] == 4:
+        if np.any(tr[:, 0] != 0):
+            raise ValueError("transforms: the top-left quadrant's (column 0) must be 0")
+        tr = tr[:, 1:]
+    idx, ent = np.asarray(indices, dtype=np.int64), np.asarray(entries, dtype=np.int64)
+    if idx.ndim != 2 or ent.ndim != 2 or tr.ndim != 2 or not len(idx) == len(ent) == len(tr):
+        raise ValueError(f"fields of n blocks: indices (n, 64), entries (n, {len(pos) - 67}), transforms (n, 4); "
+                         f"got shapes {idx.shape}, {ent.shape}, {tr.shape}")
+    return pack_many(np.concatenate([idx, ent, tr], axis=1), pos, width, nbytes)
+
+
+def unpack_block_fields(blocks, pos, width):
+    """Physical blocks -> (indices (n, 64), entries (n, E), transforms (n, 4)), int64,
+    transforms[:, 0] = 0: the inverse of ``pack_block_fields``."""
+    f = unpack_many(blocks, pos, width)
+    tr = np.zeros((len(f), 4), dtype=np.int64)
+    tr[:, 1:] = f[:, len(pos) - 3:]
+    return f[:, :64], f[:, 64:len(pos) - 3], tr
+

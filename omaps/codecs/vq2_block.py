@@ -116,25 +116,13 @@ def pack_many(indices, codebook, transforms) -> np.ndarray:
     """Symbolic fields of n blocks -> their physical blocks (n, 32) uint8: ``indices`` (n, 64) in
     0..7, ``codebook`` (n, 11) 5-bit codes, ``transforms`` (n, 4) with column 0 all 0, or (n, 3)
     for quadrants 1..3. ValueError for a field out of range."""
-    tr = np.asarray(transforms, dtype=np.int64)
-    if tr.ndim == 2 and tr.shape[1] == 4:
-        if np.any(tr[:, 0] != 0):
-            raise ValueError("transforms: the top-left quadrant's (column 0) must be 0")
-        tr = tr[:, 1:]
-    idx, cb = np.asarray(indices, dtype=np.int64), np.asarray(codebook, dtype=np.int64)
-    if idx.ndim != 2 or cb.ndim != 2 or tr.ndim != 2 or not len(idx) == len(cb) == len(tr):
-        raise ValueError(f"fields of n blocks: indices (n, 64), codebook (n, 11), transforms (n, 4); got shapes "
-                         f"{idx.shape}, {cb.shape}, {tr.shape}")
-    return bits.pack_many(np.concatenate([idx, cb, tr], axis=1), FIELD_POS, FIELD_BITS, BLOCK_BYTES)
+    return bits.pack_block_fields(indices, codebook, transforms, FIELD_POS, FIELD_BITS, BLOCK_BYTES)
 
 
 def unpack_many(blocks):
     """Physical blocks (n, 32) uint8 -> (indices (n, 64), codebook (n, 11), transforms (n, 4)), int64,
     transforms[:, 0] = 0."""
-    f = bits.unpack_many(blocks, FIELD_POS, FIELD_BITS)
-    tr = np.zeros((len(f), 4), dtype=np.int64)
-    tr[:, 1:] = f[:, 64 + N_ENTRIES:]
-    return f[:, :64], f[:, 64:64 + N_ENTRIES], tr
+    return bits.unpack_block_fields(blocks, FIELD_POS, FIELD_BITS)
 
 
 # _CODE_POS[i, q]: bit position of the codebook entry index i selects in quadrant q (i >= 3; rows
