@@ -36,7 +36,7 @@ __all__ = ["HIT_LEVEL", "allocate", "upper_hull", "parse_bytes", "triangle_weigh
 # (``trace.lookups.mixed_map_state``): no map (all C), a raw N x N square, or a codec block.
 PAIR_OPTIONS = ("none", "sq1", "sq2", "sq4", "sq8", "sq16", "sq32", "sq64", "vq2", "vq4", "vq4x64")
 
-# Where a view's candidate hits are recorded (``trace.budget.view_samples``): the micro-triangle
+# Where a view's candidate hits are recorded (``view.view_samples``): the micro-triangle
 # at this subdivision level, so that a budget can value any coarser level by the hits it knows.
 HIT_LEVEL = 8
 

@@ -140,11 +140,11 @@ def cmd_omm(a) -> int:
     settings = _settings(a)
     t0 = time.perf_counter()
     view, view_info = None, None
-    if a.weights == "view":  # the tracer's library (not its command) counts where the view's hits fall
+    if a.weights == "view":  # where the view's hits fall: the same counting trace as trace's budget
         if settings.budget is None or spec["kind"] != "gltf":
             raise InputError("--weights view needs --budget and a glTF scene")
         from ..scene import load_scene
-        from ..trace.budget import scene_view_samples
+        from ..view import scene_view_samples
 
         w, h = parse_size(a.size)
         weights, hits, cam = scene_view_samples(load_scene(spec["path"]), material_rules(a), w, h)

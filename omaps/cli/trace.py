@@ -203,7 +203,8 @@ def cmd_trace(a) -> int:
     budgets = [s for s in schemes if s.kind == "budget"]
     if budgets:
         from ..budget import triangle_weights
-        from ..trace.budget import budget_maps, view_weights
+        from ..trace.budget import budget_maps
+        from ..view import view_weights
 
         t0 = time.perf_counter()
         weights = view_weights(prep, cam, w, h) if a.weights == "view" else triangle_weights(scene, prep.alpha)

@@ -89,7 +89,7 @@ def load_uvs(path) -> np.ndarray:
 
 def load_geometries(spec: dict, view=None) -> tuple[list[Geometry], list[dict], list[str]]:
     """(geometries, skipped primitives, warnings) of an input spec. ``view``: a scene's --budget
-    weights and hits per alpha triangle (``trace.budget.scene_view_samples``) instead of area."""
+    weights and hits per alpha triangle (``view.scene_view_samples``) instead of area."""
     if spec["kind"] == "texture":
         tex = load_alpha(spec["texture"], spec.get("channel"))
         test = StateRule("cutoff", cutoff=spec["cutoff"]).alpha_test(tex, spec["filter"], spec["wrap"])
