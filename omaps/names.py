@@ -10,7 +10,8 @@ Example::
     (('nearest', 'linear'), 'nearest')
 """
 
-__all__ = ["WRAP_MODES", "FILTERS", "MODES", "BLEND_RULES", "PROMOTIONS", "ENCODERS", "EFFORTS", "OMM_FORMATS"]
+__all__ = ["WRAP_MODES", "FILTERS", "MODES", "BLEND_RULES", "PROMOTIONS", "ENCODERS", "EFFORTS", "OMM_FORMATS",
+           "BUDGET_WEIGHTS"]
 
 WRAP_MODES = ("wrap", "clamp", "mirror")  # texture addressing (``sampling``)
 FILTERS = ("nearest", "linear")  # texture filters (``sampling``)
@@ -20,3 +21,4 @@ PROMOTIONS = ("nearest", "opaque", "transparent", "hashed")  # what a C region b
 ENCODERS = ("paper", "best")  # the deck's compressor, and our search (``codecs.options``)
 EFFORTS = {"fast": 0, "medium": 1, "thorough": 2}  # our encoder's search effort (``codecs.options``)
 OMM_FORMATS = {"2state": 1, "4state": 2}  # standard OMM formats and their codes (``omm.format``)
+BUDGET_WEIGHTS = ("area", "view")  # a byte budget's weights: world area x instances, or ``view``

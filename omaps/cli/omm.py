@@ -8,7 +8,7 @@ import time
 
 from ..atomic import Outputs
 from ..errors import InputError
-from ..names import OMM_FORMATS, PROMOTIONS
+from ..names import BUDGET_WEIGHTS, OMM_FORMATS, PROMOTIONS
 from .common import add_codec_options, add_material_options, check_jobs, material_rules, parse_size, show_progress
 
 GLTF_EXTENSIONS = (".gltf", ".glb")
@@ -42,7 +42,7 @@ def add_parser(sub) -> None:
                          "that saves the most expected any-hit calls per byte of micromap data + records, every "
                          "triangle within BYTES (1263936, 1.2MiB, 800KiB); weights: world area x instances "
                          "(a scene), texel area (a texture); see --weights")
-    lv.add_argument("--weights", choices=("area", "view"), default="area",
+    lv.add_argument("--weights", choices=BUDGET_WEIGHTS, default=BUDGET_WEIGHTS[0],
                     help="--budget's weights: area (world area x instances, the default) or view: where the "
                          "candidate hits of a one-thread trace of the scene's default camera (as omaps trace "
                          "chooses it for --size) at half the resolution fall, plus 5%% of them spread by area")

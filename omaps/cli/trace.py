@@ -16,6 +16,7 @@ import numpy as np
 
 from ..atomic import Outputs, write_text
 from ..errors import InputError
+from ..names import BUDGET_WEIGHTS
 from ..schemes import TRACE_KINDS, parse_schemes
 from ..trace.camera import DEFAULT_LIGHT
 from .common import (add_codec_options, add_material_options, check_jobs, material_rules, parse_size,
@@ -53,7 +54,7 @@ def add_parser(sub) -> None:
                         "budget:BYTES (per pair the map -- none, sqN up to 64, vq2, vq4 or vq4x64 -- that saves the "
                         "most alpha tests per byte, every pair together within BYTES: 1263936, 1.2MiB, 800KiB) "
                         "(default: %(default)s)")
-    t.add_argument("--weights", choices=("area", "view"), default="area",
+    t.add_argument("--weights", choices=BUDGET_WEIGHTS, default=BUDGET_WEIGHTS[0],
                    help="budget schemes: a pair's expected candidate hits are its triangles' world area times "
                         "instances (area: rays uniform over the scene), or their candidate hits in a trace of "
                         "this view at half the resolution (view) (default: %(default)s)")
