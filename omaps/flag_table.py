@@ -8,12 +8,14 @@ the region has that state, exactly as the cell-by-cell rasteriser would find it.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from numba import njit
 
 from .sampling import FootprintGrid
 
-__all__ = ["flag_table", "box_counts", "MARGIN"]
+__all__ = ["flag_table", "box_counts", "box_flag", "MARGIN"]
 
 MARGIN = 1e-9  # relative widening of region boxes; float rounding of the coordinates is ~1e-15
 
@@ -94,3 +96,23 @@ def box_counts(sat, r0, r1, c0, c1, period_y, period_x):
             nm += _rect(sat, ya1, yb1, xa1, xb1, 2)
     n = (yb0 - ya0 + yb1 - ya1) * (xb0 - xa0 + xb1 - xa1)
     return nt, no, nm, n
+
+
+@njit(cache=True, inline="always")
+def box_flag(sat, xmin, xmax, ymin, ymax, margin, period_y, period_x):
+    """The flag every part of a region inside [xmin, xmax] x [ymin, ymax] (widened by ``margin``)
+    reads, when the box decides it: 1 (only T cells), 2 (only O cells), 3 (only C cells, none
+    mixed), else 0; with the box's mixed and distinct cell counts (nm, nc)."""
+    c0 = int(math.floor(xmin - margin))
+    c1 = int(math.ceil(xmax + margin))
+    r0 = int(math.floor(ymin - margin))
+    r1 = int(math.ceil(ymax + margin))
+    nt, no, nm, nc = box_counts(sat, r0, r1, c0, c1, period_y, period_x)
+    if no == 0:
+        return 1, nm, nc
+    if nt == 0:
+        return 2, nm, nc
+    if nt == nc and no == nc and nm == 0:
+        return 3, nm, nc
+    return 0, nm, nc
+

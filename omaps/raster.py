@@ -115,12 +115,13 @@ def _vertex_flags(grid, poly, k, grow):
 
 
 @njit(cache=True)
-def polygon_flags_table(sat, grid, poly, k, grow, buf_a, buf_b):
+def polygon_flags_table(sat, grid, poly, k, grow, scratch):
     """``polygon_flags`` of convex polygon ``poly[:k]``, the same arithmetic (row bands,
     x-extents, growth) and the same flag, with each row's cell span counted in O(1) from the
     summed-area table ``sat`` (``flag_table.flag_table``); only a span holding mixed bilinear
-    cells is walked cell by cell. ``grid``: ``FootprintGrid.kernel_args()``; ``buf_a``, ``buf_b``
-    (POLY_MAX, 2) scratch for ``bilinear.cell_flag``."""
+    cells is walked cell by cell. ``grid``: ``FootprintGrid.kernel_args()``; ``scratch``
+    (2 * POLY_MAX, 2) for ``bilinear.cell_flag``, sliced only when a mixed cell needs it (this runs
+    once per leaf of the bakers: millions of times)."""
     flags, mixed, values, bounds, period_x, period_y = grid
     ymin = poly[0, 1]
     ymax = poly[0, 1]
@@ -157,7 +158,8 @@ def polygon_flags_table(sat, grid, poly, k, grow, buf_a, buf_b):
             for c in range(c0, c1):
                 col = cell_index(c, wc, period_x)
                 if mixed[row, col]:
-                    acc |= cell_flag(values, bounds, period_x, period_y, row, col, poly, k, c, r, grow, buf_a, buf_b)
+                    acc |= cell_flag(values, bounds, period_x, period_y, row, col, poly, k, c, r, grow,
+                                     scratch[:POLY_MAX], scratch[POLY_MAX:2 * POLY_MAX])
                     if acc == 3:
                         return 3
         if acc == 3:

@@ -27,8 +27,6 @@ Example::
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 from numba import njit, prange
 
@@ -37,7 +35,7 @@ from ..bilinear import POLY_MAX
 from ..errors import InputError
 from ..pair import pair_weights
 from ..sampling import FootprintGrid
-from ..flag_table import MARGIN, box_counts, flag_table
+from ..flag_table import MARGIN, box_flag, flag_table
 
 __all__ = ["bake_pair_squares", "bake_pair_flags", "or_downsample", "flags_to_states", "MAX_SQUARE",
            "check_square_size"]
@@ -93,7 +91,7 @@ def _texel_point(uv, b, tri, s, t, w, h, off):
 
 
 @njit(cache=True)
-def _cell_flag(sat, grid, off, w, h, uv, tri, n, i, j, grow, rect, poly, pts, buf_a, buf_b):
+def _cell_flag(sat, grid, off, w, h, uv, tri, n, i, j, grow, rect, poly, pts, scratch):
     """Flag of triangle ``tri``'s part of cell (i, j) (0 when the part has no area)."""
     s0 = i / n
     s1 = (i + 1) / n
@@ -115,7 +113,7 @@ def _cell_flag(sat, grid, off, w, h, uv, tri, n, i, j, grow, rect, poly, pts, bu
         return 0
     for v in range(k):
         pts[v, 0], pts[v, 1] = _texel_point(uv, 3 * tri, tri, poly[v, 0], poly[v, 1], w, h, off)
-    return raster.polygon_flags_table(sat, grid, pts, k, grow, buf_a, buf_b)
+    return raster.polygon_flags_table(sat, grid, pts, k, grow, scratch)
 
 
 MIN_TREE_AREA = 1e-3  # texel area below which an ungrown triangle is baked cell by cell
@@ -127,15 +125,14 @@ def _pair_flags(sat, grid, off, w, h, uv, has_b, n, grow, out):
     """Flags (n, n) of one pair's square map ORed into ``out`` (zeros on entry).
 
     Each triangle's part is walked as a quadtree of cell blocks: when the box around a block's
-    image in texture space (``flag_table.box_counts``) holds only T, only O, or only unmixed C
+    image in texture space (``flag_table.box_flag``) holds only T, only O, or only unmixed C
     cells, every cell of the block in that triangle reads exactly that flag, as ``_cell_flag``
     would find it cell by cell (each part has area, so it reads at least one cell of the box);
     otherwise the block splits, down to single cells rasterised by ``_cell_flag``."""
     rect = np.empty((4, 2))
     poly = np.empty((8, 2))
     pts = np.empty((8, 2))
-    buf_a = np.empty((POLY_MAX, 2))
-    buf_b = np.empty((POLY_MAX, 2))
+    scratch = np.empty((2 * POLY_MAX, 2))
     st_i = np.empty(STACK, np.int64)
     st_j = np.empty(STACK, np.int64)
     st_n = np.empty(STACK, np.int64)
@@ -168,7 +165,7 @@ def _pair_flags(sat, grid, off, w, h, uv, has_b, n, grow, out):
             if (tri == 0 and i0 + m - 1 < j0) or (tri == 1 and i0 > j0 + m - 1):
                 continue
             if m == 1:
-                out[j0, i0] |= _cell_flag(sat, grid, off, w, h, uv, tri, n, i0, j0, grow, rect, poly, pts, buf_a, buf_b)
+                out[j0, i0] |= _cell_flag(sat, grid, off, w, h, uv, tri, n, i0, j0, grow, rect, poly, pts, scratch)
                 continue
             f = 0
             if tree:
@@ -184,17 +181,7 @@ def _pair_flags(sat, grid, off, w, h, uv, has_b, n, grow, out):
                     xmax = max(xmax, x)
                     ymin = min(ymin, y)
                     ymax = max(ymax, y)
-                c0 = int(math.floor(xmin - margin))
-                c1 = int(math.ceil(xmax + margin))
-                r0 = int(math.floor(ymin - margin))
-                r1 = int(math.ceil(ymax + margin))
-                nt, no, nm, nc = box_counts(sat, r0, r1, c0, c1, py, px)
-                if no == 0:
-                    f = 1
-                elif nt == 0:
-                    f = 2
-                elif nt == nc and no == nc and nm == 0:
-                    f = 3
+                f, _, _ = box_flag(sat, xmin, xmax, ymin, ymax, margin, py, px)
             if f:
                 for j in range(j0, j0 + m):
                     for i in range(i0, i0 + m):

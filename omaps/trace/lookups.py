@@ -87,7 +87,7 @@ def stored_micromap_state(table, tri, b1, b2):
 @njit(cache=True)
 def counting_state(table, tri, b1, b2):
     """No map (every candidate C), counting each triangle's candidate hits and recording where
-    they fall: ``trace.budget``'s view weights. The int64 words: triangles n, record capacity,
+    they fall: the view weights (``omaps.view``). The int64 words: triangles n, record capacity,
     hits recorded, n counts, then per hit ``tri << 2 * HIT_LEVEL | micro-triangle at HIT_LEVEL``.
     Run on one thread: plain increments."""
     c = i64_ptr(table[T_COUNT])
