@@ -23,7 +23,6 @@ from __future__ import annotations
 import contextlib
 import errno
 import os
-import secrets
 import shutil
 import signal
 import threading
@@ -34,7 +33,7 @@ TEMP_PREFIX = ".omaps-"
 
 
 def _temp_name(folder: str, suffix: str = "") -> str:
-    return os.path.join(folder, f"{TEMP_PREFIX}{secrets.token_hex(6)}{suffix}")
+    return os.path.join(folder, f"{TEMP_PREFIX}{os.urandom(6).hex()}{suffix}")
 
 
 def make_temp_file(folder, suffix: str = "") -> str:

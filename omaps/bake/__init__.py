@@ -7,10 +7,25 @@
 * ``pair_maps``: both on the corpus pair, and the savings metric.
 """
 
-from .micromap import GROW_TEXEL, bake_micromap_rows, bake_micromaps, check_level, dynamic_levels, micro_starts
-from .pair_maps import bake_pair_triangles, bake_square, known_fraction, texel_limit
-from .square import bake_pair_flags, bake_pair_squares, check_square_size, or_downsample
+import importlib
+
+# each public name's module, imported on first use: ``omaps omm`` from a texture loads the micromap
+# baker alone (start-up is part of every run's time)
+_HOME = {**dict.fromkeys(("GROW_TEXEL", "bake_micromap_rows", "bake_micromaps", "check_level", "dynamic_levels",
+                          "micro_starts"), "micromap"),
+         **dict.fromkeys(("bake_pair_triangles", "bake_square", "known_fraction", "texel_limit"), "pair_maps"),
+         **dict.fromkeys(("bake_pair_flags", "bake_pair_squares", "check_square_size", "or_downsample"), "square")}
 
 __all__ = ["GROW_TEXEL", "bake_micromaps", "bake_micromap_rows", "check_level", "dynamic_levels", "micro_starts",
            "bake_pair_triangles", "bake_square", "known_fraction", "texel_limit", "bake_pair_flags",
            "bake_pair_squares", "check_square_size", "or_downsample"]
+
+
+def __getattr__(name):
+    if name in _HOME:
+        return getattr(importlib.import_module(f".{_HOME[name]}", __name__), name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
+def __dir__():
+    return sorted(list(globals()) + __all__)

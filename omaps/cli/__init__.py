@@ -1,5 +1,5 @@
 """The ``omaps`` command line (``main``); each command composes the core and re-implements none of it."""
 
-from .main import main
+from .main import main, run
 
-__all__ = ["main"]
+__all__ = ["main", "run"]

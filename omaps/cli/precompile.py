@@ -19,9 +19,7 @@ import importlib
 import io
 import os
 import re
-import subprocess
 import sys
-import tempfile
 import time
 
 __all__ = ["FAMILIES", "uncached", "families_for", "announce", "start_ahead", "finish_ahead", "stop_ahead",
@@ -143,6 +141,8 @@ def start_ahead(args):
     names = [f for g in groups for f in g]
     print(f"omaps: compiling the numba kernels of {', '.join(names)} ahead of first use, beside this "
           f"evaluation (once; about {max(_seconds(g) for g in groups)} s)", file=sys.stderr, flush=True)
+    import subprocess  # here, not at the top: a command that starts nothing ahead skips its import
+
     procs = [(g, subprocess.Popen([sys.executable, "-m", "omaps.cli.precompile", *g], stdin=subprocess.DEVNULL,
                                   stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)) for g in groups]
     return procs, time.perf_counter()
@@ -222,6 +222,8 @@ def _quad_scene(folder: str) -> str:
 def warm(families) -> None:
     """Compile the families' kernels by running the commands that use them on tiny inputs."""
     from .main import main
+
+    import tempfile
 
     with tempfile.TemporaryDirectory(prefix="omaps-precompile-") as tmp:
         scene = _quad_scene(tmp)

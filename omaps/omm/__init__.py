@@ -13,9 +13,21 @@ Example::
     (dtype('uint8'), ('data_offset', 'level', 'format'), [0])
 """
 
-from .files import read, write
-from .pairs import expand, merge
-from .pipeline import Geometry, OmmResult, OmmSettings, build
-from .verify import verify
+import importlib
+
+# where each public name lives: imported on first use, so that a command (``omaps omm``) loads
+# only the modules, and the numba kernels, it needs
+_HOME = {"read": "files", "write": "files", "expand": "pairs", "merge": "pairs", "Geometry": "pipeline",
+         "OmmResult": "pipeline", "OmmSettings": "pipeline", "build": "pipeline", "verify": "verify"}
 
 __all__ = ["Geometry", "OmmResult", "OmmSettings", "build", "read", "write", "expand", "merge", "verify"]
+
+
+def __getattr__(name):
+    if name in _HOME:
+        return getattr(importlib.import_module(f".{_HOME[name]}", __name__), name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
+def __dir__():
+    return sorted(list(globals()) + __all__)

@@ -29,15 +29,16 @@ import numpy as np
 
 from .. import __version__, states
 from ..alpha_test import AlphaTest
-from ..bake import GROW_TEXEL, bake_micromaps, bake_pair_squares, check_level, dynamic_levels, micro_starts
-from ..bake.micromap import check_uv_triangles, flag_table, texel_areas
+from ..bake.micromap import (GROW_TEXEL, bake_micromaps, check_level, check_uv_triangles, dynamic_levels, flag_table,
+                             micro_starts, texel_areas)
 from ..errors import InputError
-from ..pair import corner_uvs
-from ..promotion import PROMOTIONS
-from ..schemes import get_scheme
-from ..workers import encode_maps
+from ..names import PROMOTIONS
 from . import format as omm_format
-from . import pairs, resolve
+from . import resolve
+
+# The square sources (--from SCHEME: the pair baker, the codecs, the encoding workers, the
+# expansion) are imported where they are used, so that baking from the texture loads none of
+# their modules and kernels: start-up is part of every omm run's time.
 
 __all__ = ["Geometry", "OmmSettings", "OmmResult", "build"]
 
@@ -71,7 +72,9 @@ class Geometry:
         """(pair_of (T,), corners (T, 3), pairs (P, 2): triangles A and B, -1 for none)."""
         n = len(self.tris_uv)
         if self.pair_of is None:
-            return pairs.corpus_pairing(n)
+            from .pairs import corpus_pairing
+
+            return corpus_pairing(n)
         pair_of = np.asarray(self.pair_of, dtype=np.int64)
         corners = np.asarray(self.corners, dtype=np.int8).reshape(n, 3)
         p = int(pair_of.max()) + 1 if n else 0
@@ -119,7 +122,11 @@ class OmmSettings:
     @property
     def scheme(self):
         """The square scheme of a ``--from`` source (None for ``texture``)."""
-        return None if self.source == "texture" else get_scheme(self.source, self.encoder, self.effort)
+        if self.source == "texture":
+            return None
+        from ..schemes import get_scheme
+
+        return get_scheme(self.source, self.encoder, self.effort)
 
     @property
     def format_code(self) -> int:
@@ -261,6 +268,11 @@ def _pair_states(g: Geometry, grid, tris: np.ndarray, scheme, jobs: int = 1) -> 
     """T/O/C micromaps (flat) at level log2 N of every triangle from its pair's square map, stored
     and decoded by the scheme's codec; the blocks (P, bytes) and the pairing records."""
     pair_of, corners, prs = g.pairing()
+    from ..bake.square import bake_pair_squares
+    from ..pair import corner_uvs
+    from ..workers import encode_maps
+    from .pairs import expand
+
     uv, has_b = corner_uvs(tris, corners, prs[:, 0], prs[:, 1])  # every pair has an A
     squares = bake_pair_squares(grid, uv, has_b, scheme.codec.map_size, GROW_TEXEL)
     if g.unknown is not None:  # a pair with an unknown triangle is all C
@@ -271,12 +283,14 @@ def _pair_states(g: Geometry, grid, tris: np.ndarray, scheme, jobs: int = 1) -> 
     rec = np.zeros(len(tris), dtype=omm_format.PAIR_RECORD)
     rec["pair"] = pair_of
     rec["corners"] = corners
-    return pairs.expand(decoded, pair_of, corners).ravel(), blocks, rec
+    return expand(decoded, pair_of, corners).ravel(), blocks, rec
 
 
 def _triangle_levels(test: AlphaTest, tris: np.ndarray, settings: OmmSettings, n_map: int | None) -> np.ndarray:
     if n_map is not None:
-        return np.full(len(tris), pairs.level_of_size(n_map), dtype=np.int64)
+        from .pairs import level_of_size
+
+        return np.full(len(tris), level_of_size(n_map), dtype=np.int64)
     if settings.dynamic_scale is not None:
         return dynamic_levels(tris, test.width, test.height, settings.dynamic_scale, settings.max_level)
     return np.full(len(tris), settings.level, dtype=np.int64)

@@ -1,0 +1,46 @@
+"""The ``omaps`` program ends without tearing the interpreter down (``omaps.cli.run``): its exit
+code is ``main``'s, its output reaches a file or a pipe whole, and exit handlers still run."""
+
+import os
+import subprocess
+import sys
+
+import numpy as np
+from PIL import Image
+
+ENV = {k: v for k, v in os.environ.items() if k != "PYTHONUNBUFFERED"}  # buffered streams, as by default
+SCRIPT = """
+import atexit, sys
+atexit.register(lambda: open(sys.argv[1], "w").write("ran"))
+from omaps.cli import run
+run(sys.argv[2:])
+"""
+
+
+def _leaf(tmp_path):
+    img = np.zeros((8, 8, 4), np.uint8)
+    img[2:6, 2:6, 3] = 255
+    Image.fromarray(img).save(tmp_path / "leaf.png")
+    np.save(tmp_path / "uvs.npy", np.array([[[0, 0], [1, 0], [0, 1]]], float))
+
+
+def test_run_flushes_output_and_runs_exit_handlers(tmp_path):
+    _leaf(tmp_path)
+    out = tmp_path / "stdout.txt"
+    with open(out, "w") as f:  # a file: stdout is block-buffered, so an unflushed line would be lost
+        r = subprocess.run([sys.executable, "-c", SCRIPT, str(tmp_path / "mark"), "omm", str(tmp_path / "leaf.png"),
+                            str(tmp_path / "uvs.npy"), "-o", str(tmp_path / "omm"), "--quiet"], stdout=f,
+                           stderr=subprocess.PIPE, text=True, cwd=tmp_path, env=ENV)
+    assert r.returncode == 0, r.stderr
+    assert "1 triangles, 256 micro-triangles" in out.read_text()
+    assert (tmp_path / "mark").read_text() == "ran"
+    assert (tmp_path / "omm" / "omm.json").is_file()
+
+
+def test_run_keeps_the_exit_code_of_bad_input(tmp_path):
+    r = subprocess.run([sys.executable, "-c", SCRIPT, str(tmp_path / "mark"), "omm", str(tmp_path / "absent.png"),
+                        str(tmp_path / "uvs.npy"), "-o", str(tmp_path / "omm")], capture_output=True, text=True, env=ENV)
+    assert r.returncode == 2
+    assert "absent.png" in r.stderr
+    assert (tmp_path / "mark").read_text() == "ran"
+    assert not (tmp_path / "omm").exists()
