@@ -100,7 +100,7 @@ def _clip_axis(src, k, dst, axis, bound, keep_above):
     return m
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def region_extremes(poly, k, ox, oy, lo, hi, a00, a01, a10, a11, buf_a, buf_b):
     """(min, max) of the bilinear f of taps a.. over polygon poly[:k] - (ox, oy) (local
     coordinates) clipped to the box [lo, hi]²; (inf, -inf) when nothing is left. ``buf_*``:
@@ -156,7 +156,7 @@ def region_extremes(poly, k, ox, oy, lo, hi, a00, a01, a10, a11, buf_a, buf_b):
     return mn, mx
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def cell_flag(values, bounds, period_x, period_y, row, col, poly, k, c, r, grow, buf_a, buf_b):
     """Flag (1 T, 2 O, 3 C) of convex polygon poly[:k] (grid coordinates), grown by ``grow``,
     within the cell of unaddressed index (r, c), stored at (row, col). ``buf_*``: scratch
@@ -215,7 +215,7 @@ def _classify(mn, mx, a00, a01, a10, a11, bounds, grow):
     return 3
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def point_flag(flags, mixed, values, bounds, period_x, period_y, x, y, grow):
     """Flag of one point (x, y) (grid coordinates) of a region: part of the region's own flag,
     so a region whose points' flags OR to 3 is C without clipping it to any cell (a quick

@@ -78,32 +78,21 @@ def check_uv_triangles(tris_uv) -> np.ndarray:
     return t
 
 
-@njit(cache=True, inline="always")
-def _points_flag(flags, mixed, values, bounds, period_x, period_y, x0, y0, x1, y1, x2, y2, grow, tri):
-    """OR of the three vertices' own flags (``bilinear.point_flag``); stores the triangle in
-    ``tri`` (3, 2) as the polygon ``bilinear.cell_flag`` clips."""
-    acc = point_flag(flags, mixed, values, bounds, period_x, period_y, x0, y0, grow)
-    acc |= point_flag(flags, mixed, values, bounds, period_x, period_y, x1, y1, grow)
-    acc |= point_flag(flags, mixed, values, bounds, period_x, period_y, x2, y2, grow)
-    tri[0, 0] = x0
-    tri[0, 1] = y0
-    tri[1, 0] = x1
-    tri[1, 1] = y1
-    tri[2, 0] = x2
-    tri[2, 1] = y2
-    return acc
-
-
-@njit(cache=True)
-def _leaf_flag(sat, grid, x0, y0, x1, y1, x2, y2, grow, scratch):
+@njit(cache=True, _nrt=False)
+def _leaf_flag(sat, flags, mixed, values, bounds, period_x, period_y, x0, y0, x1, y1, x2, y2, grow, points, tri,
+               buf_a, buf_b):
     """OR of the flags of the cells a micro-triangle (grown by ``grow``) overlaps (0: no area):
     ``raster.polygon_flags``' arithmetic, each row's cell span read in O(1) unless it holds mixed
     cells -- ``raster.polygon_flags_table`` for a triangle held in scalars: this is the baker's
     innermost call (millions per bake), and the general polygon version, reading its vertices
-    from an array, made the oak bake about 15 % slower (1.42 against 1.24 s on one thread). ``grid``: ``FootprintGrid.kernel_args()``; ``scratch`` (2 * POLY_MAX + 3, 2)."""
-    flags, mixed, values, bounds, period_x, period_y = grid
+    from an array, made the oak bake about 15 % slower (1.42 against 1.24 s on one thread).
+
+    ``points``: the OR of the three vertices' own flags (``bilinear.point_flag``) when the caller
+    has them (a leaf's vertices are shared with its siblings), else -1 (read here when needed).
+    ``tri`` (3, 2) receives the triangle, the polygon ``bilinear.cell_flag`` clips; ``buf_*``
+    (POLY_MAX, 2) scratch. No reference counting (``_nrt=False``: it allocates nothing): numba's
+    atomic counts of the array arguments took about a tenth of the bake."""
     points_done = False
-    tri = scratch[2 * POLY_MAX:]
     ymin = min(y0, min(y1, y2))
     ymax = max(y0, max(y1, y2))
     acc = 0
@@ -112,9 +101,11 @@ def _leaf_flag(sat, grid, x0, y0, x1, y1, x2, y2, grow, scratch):
         # first (cheap), a leaf across the cut-off is C before any row is counted. (Ungrown, a
         # vertex on a row's lower edge lies outside the spans: then only after a mixed span.)
         points_done = True
-        acc = _points_flag(flags, mixed, values, bounds, period_x, period_y, x0, y0, x1, y1, x2, y2, grow, tri)
+        acc = points if points >= 0 else _points_flag(flags, mixed, values, bounds, period_x, period_y, x0, y0, x1,
+                                                      y1, x2, y2, grow)
         if acc == 3:
             return 3
+        _set_tri(tri, x0, y0, x1, y1, x2, y2)
     for r in range(int(math.floor(ymin - grow)), int(math.ceil(ymax + grow))):
         b0 = max(float(r) - grow, ymin)
         b1 = min(float(r + 1) + grow, ymax)
@@ -139,22 +130,40 @@ def _leaf_flag(sat, grid, x0, y0, x1, y1, x2, y2, grow, scratch):
         if nm > 0 and acc != 3:  # the mixed cells, each decided on its own
             if not points_done:  # the vertices' own flags first (``raster.polygon_flags`` does the same)
                 points_done = True
-                acc |= _points_flag(flags, mixed, values, bounds, period_x, period_y, x0, y0, x1, y1, x2, y2, grow,
-                                    tri)
+                acc |= points if points >= 0 else _points_flag(flags, mixed, values, bounds, period_x, period_y, x0,
+                                                               y0, x1, y1, x2, y2, grow)
                 if acc == 3:
                     return 3
+                _set_tri(tri, x0, y0, x1, y1, x2, y2)
             hc, wc = flags.shape
             row = cell_index(r, hc, period_y)
             for c in range(c0, c1):
                 col = cell_index(c, wc, period_x)
                 if mixed[row, col]:
-                    acc |= cell_flag(values, bounds, period_x, period_y, row, col, tri, 3, c, r, grow,
-                                     scratch[:POLY_MAX], scratch[POLY_MAX:2 * POLY_MAX])
+                    acc |= cell_flag(values, bounds, period_x, period_y, row, col, tri, 3, c, r, grow, buf_a, buf_b)
                     if acc == 3:
                         return 3
         if acc == 3:
             return 3
     return acc
+
+
+@njit(cache=True, inline="always")
+def _points_flag(flags, mixed, values, bounds, period_x, period_y, x0, y0, x1, y1, x2, y2, grow):
+    """OR of the three vertices' own flags (``bilinear.point_flag``)."""
+    acc = point_flag(flags, mixed, values, bounds, period_x, period_y, x0, y0, grow)
+    acc |= point_flag(flags, mixed, values, bounds, period_x, period_y, x1, y1, grow)
+    return acc | point_flag(flags, mixed, values, bounds, period_x, period_y, x2, y2, grow)
+
+
+@njit(cache=True, inline="always")
+def _set_tri(tri, x0, y0, x1, y1, x2, y2):
+    tri[0, 0] = x0
+    tri[0, 1] = y0
+    tri[1, 0] = x1
+    tri[1, 1] = y1
+    tri[2, 0] = x2
+    tri[2, 1] = y2
 
 
 @njit(cache=True, inline="always")
@@ -169,23 +178,36 @@ def _vertex(tri, i, j, inv_n, w, h, offset):
     return u * w + offset, v * h + offset
 
 
+@njit(cache=True, inline="always")
+def _leaf_state(f):
+    """A leaf's state from its flag (0, no area: C, counted by the caller)."""
+    if f == 0 or f == 3:
+        return 2
+    return f - 1  # FLAG_T 1 -> T 0, FLAG_O 2 -> O 1
+
+
 NODE_EXACT_CELLS = 16  # a node box this small with mixed cells is rasterised before descending
 STACK = 3 * MAX_LEVEL + 4  # nodes pending: 3 more per level down, plus the root
+# the four children of a node (p0, p1, p2 and the midpoints m01, m12, m02 = 0 .. 5), bird-curve order
+CHILD_VERTS = ((0, 3, 5), (5, 4, 3), (3, 1, 4), (4, 5, 2))
 
 
-@njit(cache=True)
-def _bake_one(sat, grid, tri, level, w, h, offset, grow, out, st_l, st_k, st_v, scratch):
-    """States of one triangle's 4**level micro-triangles into ``out``; returns how many
+@njit(cache=True, _nrt=False)
+def _bake_one(sat, flags, mixed, values, bounds, period_x, period_y, tri, level, w, h, offset, grow, out, base, st_l,
+              st_k, st_v, vx, vf, ptri, buf_a, buf_b):
+    """States of one triangle's 4**level micro-triangles into ``out[base:]``; returns how many
     micro-triangles had no area (the reference raises on those). ``st_*``: the node stack
-    (level, index, barycentric grid coordinates of p0, p1, p2), STACK entries."""
-    period_x = grid[4]
-    period_y = grid[5]
+    (level, index, barycentric grid coordinates of p0, p1, p2), STACK entries; ``vx`` (6, 2),
+    ``vf`` (6,) the vertices of a node's children and their flags; ``ptri`` (3, 2), ``buf_*``
+    (POLY_MAX, 2) the leaf's scratch. A node just above the leaves bakes its four children in
+    place: their six vertices, and those vertices' own flags, are computed once."""
     n = 1 << level
     inv_n = 1.0 / n
     scale = 1.0
     for k in range(3):
         scale = max(scale, abs(tri[k, 0] * w) + abs(offset), abs(tri[k, 1] * h) + abs(offset))
     margin = MARGIN * scale + grow
+    points_first = grow > 0.0 and mixed.shape[0] > 0  # as ``_leaf_flag`` reads them
     st_l[0] = 0
     st_k[0] = 0
     st_v[0, 0] = 0
@@ -205,30 +227,55 @@ def _bake_one(sat, grid, tri, level, w, h, offset, grow, out, st_l, st_k, st_v, 
         x1, y1 = _vertex(tri, i1, j1, inv_n, w, h, offset)
         x2, y2 = _vertex(tri, i2, j2, inv_n, w, h, offset)
         state = -1
-        if lv == level:  # a leaf: rasterise exactly (its box was mixed at the parent already)
-            f = _leaf_flag(sat, grid, x0, y0, x1, y1, x2, y2, grow, scratch)
+        if lv == level:  # a leaf (level 0 only: deeper ones are baked with their siblings below)
+            f = _leaf_flag(sat, flags, mixed, values, bounds, period_x, period_y, x0, y0, x1, y1, x2, y2, grow, -1,
+                           ptri, buf_a, buf_b)
             if f == 0:
                 empty += 1
-                state = 2
-            else:
-                state = 2 if f == 3 else f - 1  # FLAG_T 1 -> T 0, FLAG_O 2 -> O 1
+            state = _leaf_state(f)
         else:
             f, nm, nc = box_flag(sat, min(x0, min(x1, x2)), max(x0, max(x1, x2)), min(y0, min(y1, y2)),
                                  max(y0, max(y1, y2)), margin, period_y, period_x)
             if f:
                 state = 2 if f == 3 else f - 1  # all T, all O, or every cell C and none mixed
             elif nm > 0 and nc <= NODE_EXACT_CELLS:
-                f = _leaf_flag(sat, grid, x0, y0, x1, y1, x2, y2, grow, scratch)
+                f = _leaf_flag(sat, flags, mixed, values, bounds, period_x, period_y, x0, y0, x1, y1, x2, y2, grow,
+                               -1, ptri, buf_a, buf_b)
                 if f == 1 or f == 2:
                     state = f - 1  # known exactly: so is every micro-triangle inside it
         if state >= 0:
             span = 1 << (2 * (level - lv))
-            out[k * span:(k + 1) * span] = state
+            for i in range(base + k * span, base + (k + 1) * span):
+                out[i] = state
             continue
-        # children in reverse so child 0 is handled first
         m01i, m01j = (i0 + i1) // 2, (j0 + j1) // 2
         m12i, m12j = (i1 + i2) // 2, (j1 + j2) // 2
         m02i, m02j = (i0 + i2) // 2, (j0 + j2) // 2
+        if lv + 1 == level:  # the children are leaves: bake the four here, sharing their vertices
+            vx[0, 0], vx[0, 1] = x0, y0
+            vx[1, 0], vx[1, 1] = x1, y1
+            vx[2, 0], vx[2, 1] = x2, y2
+            vx[3, 0], vx[3, 1] = _vertex(tri, m01i, m01j, inv_n, w, h, offset)
+            vx[4, 0], vx[4, 1] = _vertex(tri, m12i, m12j, inv_n, w, h, offset)
+            vx[5, 0], vx[5, 1] = _vertex(tri, m02i, m02j, inv_n, w, h, offset)
+            if points_first:
+                for v in range(6):
+                    vf[v] = point_flag(flags, mixed, values, bounds, period_x, period_y, vx[v, 0], vx[v, 1], grow)
+            for c in range(4):
+                a, b, d = CHILD_VERTS[c]
+                pts = -1
+                if points_first:
+                    pts = vf[a] | vf[b] | vf[d]
+                if pts == 3:
+                    f = 3
+                else:
+                    f = _leaf_flag(sat, flags, mixed, values, bounds, period_x, period_y, vx[a, 0], vx[a, 1],
+                                   vx[b, 0], vx[b, 1], vx[d, 0], vx[d, 1], grow, pts, ptri, buf_a, buf_b)
+                if f == 0:
+                    empty += 1
+                out[base + 4 * k + c] = _leaf_state(f)
+            continue
+        # children in reverse so child 0 is handled first
         for c in range(3, -1, -1):
             st_l[top] = lv + 1
             st_k[top] = 4 * k + c
@@ -255,17 +302,25 @@ CHUNK = 64  # triangles per parallel work item (one node stack each)
 
 @njit(cache=True, parallel=True)
 def _bake_all(sat, grid, tris, levels, starts, w, h, offset, grow, out):
+    flags, mixed, values, bounds, period_x, period_y = grid
     empty = np.zeros(tris.shape[0], dtype=np.int64)
     n_chunks = (tris.shape[0] + CHUNK - 1) // CHUNK
     for c in prange(n_chunks):
         st_l = np.empty(STACK, dtype=np.int64)
         st_k = np.empty(STACK, dtype=np.int64)
         st_v = np.empty((STACK, 6), dtype=np.int64)
-        scratch = np.empty((2 * POLY_MAX + 3, 2))
+        vx = np.empty((6, 2))
+        vf = np.empty(6, dtype=np.int64)
+        tri = np.empty((3, 2))
+        ptri = np.empty((3, 2))
+        buf_a = np.empty((POLY_MAX, 2))
+        buf_b = np.empty((POLY_MAX, 2))
         for t in range(c * CHUNK, min((c + 1) * CHUNK, tris.shape[0])):
-            n = 1 << (2 * levels[t])
-            empty[t] = _bake_one(sat, grid, tris[t], levels[t], w, h, offset, grow,
-                                 out[starts[t]:starts[t] + n], st_l, st_k, st_v, scratch)
+            for v in range(3):
+                tri[v, 0] = tris[t, v, 0]
+                tri[v, 1] = tris[t, v, 1]
+            empty[t] = _bake_one(sat, flags, mixed, values, bounds, period_x, period_y, tri, levels[t], w, h, offset,
+                                 grow, out, starts[t], st_l, st_k, st_v, vx, vf, ptri, buf_a, buf_b)
     return empty
 
 
