@@ -33,13 +33,15 @@ def _axes(poly):
 def overlapping_squares(poly, x0, y0, size):
     """Mask of squares [x0, x0+size] x [y0, y0+size] (arrays) whose interior meets the polygon's."""
     poly = np.asarray(poly, dtype=np.float64)
-    ok = np.ones(np.shape(x0), dtype=bool)
+    x0, y0 = np.broadcast_arrays(np.asarray(x0, dtype=np.float64), np.asarray(y0, dtype=np.float64))
+    ok = np.ones(x0.shape, dtype=bool)
     for n in _axes(poly):
         p = poly @ n
         pmin, pmax = p.min(), p.max()
-        corners = np.stack([x0 * n[0] + y0 * n[1], (x0 + size) * n[0] + y0 * n[1],
-                            x0 * n[0] + (y0 + size) * n[1], (x0 + size) * n[0] + (y0 + size) * n[1]])
-        qmin, qmax = corners.min(axis=0), corners.max(axis=0)
+        # the square's projection: its corner (x0, y0) plus the extreme corner offsets along n
+        q = x0 * n[0] + y0 * n[1]
+        qmin = q + size * (min(n[0], 0.0) + min(n[1], 0.0))
+        qmax = q + size * (max(n[0], 0.0) + max(n[1], 0.0))
         ok &= np.maximum(pmin, qmin) < np.minimum(pmax, qmax)
     return ok
 
@@ -82,17 +84,34 @@ def region_state(texels, poly_texel, filter="nearest"):
     return C
 
 
+def _interval_overlaps(lo, hi, cells):
+    """(len(lo), len(cells)) mask: open interval (lo, hi) meets open (cells, cells + 1)."""
+    return np.maximum(lo[:, None], cells[None, :]) < np.minimum(hi[:, None], cells[None, :] + 1.0)
+
+
 def square_map(states_img, n, filter="nearest", wrap="clamp"):
+    """The N x N map over the whole texture: cell (i, j) is [i w/N, (i+1) w/N] x [j h/N, (j+1) h/N].
+    An axis-aligned cell meets a texel's read square iff their x and y intervals overlap (the
+    separating axes of two axis-aligned boxes), so the texels a cell reads are rows x columns, and
+    the count of its non-T (non-O) texels is mask_y @ image @ mask_x^T, all cells at once."""
     h, w = states_img.shape
-    texels = Addressed(states_img, wrap, 4)
-    out = np.empty((n, n), dtype=np.uint8)
-    for j in range(n):
-        for i in range(n):
-            x0, x1 = i * w / n, (i + 1) * w / n
-            y0, y1 = j * h / n, (j + 1) * h / n
-            poly = [[x0, y0], [x1, y0], [x1, y1], [x0, y1]]
-            out[j, i] = region_state(texels, poly, filter)
-    return out
+    m = 4
+    padded = Addressed(states_img, wrap, m).padded
+    k = np.arange(n)
+    # the read square of texel x: [x, x+1] (nearest), (x-0.5, x+1.5) (a bilinear tap): as unit
+    # cells after halving the coordinates of the linear one
+    if filter == "nearest":
+        cx, cy, s = np.arange(-m, w + m, dtype=np.float64), np.arange(-m, h + m, dtype=np.float64), 1.0
+    else:
+        cx, cy, s = np.arange(-m, w + m) - 0.5, np.arange(-m, h + m) - 0.5, 2.0
+    mx = _interval_overlaps(k * w / n / s, (k + 1) * w / n / s, cx / s).astype(np.float32)
+    my = _interval_overlaps(k * h / n / s, (k + 1) * h / n / s, cy / s).astype(np.float32)
+    if not (mx.any(axis=1).all() and my.any(axis=1).all()):
+        raise ValueError("region reads nothing")
+    # texel counts (< 2^24, exact in float32)
+    non_t = (my @ (padded != T).astype(np.float32)) @ mx.T
+    non_o = (my @ (padded != O).astype(np.float32)) @ mx.T
+    return np.where(non_t == 0, T, np.where(non_o == 0, O, C)).astype(np.uint8)
 
 
 def subdivide(tri, level):
@@ -150,10 +169,35 @@ def bilinear_at(values, wrap_u, wrap_v, x, y):
     fx, fy = x - Fraction(1, 2), y - Fraction(1, 2)
     x0, y0 = math.floor(fx), math.floor(fy)
     ax, ay = fx - x0, fy - y0
-    t = [[Fraction(float(_tap(values, wrap_u, wrap_v, x0 + i, y0 + j))) for i in (0, 1)] for j in (0, 1)]
+    t = [[_exact(_tap(values, wrap_u, wrap_v, x0 + i, y0 + j)) for i in (0, 1)] for j in (0, 1)]
     top = t[0][0] + ax * (t[0][1] - t[0][0])
     bot = t[1][0] + ax * (t[1][1] - t[1][0])
     return top + ay * (bot - top)
+
+
+def _exact(v):
+    """A texel value as an exact number: an int for integer values (cheaper than a Fraction)."""
+    f = float(v)
+    return int(f) if f.is_integer() else Fraction(f)
+
+
+def _inside_many(poly, pts):
+    """``_inside`` for many points: float64 cross products decide where they are far from 0
+    (their rounding error is below 1e-9 of the terms' size); the few others exactly."""
+    pf = np.array([[float(x), float(y)] for x, y in poly])
+    q = np.array([[float(x), float(y)] for x, y in pts]).reshape(-1, 2)
+    a, b = pf, np.roll(pf, -1, axis=0)
+    t1 = (b[:, 0] - a[:, 0])[None, :] * (q[:, 1, None] - a[None, :, 1])
+    t2 = (b[:, 1] - a[:, 1])[None, :] * (q[:, 0, None] - a[None, :, 0])
+    cross = t1 - t2
+    sure = np.abs(cross) > 1e-9 * (np.abs(t1) + np.abs(t2)) + 1e-300
+    out = []
+    for k, p in enumerate(pts):
+        if sure[k].all():
+            out.append(bool(np.all(cross[k] > 0) or np.all(cross[k] < 0)))
+        else:
+            out.append(_inside(poly, p))
+    return out
 
 
 def _inside(poly, p):
@@ -169,8 +213,16 @@ def bilinear_extremes(values, wrap_u, wrap_v, poly_texel):
     ys = [p[1] for p in poly]
     gx = [i + half for i in range(math.floor(min(xs)) - 1, math.ceil(max(xs)) + 1)]
     gy = [j + half for j in range(math.floor(min(ys)) - 1, math.ceil(max(ys)) + 1)]
+    memo = {}
+
+    def at(x, y):  # the alpha at a point, each point computed once
+        if (x, y) not in memo:
+            memo[x, y] = bilinear_at(values, wrap_u, wrap_v, x, y)
+        return memo[x, y]
+
     cands = list(poly)
-    cands += [(x, y) for x in gx for y in gy if _inside(poly, (x, y))]
+    grid = [(x, y) for x in gx for y in gy]
+    cands += [p for p, inside in zip(grid, _inside_many(poly, grid)) if inside]
     for a, b in zip(poly, poly[1:] + poly[:1]):
         d = (b[0] - a[0], b[1] - a[1])
         ts = {Fraction(0), Fraction(1)}
@@ -181,10 +233,10 @@ def bilinear_extremes(values, wrap_u, wrap_v, poly_texel):
         for t in ts:
             cands.append((a[0] + t * d[0], a[1] + t * d[1]))
         for t0, t1 in zip(ts, ts[1:]):  # one dual square per piece: a quadratic in t
-            f0 = bilinear_at(values, wrap_u, wrap_v, a[0] + t0 * d[0], a[1] + t0 * d[1])
+            f0 = at(a[0] + t0 * d[0], a[1] + t0 * d[1])
             tm = (t0 + t1) / 2
-            fm = bilinear_at(values, wrap_u, wrap_v, a[0] + tm * d[0], a[1] + tm * d[1])
-            f1 = bilinear_at(values, wrap_u, wrap_v, a[0] + t1 * d[0], a[1] + t1 * d[1])
+            fm = at(a[0] + tm * d[0], a[1] + tm * d[1])
+            f1 = at(a[0] + t1 * d[0], a[1] + t1 * d[1])
             # q(u) = f0 + c1 u + c2 u^2 on u in [0, 1] through the three values
             c2 = 2 * (f0 + f1 - 2 * fm)
             c1 = f1 - f0 - c2
@@ -193,7 +245,7 @@ def bilinear_extremes(values, wrap_u, wrap_v, poly_texel):
                 if 0 < u < 1:
                     t = t0 + u * (t1 - t0)
                     cands.append((a[0] + t * d[0], a[1] + t * d[1]))
-    vals = [bilinear_at(values, wrap_u, wrap_v, x, y) for x, y in cands]
+    vals = [at(x, y) for x, y in cands]
     return min(vals), max(vals)
 
 
