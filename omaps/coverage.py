@@ -23,14 +23,17 @@ Example::
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from numba import njit, prange
 
 from . import birdcurve
 from .alpha_test import AlphaTest, sample_passes
 from .pair import pair_weights
+from .sampling import address
 
-__all__ = ["micro_fractions", "cell_fractions", "micro_vertices", "micro_corners", "micro_hits", "SAMPLES_PER_TEXEL",
+__all__ = ["micro_fractions", "cell_fractions", "micro_vertices", "micro_corners", "micro_corners_of", "micro_hits", "micro_hits_with", "SAMPLES_PER_TEXEL",
            "MAX_SAMPLE_LEVEL", "CELL_SAMPLES"]
 
 SAMPLES_PER_TEXEL = 16
@@ -73,15 +76,33 @@ def micro_vertices(index, level):
 @njit(cache=True)
 def micro_corners(tri_texel, index, level):
     """Texel coordinates (ax, ay, bx, by, cx, cy) of micro-triangle ``index``'s vertices."""
-    a1, a2, b1, b2, c1, c2 = _micro_vertices(index, level)
     t = tri_texel
-    qax = (1.0 - a1 - a2) * t[0, 0] + a1 * t[1, 0] + a2 * t[2, 0]
-    qay = (1.0 - a1 - a2) * t[0, 1] + a1 * t[1, 1] + a2 * t[2, 1]
-    qbx = (1.0 - b1 - b2) * t[0, 0] + b1 * t[1, 0] + b2 * t[2, 0]
-    qby = (1.0 - b1 - b2) * t[0, 1] + b1 * t[1, 1] + b2 * t[2, 1]
-    qcx = (1.0 - c1 - c2) * t[0, 0] + c1 * t[1, 0] + c2 * t[2, 0]
-    qcy = (1.0 - c1 - c2) * t[0, 1] + c1 * t[1, 1] + c2 * t[2, 1]
+    return _corners(t[0, 0], t[0, 1], t[1, 0], t[1, 1], t[2, 0], t[2, 1], index, level)
+
+
+@njit(cache=True, inline="always")
+def micro_corners_of(tris_texel, t, index, level):
+    """``micro_corners`` of triangle ``t`` of ``tris_texel`` (T, 3, 2), for kernels that hold
+    every triangle (no view of one is made)."""
+    return _corners(tris_texel[t, 0, 0], tris_texel[t, 0, 1], tris_texel[t, 1, 0], tris_texel[t, 1, 1],
+                    tris_texel[t, 2, 0], tris_texel[t, 2, 1], index, level)
+
+
+@njit(cache=True, inline="always")
+def _corners(t0x, t0y, t1x, t1y, t2x, t2y, index, level):
+    """``micro_corners`` of the texel-space triangle (t0, t1, t2) given as scalars."""
+    a1, a2, b1, b2, c1, c2 = _micro_vertices(index, level)
+    qax = (1.0 - a1 - a2) * t0x + a1 * t1x + a2 * t2x
+    qay = (1.0 - a1 - a2) * t0y + a1 * t1y + a2 * t2y
+    qbx = (1.0 - b1 - b2) * t0x + b1 * t1x + b2 * t2x
+    qby = (1.0 - b1 - b2) * t0y + b1 * t1y + b2 * t2y
+    qcx = (1.0 - c1 - c2) * t0x + c1 * t1x + c2 * t2x
+    qcy = (1.0 - c1 - c2) * t0y + c1 * t1y + c2 * t2y
     return qax, qay, qbx, qby, qcx, qcy
+
+
+BLOCK = 8  # points counted between two checks of the count
+TAPS = 8  # texels per side of the block of taps ``micro_hits`` reads first (larger regions: texel by texel)
 
 
 @njit(cache=True)
@@ -90,33 +111,98 @@ def micro_hits(value, threshold, inclusive, filt, mode_u, mode_v, corners, sampl
     its 4**k points (the centroids of its level-``k`` sub-triangles,
     ``samples[(4**k - 1) // 3:][:4**k]``), counted until the count can no longer end on the
     other side of ``need``: the result is >= need exactly when the full count is (``need`` >
-    4**k counts them all)."""
+    4**k counts them all). Each point's answer is ``alpha_test.sample_passes``'."""
+    return micro_hits_with(value, threshold, inclusive, filt, mode_u, mode_v, corners, samples, k, need,
+                           np.empty((TAPS, TAPS)))
+
+
+@njit(cache=True, _nrt=False)
+def micro_hits_with(value, threshold, inclusive, filt, mode_u, mode_v, corners, samples, k, need, taps):
+    """``micro_hits`` with a scratch block ``taps`` (TAPS, TAPS) (a kernel's, reused).
+
+    Each point's answer is ``alpha_test.sample_passes``' -- the shader's fetch
+    (``sampling.sample_texture``) compared with the threshold -- with the same arithmetic. This
+    is the 4-state resolve's inner loop, so under the linear filter the texels the points can
+    read (the taps around the corners' box, when they fit in ``taps``) are read first, each
+    addressed once; then the points go in blocks of BLOCK with no branch (the compiler
+    vectorises a block), the count checked after each block."""
     qax, qay, qbx, qby, qcx, qcy = corners
     first = ((1 << (2 * k)) - 1) // 3
     n = 1 << (2 * k)
+    h, w = value.shape
+    # the block: taps floor(p - 0.5) and + 1 of every point p of the corners' box widened by e,
+    # far beyond the rounding of a point (a convex combination of the corners), so every point's
+    # cell is in it (the index clamp below only keeps memory safe); a box over TAPS texels: each
+    # point reads the texture itself
+    bx = by = 0
+    nbx = nby = 0
+    if filt == 1:
+        e = 1e-6 * (1.0 + max(max(abs(qax), abs(qbx)), abs(qcx)) + max(max(abs(qay), abs(qby)), abs(qcy)))
+        bx = int(math.floor(min(min(qax, qbx), qcx) - 0.5 - e))
+        by = int(math.floor(min(min(qay, qby), qcy) - 0.5 - e))
+        nx = int(math.floor(max(max(qax, qbx), qcx) - 0.5 + e)) - bx + 2
+        ny = int(math.floor(max(max(qay, qby), qcy) - 0.5 + e)) - by + 2
+        if nx <= TAPS and ny <= TAPS:
+            nbx = nx - 1  # cells whose four taps are in the block: 0 .. nbx - 1, 0 .. nby - 1
+            nby = ny - 1
+            for j in range(ny):
+                row = address(by + j, h, mode_v)
+                for i in range(nx):
+                    taps[j, i] = np.float64(value[row, address(bx + i, w, mode_u)])
     hits = 0
+    if nbx > 0:
+        # every point reads its taps from the block: blocks of points without a branch (the
+        # compiler vectorises them), the count checked after each
+        step = min(n, BLOCK)
+        for b in range(first, first + n, step):
+            for s in range(b, b + step):
+                w1 = samples[s, 0]
+                w2 = samples[s, 1]
+                w0 = 1.0 - w1 - w2
+                fx = (w0 * qax + w1 * qbx + w2 * qcx) - 0.5
+                fy = (w0 * qay + w1 * qby + w2 * qcy) - 0.5
+                i = min(max(int(math.floor(fx)) - bx, 0), nbx - 1)
+                j = min(max(int(math.floor(fy)) - by, 0), nby - 1)
+                a00 = taps[j, i]
+                a01 = taps[j, i + 1]
+                a10 = taps[j + 1, i]
+                a11 = taps[j + 1, i + 1]
+                ax = fx - (i + bx)
+                ay = fy - (j + by)
+                top = a00 + ax * (a01 - a00)
+                bot = a10 + ax * (a11 - a10)
+                lo = min(min(a00, a01), min(a10, a11))
+                hi = max(max(a00, a01), max(a10, a11))
+                hits += _passes(min(max(top + ay * (bot - top), lo), hi), threshold, inclusive)
+            if hits >= need or (need <= n and hits + (first + n - b - step) < need):
+                break
+        return hits
     for s in range(first, first + n):
         w1 = samples[s, 0]
         w2 = samples[s, 1]
         w0 = 1.0 - w1 - w2
-        if sample_passes(value, threshold, inclusive, filt, mode_u, mode_v,
-                         w0 * qax + w1 * qbx + w2 * qcx, w0 * qay + w1 * qby + w2 * qcy):
-            hits += 1
-            if hits == need:
-                break
-        elif need <= n and hits + (first + n - 1 - s) < need:
+        hits += sample_passes(value, threshold, inclusive, filt, mode_u, mode_v, w0 * qax + w1 * qbx + w2 * qcx,
+                              w0 * qay + w1 * qby + w2 * qcy)
+        # one rarely taken branch per point: the count reached ``need``, or cannot any more
+        if hits == need or (need <= n and hits + (first + n - 1 - s) < need):
             break
     return hits
 
 
+@njit(cache=True, inline="always")
+def _passes(a, threshold, inclusive):
+    return (a >= threshold) if inclusive else (a > threshold)
+
+
 @njit(cache=True)
-def micro_fraction(value, threshold, inclusive, filt, mode_u, mode_v, tri_texel, index, level, samples, k):
+def micro_fraction(value, threshold, inclusive, filt, mode_u, mode_v, tri_texel, index, level, samples, k, taps):
     """Fraction of the sample points of micro-triangle ``index`` where the alpha test passes,
     and the micro-triangle's centroid (texel coordinates). The points are the centroids of its
-    level-``k`` sub-triangles, ``samples[(4**k - 1) // 3:][:4**k]``."""
+    level-``k`` sub-triangles, ``samples[(4**k - 1) // 3:][:4**k]``; ``taps`` ``micro_hits_with``'s
+    scratch."""
     q = micro_corners(tri_texel, index, level)
     n = 1 << (2 * k)
-    hits = micro_hits(value, threshold, inclusive, filt, mode_u, mode_v, q, samples, k, n + 1)
+    hits = micro_hits_with(value, threshold, inclusive, filt, mode_u, mode_v, q, samples, k, n + 1, taps)
     return hits / n, (q[0] + q[2] + q[4]) / 3.0, (q[1] + q[3] + q[5]) / 3.0
 
 
@@ -144,9 +230,10 @@ def sample_levels(tris_texel: np.ndarray, levels: np.ndarray) -> np.ndarray:
 @njit(cache=True, parallel=True)
 def _fractions(value, threshold, inclusive, filt, mu, mv, tris, levels, starts, samples, sample_k, out):
     for t in prange(tris.shape[0]):
+        taps = np.empty((TAPS, TAPS))
         for k in range(starts[t + 1] - starts[t]):
             f, _, _ = micro_fraction(value, threshold, inclusive, filt, mu, mv, tris[t], k, levels[t], samples,
-                                     sample_k[t])
+                                     sample_k[t], taps)
             out[starts[t] + k] = f
 
 

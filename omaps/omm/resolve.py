@@ -15,41 +15,66 @@ import numpy as np
 from numba import njit, prange
 
 from ..alpha_test import AlphaTest
-from ..coverage import micro_corners, micro_hits, sample_levels, sample_points, texel_triangles
+from ..coverage import TAPS, micro_corners_of, micro_hits_with, sample_levels, sample_points, texel_triangles
 from ..promotion import hashed_threshold, promotion_code
 from . import format as omm_format
 
 __all__ = ["resolve", "resolve_counted"]
 
 
+@njit(cache=True, _nrt=False)
+def _resolve_one(states3, base, end, level, two_state, mode, seed, value, thr, inclusive, filt, mu, mv, tris, t,
+                 samples, sample_k, out, counts, taps):
+    """Triangle ``t``'s micro-triangles ``states3[base:end]`` into ``out``, its counts into
+    ``counts[t]`` (no reference counting: it allocates nothing)."""
+    n_s = 1 << (2 * sample_k)
+    n_t = n_o = n_c = r0 = r1 = r2 = r3 = 0
+    for i in range(base, end):
+        s = states3[i]
+        if s < 2:
+            out[i] = s
+            if s == 0:
+                n_t += 1
+            else:
+                n_o += 1
+            continue
+        n_c += 1
+        if mode == 1 or mode == 2:
+            opaque = mode == 1
+        else:  # O iff the opaque fraction hits / n_s > cut, i.e. hits >= floor(cut * n_s) + 1
+            q = micro_corners_of(tris, t, i - base, level)
+            cut = 0.5 if mode == 0 else hashed_threshold((q[0] + q[2] + q[4]) / 3.0, (q[1] + q[3] + q[5]) / 3.0, seed)
+            need = int(math.floor(cut * n_s)) + 1
+            opaque = micro_hits_with(value, thr, inclusive, filt, mu, mv, q, samples, sample_k, need, taps) >= need
+        if two_state:
+            o = 1 if opaque else 0
+        else:
+            o = 3 if opaque else 2
+        out[i] = o
+        if o == 0:
+            r0 += 1
+        elif o == 1:
+            r1 += 1
+        elif o == 2:
+            r2 += 1
+        else:
+            r3 += 1
+    counts[t, 0] = n_t
+    counts[t, 1] = n_o
+    counts[t, 2] = n_c
+    counts[t, 3] = r0
+    counts[t, 4] = r1
+    counts[t, 5] = r2
+    counts[t, 6] = r3
+
+
 @njit(cache=True, parallel=True)
 def _resolve(states3, starts, levels, two_state, mode, seed, value, thr, inclusive, filt, mu, mv, tris,
              samples, sample_k, out, counts):
     for t in prange(tris.shape[0]):
-        base = starts[t]
-        n_s = 1 << (2 * sample_k[t])
-        for j in range(7):
-            counts[t, j] = 0
-        for k in range(starts[t + 1] - base):
-            s = states3[base + k]
-            if s < 2:
-                out[base + k] = s
-                counts[t, s] += 1
-                continue
-            counts[t, 2] += 1
-            if mode == 1 or mode == 2:
-                opaque = mode == 1
-            else:  # O iff the opaque fraction hits / n_s > cut, i.e. hits >= floor(cut * n_s) + 1
-                q = micro_corners(tris[t], k, levels[t])
-                cut = 0.5 if mode == 0 else hashed_threshold((q[0] + q[2] + q[4]) / 3.0, (q[1] + q[3] + q[5]) / 3.0,
-                                                             seed)
-                need = int(math.floor(cut * n_s)) + 1
-                opaque = micro_hits(value, thr, inclusive, filt, mu, mv, q, samples, sample_k[t], need) >= need
-            if two_state:
-                out[base + k] = 1 if opaque else 0
-            else:
-                out[base + k] = 3 if opaque else 2
-            counts[t, 3 + out[base + k]] += 1
+        taps = np.empty((TAPS, TAPS))
+        _resolve_one(states3, starts[t], starts[t + 1], levels[t], two_state, mode, seed, value, thr, inclusive, filt,
+                     mu, mv, tris, t, samples, sample_k[t], out, counts, taps)
 
 
 def resolve_counted(states3: np.ndarray, starts: np.ndarray, levels, test: AlphaTest, tris_uv, fmt: int,
