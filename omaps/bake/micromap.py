@@ -269,6 +269,13 @@ def _bake_one(sat, flags, mixed, values, bounds, period_x, period_y, tri, level,
                 if pts == 3:
                     f = 3
                 else:
+                    f = 0
+                    if grow > 0.0:  # grown, a leaf has area: the box's answer is its own when the box has one
+                        f, _, _ = box_flag(sat, min(vx[a, 0], min(vx[b, 0], vx[d, 0])),
+                                           max(vx[a, 0], max(vx[b, 0], vx[d, 0])),
+                                           min(vx[a, 1], min(vx[b, 1], vx[d, 1])),
+                                           max(vx[a, 1], max(vx[b, 1], vx[d, 1])), margin, period_y, period_x)
+                if f == 0:
                     f = _leaf_flag(sat, flags, mixed, values, bounds, period_x, period_y, vx[a, 0], vx[a, 1],
                                    vx[b, 0], vx[b, 1], vx[d, 0], vx[d, 1], grow, pts, ptri, buf_a, buf_b)
                 if f == 0:
