@@ -72,3 +72,34 @@ def pytest_sessionstart(session):
         p.wait()  # a failure only means the tests compile what they need themselves
     if tr is not None:
         tr.write_line(f"kernels compiled in {time.perf_counter() - t0:.0f} s")
+
+
+def pytest_xdist_make_scheduler(config, log):
+    """With ``--dist load`` (pyproject.toml), the xdist workers are given one test at a time
+    (each keeps at most three queued), but a test module with a module- or class-scoped fixture
+    as one unit, to one worker, so that the fixture is computed once; the units go out largest
+    first, then the single tests in the collection's order (pytest_collection_modifyitems).
+    (pytest-xdist's own ``loadgroup`` cannot group: it renames node ids, which pytest 9 ignores.)"""
+    if config.getoption("dist") != "load":
+        return None
+    import re
+
+    from xdist.scheduler import LoadScopeScheduling
+
+    here = Path(__file__).resolve().parent
+    grouped = {p.relative_to(config.rootpath).as_posix() for p in here.glob("test_*.py")
+               if re.search(r"@pytest\.fixture\(scope=\"(module|class)\"", p.read_text(encoding="utf-8"))}
+
+    class ModuleFixtureScheduling(LoadScopeScheduling):
+        def _split_scope(self, nodeid):
+            module = nodeid.split("::", 1)[0]
+            return module if module in grouped else nodeid
+
+    return ModuleFixtureScheduling(config, log)
+
+
+def pytest_collection_modifyitems(config, items):
+    """The tests marked ``long`` (the longest, e.g. the README part tracing the forest) first,
+    so that the workers start them early and short ones fill in at the end: the workers finish
+    together. Depends on the collection only, so every worker computes the same order."""
+    items.sort(key=lambda it: it.get_closest_marker("long") is None)  # stable: else as collected

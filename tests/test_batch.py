@@ -117,7 +117,8 @@ def test_killed_batch_resumes_without_redoing_finished_inputs(tmp_path):
     proc.send_signal(signal.SIGKILL)
     proc.wait()
     assert proc.returncode == -signal.SIGKILL, "the batch finished before it could be killed"
-    done = sorted(f for f in os.listdir(markers) if f.endswith(".json"))
+    # (a marker being written when the kill came is still under its hidden temporary name)
+    done = sorted(f for f in os.listdir(markers) if f.endswith(".json") and not f.startswith(".omaps-"))
     assert 2 <= len(done) < 40 and not (out / "summary.json").exists()
     for f in done:  # every marked input has its whole output
         json.loads((out / f).read_text())
@@ -151,6 +152,7 @@ def test_batch_errors_before_work(tmp_path, capsys):
 
 
 @needs_scenes
+@pytest.mark.long
 def test_omm_serial_identical_to_single_runs(tmp_path):
     """The shared palm and smallpine scenes: one folder per scene, file by file equal to omaps omm."""
     out = tmp_path / "out"
@@ -190,6 +192,7 @@ def test_trace_serial_matches_single_run(tmp_path):
 
 
 @needs_shared
+@pytest.mark.long
 def test_local_cluster_eval_equals_single_eval_on_the_folder(tmp_path):
     """The one LocalCluster of the tests (subprocess: the CLI as a user runs it)."""
     out = tmp_path / "out"

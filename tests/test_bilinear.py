@@ -70,6 +70,7 @@ def triangles(draw, coord):
 @settings(max_examples=120, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(textures, st.one_of(triangles(dyadic), triangles(anyfloat)), st.integers(0, 3), st.sampled_from(WRAPS),
        st.sampled_from(RULES))
+@pytest.mark.long
 def test_micromaps_match_exact_extremes(alpha8, tri, level, wrap, rule):
     grid = _test(alpha8, rule, wrap).grid()
     h, w = alpha8.shape

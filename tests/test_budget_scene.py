@@ -53,6 +53,7 @@ def test_triangle_weights_sum_world_area_over_instances(tmp_path):
 
 
 @needs_scenes
+@pytest.mark.long
 def test_trace_budget_reads_each_pair_through_its_own_codec():
     from omaps.schemes import get_scheme
     from omaps.trace import prepare
@@ -91,6 +92,7 @@ def test_trace_budget_reads_each_pair_through_its_own_codec():
 
 
 @needs_scenes
+@pytest.mark.long
 def test_trace_budget_changes_no_pixel_and_stays_within_bytes(tmp_path):
     out = tmp_path / "t.json"
     pairs = 1920
@@ -256,6 +258,7 @@ def test_omm_budget_merges_within_the_bytes_and_stays_exact(tmp_path):
 
 
 @needs_scenes
+@pytest.mark.long
 def test_omm_budget_view_weights_on_palm(tmp_path):
     out = tmp_path / "palm.glb"
     assert main(["omm", str(SCENES / "palm.glb"), "-o", str(out), "--budget", "3000", "--max-level", "4",

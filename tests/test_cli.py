@@ -174,6 +174,7 @@ def test_console_script(tmp_path):
 
 
 @needs_shared
+@pytest.mark.long
 def test_real_corpus_eval(tmp_path):
     j = tmp_path / "real.json"
     assert main(["eval", str(TEXTURES), "--min-size", "64", "--quiet", "--json", str(j)]) == 0

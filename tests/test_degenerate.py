@@ -81,6 +81,7 @@ def test_omm_of_degenerate_uvs_verifies(scene, tmp_path, args):
         assert max(int(k) for k in s["statistics"]["levels"]) <= 9
 
 
+@pytest.mark.long
 def test_trace_of_degenerate_uvs_changes_nothing(scene, tmp_path):
     path, _ = scene
     rc = main(["trace", str(path), "--schemes", "none,tri3,sq16,vq2,vq4,vq4x64", "--size", "48", "--shadows",

@@ -665,6 +665,7 @@ def smallpine_doc() -> dict:
 @needs_scenes
 @fuzz_settings(30)
 @given(st.data())
+@pytest.mark.long
 def test_fuzzed_real_scene_json(data):
     """Mutations of a real glTF (smallpine): its JSON mutated, its buffer read from ../shared."""
     doc = data.draw(mutated_json(smallpine_doc()))

@@ -62,6 +62,7 @@ def triangle_sets(draw, coord):
 @settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(st.one_of(state_images, binary_images), st.one_of(triangle_sets(dyadic), triangle_sets(anyfloat)),
        st.integers(0, 5), st.sampled_from(FILTERS), st.sampled_from(WRAPS))
+@pytest.mark.long
 def test_identical_to_the_raster(img, tris, level, filter, wrap):
     """Arbitrary float coordinates too: the kernel repeats the reference raster's arithmetic,
     without growth and with real geometry's growth."""

@@ -233,6 +233,7 @@ def test_gltf_without_alpha_tested_material(tmp_path, capsys):
 # ---- the shared scenes ---------------------------------------------------------------------
 
 @needs_scenes
+@pytest.mark.long
 def test_palm(tmp_path, capsys):
     out = tmp_path / "palm"
     assert main(["omm", str(SCENES / "palm.glb"), "-o", str(out), "--dynamic", "4", "--max-level", "5"]) == 0

@@ -229,6 +229,7 @@ def test_index_encoding_round_trip(values):
 
 
 @needs_palm
+@pytest.mark.long
 def test_palm_glb_extension_verify_trace_and_expand(tmp_path):
     out = tmp_path / "palm.glb"
     assert main(["omm", PALM, "-o", str(out), "--quiet"]) == 0
@@ -250,6 +251,7 @@ def test_palm_glb_extension_verify_trace_and_expand(tmp_path):
 
 
 @needs_palm
+@pytest.mark.long
 def test_palm_from_vq2_pairs_expand_and_trace(tmp_path):
     baked = tmp_path / "palm_vq2.gltf"
     assert main(["omm", PALM, "-o", str(baked), "--from", "vq2", "--quiet"]) == 0
@@ -282,6 +284,7 @@ def test_palm_from_vq2_pairs_expand_and_trace(tmp_path):
 @pytest.mark.parametrize("scene, args, suffixes", [
     ("palm.glb", ["--level", "3", "--format", "2state", "--promote", "hashed"], (".glb", ".gltf")),
     ("smallpine/scene.gltf", ["--from", "vq4"], (".glb", ".gltf")), ("forest.glb", [], (".glb",))])
+@pytest.mark.long
 def test_khronos_validator(tmp_path, scene, args, suffixes):
     """The outputs validate like their input: palm.glb with 0 errors and 0 warnings; smallpine and
     forest carry their inputs' own errors (a missing normal-map file; normals of zero length) and

@@ -7,6 +7,7 @@ import sys
 from types import SimpleNamespace
 
 import numpy as np
+import pytest
 from gltf_files import write_quad_gltf
 
 from omaps.cli.precompile import FAMILIES, families_for
@@ -33,6 +34,7 @@ def test_families_of_commands():
     assert all(f in FAMILIES for f in ["square", "micromap", "trace", "vq2", "vq4", "omm", "budget"])
 
 
+@pytest.mark.long
 def test_empty_cache_is_announced_once_and_compiled_kernels_are_found(tmp_path):
     """With an empty private cache every family is uncached; a command announces its compile
     (one line) the first time only, and afterwards its families count as cached while the

@@ -146,6 +146,7 @@ PARTS = readme_parts()
 @pytest.mark.skipif(not (TEXTURES.is_dir() and (SCENES / "palm.glb").is_file() and (SCENES / "forest.glb").is_file()),
                     reason=f"the README's commands use ../shared/data, not found at {SHARED / 'data'}")
 @pytest.mark.parametrize("script", PARTS, ids=[f"{k:02d}-{_part_id(s)}" for k, s in enumerate(PARTS)])
+@pytest.mark.long
 def test_readme_commands_run(tmp_path, script):
     """One part of the README's commands (readme_parts), as one bash script run from a folder
     beside ``../shared``, as from the repository root."""

@@ -5,6 +5,7 @@ alpha test, including points on cell and texel boundaries)."""
 from fractions import Fraction
 
 import numpy as np
+import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -228,6 +229,7 @@ def _points(n, corners, rng, count):
 @settings(max_examples=40)
 @given(st.integers(0, 2 ** 32 - 1), st.sampled_from([(0, 1, 2), (1, 2, 0), (2, 1, 0)]), filters, wraps, wraps,
        st.sampled_from([0.25, 0.5, 0.7]), st.booleans())
+@pytest.mark.long
 def test_tracer_lookups_agree_with_the_alpha_test(seed, b_order, filt, wu, wv, cutoff, dyadic_uvs):
     rng = np.random.default_rng(seed)
     alpha = rng.integers(0, 256, (8, 8)).astype(np.uint8)

@@ -5,6 +5,7 @@ pack/unpack, a conservative encoder (brute-force check), lossless where it can b
 import json
 
 import numpy as np
+import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
@@ -224,6 +225,7 @@ REAL = real_textures(min_size=64)
 
 
 @needs_shared
+@pytest.mark.long
 def test_corpus_never_above_sq64():
     rule = StateRule()
     got = []
