@@ -208,6 +208,7 @@ def _bake_one(sat, flags, mixed, values, bounds, period_x, period_y, tri, level,
         scale = max(scale, abs(tri[k, 0] * w) + abs(offset), abs(tri[k, 1] * h) + abs(offset))
     margin = MARGIN * scale + grow
     points_first = grow > 0.0 and mixed.shape[0] > 0  # as ``_leaf_flag`` reads them
+    no_points = np.int64(-1)  # typed, not a literal: one compiled ``_leaf_flag`` serves every call
     st_l[0] = 0
     st_k[0] = 0
     st_v[0, 0] = 0
@@ -228,8 +229,8 @@ def _bake_one(sat, flags, mixed, values, bounds, period_x, period_y, tri, level,
         x2, y2 = _vertex(tri, i2, j2, inv_n, w, h, offset)
         state = -1
         if lv == level:  # a leaf (level 0 only: deeper ones are baked with their siblings below)
-            f = _leaf_flag(sat, flags, mixed, values, bounds, period_x, period_y, x0, y0, x1, y1, x2, y2, grow, -1,
-                           ptri, buf_a, buf_b)
+            f = _leaf_flag(sat, flags, mixed, values, bounds, period_x, period_y, x0, y0, x1, y1, x2, y2, grow,
+                           no_points, ptri, buf_a, buf_b)
             if f == 0:
                 empty += 1
             state = _leaf_state(f)
@@ -240,7 +241,7 @@ def _bake_one(sat, flags, mixed, values, bounds, period_x, period_y, tri, level,
                 state = 2 if f == 3 else f - 1  # all T, all O, or every cell C and none mixed
             elif nm > 0 and nc <= NODE_EXACT_CELLS:
                 f = _leaf_flag(sat, flags, mixed, values, bounds, period_x, period_y, x0, y0, x1, y1, x2, y2, grow,
-                               -1, ptri, buf_a, buf_b)
+                               no_points, ptri, buf_a, buf_b)
                 if f == 1 or f == 2:
                     state = f - 1  # known exactly: so is every micro-triangle inside it
         if state >= 0:
@@ -263,7 +264,7 @@ def _bake_one(sat, flags, mixed, values, bounds, period_x, period_y, tri, level,
                     vf[v] = point_flag(flags, mixed, values, bounds, period_x, period_y, vx[v, 0], vx[v, 1], grow)
             for c in range(4):
                 a, b, d = CHILD_VERTS[c]
-                pts = -1
+                pts = no_points
                 if points_first:
                     pts = vf[a] | vf[b] | vf[d]
                 if pts == 3:
