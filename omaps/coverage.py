@@ -101,7 +101,7 @@ def _corners(t0x, t0y, t1x, t1y, t2x, t2y, index, level):
     return qax, qay, qbx, qby, qcx, qcy
 
 
-BLOCK = 8  # points counted between two checks of the count
+BLOCK = 16  # points counted between two checks of the count (16 ran 2-6 % faster than 8, 4 slower)
 TAPS = 8  # texels per side of the block of taps ``micro_hits`` reads first (larger regions: texel by texel)
 
 
