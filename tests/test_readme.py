@@ -68,7 +68,8 @@ def _related(a: str, b: str) -> bool:
 def readme_parts() -> list[list[str]]:
     """The README's lines as independent scripts, each in the README's order: lines that name a
     common path under ``out/`` (one makes what another reads, verifies, replaces or traces) are
-    one part, and a line using ``$leaf`` is preceded by the README's latest ``leaf=`` line before it.
+    one part, which starts with the README's ``leaf=`` line (the latest before a command using
+    ``$leaf``) if its commands use ``$leaf``.
     Every line but the ``leaf=`` ones is in exactly one part (test_readme_parts_cover_every_line);
     the parts share nothing, so the test workers can run them side by side."""
     lines = readme_lines()
