@@ -30,7 +30,7 @@ __all__ = ["FAMILIES", "uncached", "families_for", "announce", "start_ahead", "f
 # trace command and of omaps eval)
 FAMILIES = {
     "square": (("omaps.flag_table", "omaps.raster", "omaps.bake.square"), 10),
-    "micromap": (("omaps.flag_table", "omaps.bake.micromap"), 6),
+    "micromap": (("omaps.flag_table", "omaps.bake.micromap"), 9),
     "trace": (("omaps.trace.rays", "omaps.scene.pairing"), 10),
     "vq2": (("omaps.codecs.vq2_encode",), 10),
     "vq4": (("omaps.codecs.vq4_encode",), 30),
