@@ -44,3 +44,12 @@ def test_run_keeps_the_exit_code_of_bad_input(tmp_path):
     assert "absent.png" in r.stderr
     assert (tmp_path / "mark").read_text() == "ran"
     assert not (tmp_path / "omm").exists()
+
+
+def test_run_under_a_profiler_exits_as_usual(tmp_path):
+    """``python -m cProfile -o FILE -m omaps ...`` writes its profile after the program returns."""
+    r = subprocess.run([sys.executable, "-m", "cProfile", "-o", str(tmp_path / "p.prof"), "-m", "omaps", "omm",
+                        str(tmp_path / "absent.png"), str(tmp_path / "uvs.npy"), "-o", str(tmp_path / "omm")],
+                       capture_output=True, text=True, env=ENV)
+    assert "absent.png" in r.stderr  # (cProfile itself ends with 0 whatever the program's code)
+    assert (tmp_path / "p.prof").stat().st_size > 0

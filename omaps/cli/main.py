@@ -80,8 +80,11 @@ def run(argv=None) -> NoReturn:
     (a quarter of ``omaps omm`` on one triangle). Everything a command writes is complete when
     ``main`` returns (outputs are renamed into place, worker processes joined), so the exit
     handlers registered with ``atexit`` run, the standard streams are flushed, and the process
-    ends there with ``main``'s exit code."""
+    ends there with ``main``'s exit code. Under a profiler, tracer or debugger (``python -m
+    cProfile -m omaps ...``, coverage), which reports after the program returns, it exits as usual."""
     rc = main(argv)
+    if sys.getprofile() is not None or sys.gettrace() is not None:
+        sys.exit(rc)
     atexit._run_exitfuncs()  # noqa: SLF001 - what the interpreter's own exit would run first
     for stream in (sys.stdout, sys.stderr):
         try:
