@@ -180,3 +180,25 @@ def test_real_corpus_eval(tmp_path):
     assert main(["eval", str(TEXTURES), "--min-size", "64", "--quiet", "--json", str(j)]) == 0
     data = json.loads(j.read_text())
     assert len(data["textures"]) == 46
+
+
+def test_show_picture_holds_every_panel(tmp_path):
+    """An --show picture draws each scheme's map at its pixels: every T / O / C colour pixel of
+    the picture belongs to a panel (the text is black and grey), as many as the panels hold."""
+    from omaps import drawing, states
+    from omaps.corpus.evaluate import evaluate_texture
+    from omaps.corpus.report import show_texture
+    from omaps.schemes import get_scheme
+    from omaps.texture import load_alpha
+
+    a = np.zeros((24, 40), np.uint8)
+    a[4:20, 6:30] = 255
+    a[8:12, 10:14] = 0
+    names = ["sq4", "sq16", "tri3", "texel"]
+    r = evaluate_texture(load_alpha(a), [get_scheme(n) for n in names], keep_maps=True)
+    show_texture(tmp_path / "s.png", r, panel=96)
+    pic = np.asarray(Image.open(tmp_path / "s.png").convert("RGB"))
+    panels = [drawing.scheme_image(get_scheme(n).kind, r.maps[n], 96) for n in names]
+    for colour in states.COLOURS:
+        drawn = sum(int(np.all(p == colour, axis=2).sum()) for p in panels)
+        assert drawn > 0 and int(np.all(pic == colour, axis=2).sum()) == drawn, colour
