@@ -11,6 +11,7 @@ from hypothesis import strategies as st
 
 import omm_decoder
 import reference as ref
+import omaps.rows
 from omaps import birdcurve, promotion, states
 from omaps.alpha_test import AlphaTest, StateRule
 from omaps.bake import GROW_TEXEL, bake_micromap_rows, bake_micromaps, bake_square, dynamic_levels
@@ -106,7 +107,7 @@ def test_reuse_survives_hash_collisions(rng, monkeypatch, chunk):
     if chunk:
         monkeypatch.setattr(pipeline, "CHUNK_MICRO_TRIANGLES", chunk)
     whole = build([Geometry("g", test, tris)], OmmSettings(level=3))
-    monkeypatch.setattr(omm_format, "row_hashes", lambda packed: np.zeros(len(packed), np.uint64))
+    monkeypatch.setattr(omaps.rows, "row_hashes", lambda packed: np.zeros(len(packed), np.uint64))
     clash = build([Geometry("g", test, tris)], OmmSettings(level=3))
     for k in ("data", "triangles", "index"):
         np.testing.assert_array_equal(getattr(clash, k), getattr(whole, k))

@@ -113,19 +113,3 @@ def uniform_rows(omm_states: np.ndarray) -> np.ndarray:
     """Per micromap (M, K), whether all its micro-triangles share one state (a special index)."""
     return _uniform_rows(np.ascontiguousarray(omm_states, dtype=np.uint8))
 
-
-@njit(cache=True)
-def _row_hashes(packed):
-    out = np.empty(packed.shape[0], dtype=np.uint64)
-    for i in range(packed.shape[0]):
-        h = np.uint64(0xCBF29CE484222325)  # FNV-1a, 64 bits
-        for k in range(packed.shape[1]):
-            h = (h ^ np.uint64(packed[i, k])) * np.uint64(0x100000001B3)
-        out[i] = h
-    return out
-
-
-def row_hashes(packed: np.ndarray) -> np.ndarray:
-    """A 64-bit hash (FNV-1a) of each packed micromap (M, bytes): equal rows, equal hashes (the
-    packer's reuse compares the rows themselves where hashes agree)."""
-    return _row_hashes(np.ascontiguousarray(packed, dtype=np.uint8))

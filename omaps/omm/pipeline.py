@@ -33,6 +33,7 @@ from ..bake.micromap import (GROW_TEXEL, bake_micromaps, check_level, check_uv_t
                              micro_starts, texel_areas)
 from ..errors import InputError
 from ..names import PROMOTIONS
+from .. import rows as omaps_rows
 from . import format as omm_format
 from . import resolve
 
@@ -193,7 +194,7 @@ class _Packer:
             for r, row in zip(rows, packed):
                 idx[r] = self._new(row.tobytes(), level, fmt)
             return idx
-        hashes = omm_format.row_hashes(packed)
+        hashes = omaps_rows.row_hashes(packed)
         uniq, first, inverse = np.unique(hashes, return_index=True, return_inverse=True)
         inverse = inverse.ravel()
         if not np.array_equal(packed[first][inverse], packed):  # two rows share a hash: compare bytes
@@ -237,7 +238,7 @@ class _Packer:
             idx[r] = seen[key]
         ids = np.fromiter(seen.values(), np.int32, len(seen))
         stored = np.array([np.frombuffer(k, np.uint8) for k in seen], dtype=np.uint8).reshape(len(seen), -1)
-        h = omm_format.row_hashes(stored)
+        h = omaps_rows.row_hashes(stored)
         keep = np.argsort(h, kind="stable")
         self.stored[(level, fmt)] = (h[keep], stored[keep], ids[keep])
         return idx

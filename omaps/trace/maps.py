@@ -23,6 +23,7 @@ from ..bake.square import flags_to_states
 from ..budget import PAIR_OPTIONS
 from ..codecs import get_codec
 from ..codecs.raw import pack_states
+from ..rows import unique_rows
 from ..scene.alpha import AlphaTriangles, distinct_rows, pair_corner_uvs
 from ..workers import encode_maps as parallel_encode
 
@@ -56,9 +57,7 @@ def default_jobs(jobs: int | None) -> int:
 
 
 def dedupe_maps(m: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    flat = np.ascontiguousarray(m).reshape(len(m), int(np.prod(m.shape[1:])))  # -1 fails with no maps
-    uniq, inverse = np.unique(flat, axis=0, return_inverse=True)
-    return uniq.reshape((len(uniq),) + m.shape[1:]), inverse.ravel()
+    return unique_rows(m)
 
 
 def encode_maps(codec, maps_: np.ndarray, encoder, effort, jobs: int = 1, progress: bool = False):

@@ -1,0 +1,61 @@
+"""omaps.rows: the hashed search for equal rows gives exactly np.unique(axis=0)'s answer, also
+when every hash collides."""
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+import omaps.rows
+from omaps.rows import row_hashes, unique_rows
+
+
+def _rows(data, dtype):
+    n = data.draw(st.integers(0, 60))
+    shape = tuple(data.draw(st.lists(st.integers(1, 9), min_size=1, max_size=2)))
+    base = np.array(data.draw(st.lists(st.integers(0, 3), min_size=int(np.prod(shape)) * 4,
+                                       max_size=int(np.prod(shape)) * 4)), dtype=dtype).reshape((4,) + shape)
+    pick = np.array(data.draw(st.lists(st.integers(0, 3), min_size=n, max_size=n)), dtype=np.int64)
+    return base[pick]
+
+
+@settings(max_examples=150, deadline=None)
+@given(st.data(), st.sampled_from([np.uint8, np.int32, np.int64, np.bool_]))
+def test_unique_rows_is_numpy_unique(data, dtype):
+    a = _rows(data, dtype)
+    uniq, inverse = unique_rows(a)
+    flat = a.reshape(len(a), int(np.prod(a.shape[1:])))
+    if len(a):
+        u2, i2 = np.unique(flat, axis=0, return_inverse=True)
+        np.testing.assert_array_equal(uniq.reshape(len(uniq), -1), u2)
+        np.testing.assert_array_equal(inverse, i2.ravel())
+    assert uniq.shape[1:] == a.shape[1:]
+    np.testing.assert_array_equal(uniq[inverse], a)
+
+
+@settings(max_examples=50, deadline=None)
+@given(st.data())
+def test_collisions_are_caught(data):
+    a = _rows(data, np.uint8)
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(omaps.rows, "row_hashes", lambda f: np.zeros(len(f), np.uint64))  # every row one hash
+        uniq, inverse = omaps.rows.unique_rows(a)
+    np.testing.assert_array_equal(uniq[inverse], a)
+    assert len(uniq) == len({r.tobytes() for r in a})
+
+
+def test_hashes_of_equal_rows_agree_and_differ_otherwise():
+    rng = np.random.default_rng(5)
+    a = rng.integers(0, 3, (500, 13), dtype=np.uint8)  # 13 bytes: a padded last word
+    a[250:] = a[:250]
+    h = row_hashes(a)
+    np.testing.assert_array_equal(h[:250], h[250:])
+    assert len(np.unique(h[:250])) == len({r.tobytes() for r in a[:250]})
+    b = a[:1].copy()
+    b[0, 12] ^= 1  # one bit in the padded word
+    assert row_hashes(b)[0] != h[0]
+
+
+def test_only_integer_rows():
+    with pytest.raises(TypeError, match="integer or bool rows"):
+        unique_rows(np.zeros((3, 2)))
