@@ -56,17 +56,21 @@ def _clip(poly, k, a, b, c, out):
     vertex count."""
     m = 0
     for i in range(k):
-        p0 = poly[i]
-        p1 = poly[(i + 1) % k]
-        d0 = a * p0[0] + b * p0[1] + c
-        d1 = a * p1[0] + b * p1[1] + c
+        j = (i + 1) % k
+        x0 = poly[i, 0]
+        y0 = poly[i, 1]
+        x1 = poly[j, 0]
+        y1 = poly[j, 1]
+        d0 = a * x0 + b * y0 + c
+        d1 = a * x1 + b * y1 + c
         if d0 >= 0:
-            out[m] = p0
+            out[m, 0] = x0
+            out[m, 1] = y0
             m += 1
         if (d0 >= 0) != (d1 >= 0):
             f = d0 / (d0 - d1)
-            out[m, 0] = p0[0] + f * (p1[0] - p0[0])
-            out[m, 1] = p0[1] + f * (p1[1] - p0[1])
+            out[m, 0] = x0 + f * (x1 - x0)
+            out[m, 1] = y0 + f * (y1 - y0)
             m += 1
     return m
 
@@ -90,8 +94,8 @@ def _texel_point(uv, b, tri, s, t, w, h, off):
     return u * w + off, vv * h + off
 
 
-@njit(cache=True)
-def _cell_flag(sat, grid, off, w, h, uv, tri, n, i, j, grow, rect, poly, pts, scratch):
+@njit(cache=True, _nrt=False)
+def _cell_flag(sat, grid, off, w, h, uv, tri, n, i, j, grow, rect, poly, pts, buf_a, buf_b):
     """Flag of triangle ``tri``'s part of cell (i, j) (0 when the part has no area)."""
     s0 = i / n
     s1 = (i + 1) / n
@@ -113,29 +117,26 @@ def _cell_flag(sat, grid, off, w, h, uv, tri, n, i, j, grow, rect, poly, pts, sc
         return 0
     for v in range(k):
         pts[v, 0], pts[v, 1] = _texel_point(uv, 3 * tri, tri, poly[v, 0], poly[v, 1], w, h, off)
-    return raster.polygon_flags_table(sat, grid, pts, k, grow, scratch)
+    return raster.polygon_flags_table(sat, grid, pts, k, grow, buf_a, buf_b)
 
 
 MIN_TREE_AREA = 1e-3  # texel area below which an ungrown triangle is baked cell by cell
 STACK = 64  # blocks pending: 3 more per level down (7 levels at most), plus the root
 
 
-@njit(cache=True)
-def _pair_flags(sat, grid, off, w, h, uv, has_b, n, grow, out):
+@njit(cache=True, _nrt=False)
+def _pair_flags(sat, grid, off, w, h, uv, has_b, n, grow, out, rect, poly, pts, buf_a, buf_b, st_i, st_j, st_n):
     """Flags (n, n) of one pair's square map ORed into ``out`` (zeros on entry).
 
     Each triangle's part is walked as a quadtree of cell blocks: when the box around a block's
     image in texture space (``flag_table.box_flag``) holds only T, only O, or only unmixed C
     cells, every cell of the block in that triangle reads exactly that flag, as ``_cell_flag``
     would find it cell by cell (each part has area, so it reads at least one cell of the box);
-    otherwise the block splits, down to single cells rasterised by ``_cell_flag``."""
-    rect = np.empty((4, 2))
-    poly = np.empty((8, 2))
-    pts = np.empty((8, 2))
-    scratch = np.empty((2 * POLY_MAX, 2))
-    st_i = np.empty(STACK, np.int64)
-    st_j = np.empty(STACK, np.int64)
-    st_n = np.empty(STACK, np.int64)
+    otherwise the block splits, down to single cells rasterised by ``_cell_flag``.
+
+    Scratch from the caller: ``rect`` (4, 2), ``poly``, ``pts`` (8, 2), ``buf_*`` (POLY_MAX, 2),
+    the block stack ``st_*`` (STACK,). It allocates nothing and runs without numba's reference
+    counting (``_nrt=False``), as the leaf kernels below it."""
     py = grid[5]
     px = grid[4]
     for tri in range(2):
@@ -165,7 +166,8 @@ def _pair_flags(sat, grid, off, w, h, uv, has_b, n, grow, out):
             if (tri == 0 and i0 + m - 1 < j0) or (tri == 1 and i0 > j0 + m - 1):
                 continue
             if m == 1:
-                out[j0, i0] |= _cell_flag(sat, grid, off, w, h, uv, tri, n, i0, j0, grow, rect, poly, pts, scratch)
+                out[j0, i0] |= _cell_flag(sat, grid, off, w, h, uv, tri, n, i0, j0, grow, rect, poly, pts, buf_a,
+                                          buf_b)
                 continue
             f = 0
             if tree:
@@ -196,10 +198,24 @@ def _pair_flags(sat, grid, off, w, h, uv, has_b, n, grow, out):
                 top += 1
 
 
+CHUNK = 16  # pairs per parallel work item (one set of scratch arrays each)
+
+
 @njit(cache=True, parallel=True)
 def _bake_pairs(sat, grid, off, w, h, uv, has_b, n, grow, out):
-    for p in prange(uv.shape[0]):
-        _pair_flags(sat, grid, off, w, h, uv[p], has_b[p], n, grow, out[p])
+    n_chunks = (uv.shape[0] + CHUNK - 1) // CHUNK
+    for c in prange(n_chunks):
+        rect = np.empty((4, 2))
+        poly = np.empty((8, 2))
+        pts = np.empty((8, 2))
+        buf_a = np.empty((POLY_MAX, 2))
+        buf_b = np.empty((POLY_MAX, 2))
+        st_i = np.empty(STACK, np.int64)
+        st_j = np.empty(STACK, np.int64)
+        st_n = np.empty(STACK, np.int64)
+        for p in range(c * CHUNK, min((c + 1) * CHUNK, uv.shape[0])):
+            _pair_flags(sat, grid, off, w, h, uv[p], has_b[p], n, grow, out[p], rect, poly, pts, buf_a, buf_b, st_i,
+                        st_j, st_n)
 
 
 def bake_pair_flags(grid: FootprintGrid, corner_uv, has_b, n: int, grow: float = 0.0) -> np.ndarray:
