@@ -125,7 +125,7 @@ STACK = 64  # blocks pending: 3 more per level down (7 levels at most), plus the
 
 
 @njit(cache=True, _nrt=False)
-def _pair_flags(sat, grid, off, w, h, uv, has_b, n, grow, out, rect, poly, pts, buf_a, buf_b, st_i, st_j, st_n):
+def _pair_flags(sat, grid, off, w, h, uv, has_b, n, grow, out, rect, poly, pts, gp, buf_a, buf_b, st_i, st_j, st_n):
     """Flags (n, n) of one pair's square map ORed into ``out`` (zeros on entry).
 
     Each triangle's part is walked as a quadtree of cell blocks: when the box around a block's
@@ -191,6 +191,27 @@ def _pair_flags(sat, grid, off, w, h, uv, has_b, n, grow, out, rect, poly, pts, 
                             out[j, i] |= f
                 continue
             half = m // 2
+            if half == 1:  # the children are cells: rasterise the four here, sharing their corners
+                for c in range(9):
+                    gp[c, 0], gp[c, 1] = _texel_point(uv, b, tri, (i0 + c % 3) / n, (j0 + c // 3) / n, w, h, off)
+                for c in range(4):
+                    i = i0 + (c & 1)
+                    j = j0 + (c >> 1)
+                    if (tri == 0 and i < j) or (tri == 1 and i > j):
+                        continue
+                    if i == j:  # on the diagonal: the cell's part is clipped (``_cell_flag``)
+                        out[j, i] |= _cell_flag(sat, grid, off, w, h, uv, tri, n, i, j, grow, rect, poly, pts, buf_a,
+                                                buf_b)
+                        continue
+                    # off the diagonal the part is the whole cell, the polygon ``_clip`` returns:
+                    # corners (s0, t0), (s1, t0), (s1, t1), (s0, t1)
+                    g = (c >> 1) * 3 + (c & 1)
+                    pts[0, 0], pts[0, 1] = gp[g, 0], gp[g, 1]
+                    pts[1, 0], pts[1, 1] = gp[g + 1, 0], gp[g + 1, 1]
+                    pts[2, 0], pts[2, 1] = gp[g + 4, 0], gp[g + 4, 1]
+                    pts[3, 0], pts[3, 1] = gp[g + 3, 0], gp[g + 3, 1]
+                    out[j, i] |= raster.polygon_flags_table(sat, grid, pts, 4, grow, buf_a, buf_b)
+                continue
             for c in range(3, -1, -1):
                 st_i[top] = i0 + (c & 1) * half
                 st_j[top] = j0 + (c >> 1) * half
@@ -208,14 +229,15 @@ def _bake_pairs(sat, grid, off, w, h, uv, has_b, n, grow, out):
         rect = np.empty((4, 2))
         poly = np.empty((8, 2))
         pts = np.empty((8, 2))
+        gp = np.empty((9, 2))
         buf_a = np.empty((POLY_MAX, 2))
         buf_b = np.empty((POLY_MAX, 2))
         st_i = np.empty(STACK, np.int64)
         st_j = np.empty(STACK, np.int64)
         st_n = np.empty(STACK, np.int64)
         for p in range(c * CHUNK, min((c + 1) * CHUNK, uv.shape[0])):
-            _pair_flags(sat, grid, off, w, h, uv[p], has_b[p], n, grow, out[p], rect, poly, pts, buf_a, buf_b, st_i,
-                        st_j, st_n)
+            _pair_flags(sat, grid, off, w, h, uv[p], has_b[p], n, grow, out[p], rect, poly, pts, gp, buf_a, buf_b,
+                        st_i, st_j, st_n)
 
 
 def bake_pair_flags(grid: FootprintGrid, corner_uv, has_b, n: int, grow: float = 0.0) -> np.ndarray:
