@@ -199,13 +199,22 @@ def _pair_flags(sat, grid, off, w, h, uv, has_b, n, grow, out, rect, poly, pts, 
                     j = j0 + (c >> 1)
                     if (tri == 0 and i < j) or (tri == 1 and i > j):
                         continue
+                    g = (c >> 1) * 3 + (c & 1)
+                    if tree:  # the cell's box first, as a block's (the part has area: it reads a cell of it)
+                        f, _, _ = box_flag(sat, min(min(gp[g, 0], gp[g + 1, 0]), min(gp[g + 3, 0], gp[g + 4, 0])),
+                                           max(max(gp[g, 0], gp[g + 1, 0]), max(gp[g + 3, 0], gp[g + 4, 0])),
+                                           min(min(gp[g, 1], gp[g + 1, 1]), min(gp[g + 3, 1], gp[g + 4, 1])),
+                                           max(max(gp[g, 1], gp[g + 1, 1]), max(gp[g + 3, 1], gp[g + 4, 1])),
+                                           margin, py, px)
+                        if f:
+                            out[j, i] |= f
+                            continue
                     if i == j:  # on the diagonal: the cell's part is clipped (``_cell_flag``)
                         out[j, i] |= _cell_flag(sat, grid, off, w, h, uv, tri, n, i, j, grow, rect, poly, pts, buf_a,
                                                 buf_b)
                         continue
                     # off the diagonal the part is the whole cell, the polygon ``_clip`` returns:
                     # corners (s0, t0), (s1, t0), (s1, t1), (s0, t1)
-                    g = (c >> 1) * 3 + (c & 1)
                     pts[0, 0], pts[0, 1] = gp[g, 0], gp[g, 1]
                     pts[1, 0], pts[1, 1] = gp[g + 1, 0], gp[g + 1, 1]
                     pts[2, 0], pts[2, 1] = gp[g + 4, 0], gp[g + 4, 1]
