@@ -115,11 +115,13 @@ def _vertex_flags(grid, poly, k, grow):
 
 
 @njit(cache=True, _nrt=False)
-def polygon_flags_table(sat, grid, poly, k, grow, buf_a, buf_b):
+def polygon_flags_table(sat, grid, poly, k, grow, points, buf_a, buf_b):
     """``polygon_flags`` of convex polygon ``poly[:k]``, the same arithmetic (row bands,
     x-extents, growth) and the same flag, with each row's cell span counted in O(1) from the
     summed-area table ``sat`` (``flag_table.flag_table``); only a span holding mixed bilinear
-    cells is walked cell by cell. ``grid``: ``FootprintGrid.kernel_args()``; ``buf_*``
+    cells is walked cell by cell. ``grid``: ``FootprintGrid.kernel_args()``; ``points``: the OR
+    of the vertices' own flags (``bilinear.point_flag``) when the caller has them (vertices shared
+    with neighbouring cells), else -1 (read here when needed); ``buf_*``
     (POLY_MAX, 2) scratch for ``bilinear.cell_flag``. This runs once per leaf of the square baker
     (millions of times): it allocates nothing and runs without numba's reference counting
     (``_nrt=False``), whose atomic counts of the array arguments cost about a tenth of a bake."""
@@ -136,7 +138,7 @@ def polygon_flags_table(sat, grid, poly, k, grow, buf_a, buf_b):
         # first (cheap), a region across the cut-off is C before any row is counted. (Ungrown, a
         # vertex on a row's lower edge lies outside the spans: then only after a mixed span.)
         points_done = True
-        acc = _vertex_flags(grid, poly, k, grow)
+        acc = points if points >= 0 else _vertex_flags(grid, poly, k, grow)
         if acc == 3:
             return 3
     for r in range(int(math.floor(ymin - grow)), int(math.ceil(ymax + grow))):
@@ -151,7 +153,7 @@ def polygon_flags_table(sat, grid, poly, k, grow, buf_a, buf_b):
         if nm > 0 and acc != 3:  # the mixed cells, each decided on its own
             if not points_done:  # the vertices' own flags first (as ``polygon_flags``)
                 points_done = True
-                acc |= _vertex_flags(grid, poly, k, grow)
+                acc |= points if points >= 0 else _vertex_flags(grid, poly, k, grow)
                 if acc == 3:
                     return 3
             hc, wc = flags.shape

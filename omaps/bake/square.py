@@ -31,7 +31,7 @@ import numpy as np
 from numba import njit, prange
 
 from .. import raster, states
-from ..bilinear import POLY_MAX
+from ..bilinear import POLY_MAX, point_flag
 from ..errors import InputError
 from ..pair import pair_weights
 from ..sampling import FootprintGrid
@@ -117,7 +117,7 @@ def _cell_flag(sat, grid, off, w, h, uv, tri, n, i, j, grow, rect, poly, pts, bu
         return 0
     for v in range(k):
         pts[v, 0], pts[v, 1] = _texel_point(uv, 3 * tri, tri, poly[v, 0], poly[v, 1], w, h, off)
-    return raster.polygon_flags_table(sat, grid, pts, k, grow, buf_a, buf_b)
+    return raster.polygon_flags_table(sat, grid, pts, k, grow, np.int64(-1), buf_a, buf_b)
 
 
 MIN_TREE_AREA = 1e-3  # texel area below which an ungrown triangle is baked cell by cell
@@ -125,7 +125,8 @@ STACK = 64  # blocks pending: 3 more per level down (7 levels at most), plus the
 
 
 @njit(cache=True, _nrt=False)
-def _pair_flags(sat, grid, off, w, h, uv, has_b, n, grow, out, rect, poly, pts, gp, buf_a, buf_b, st_i, st_j, st_n):
+def _pair_flags(sat, grid, off, w, h, uv, has_b, n, grow, out, rect, poly, pts, gp, vf, buf_a, buf_b, st_i, st_j,
+                st_n):
     """Flags (n, n) of one pair's square map ORed into ``out`` (zeros on entry).
 
     Each triangle's part is walked as a quadtree of cell blocks: when the box around a block's
@@ -137,8 +138,9 @@ def _pair_flags(sat, grid, off, w, h, uv, has_b, n, grow, out, rect, poly, pts, 
     Scratch from the caller: ``rect`` (4, 2), ``poly``, ``pts`` (8, 2), ``buf_*`` (POLY_MAX, 2),
     the block stack ``st_*`` (STACK,). It allocates nothing and runs without numba's reference
     counting (``_nrt=False``), as the leaf kernels below it."""
-    py = grid[5]
-    px = grid[4]
+    flags, mixed, values, bounds, px, py = grid
+    points_first = grow > 0.0 and mixed.shape[0] > 0  # as ``raster.polygon_flags_table`` reads them
+    no_points = np.int64(-1)
     for tri in range(2):
         if tri == 1 and not has_b:
             break
@@ -194,6 +196,8 @@ def _pair_flags(sat, grid, off, w, h, uv, has_b, n, grow, out, rect, poly, pts, 
             if half == 1:  # the children are cells: rasterise the four here, sharing their corners
                 for c in range(9):
                     gp[c, 0], gp[c, 1] = _texel_point(uv, b, tri, (i0 + c % 3) / n, (j0 + c // 3) / n, w, h, off)
+                    if points_first:  # the corners' own flags, read once for the cells sharing them
+                        vf[c] = point_flag(flags, mixed, values, bounds, px, py, gp[c, 0], gp[c, 1], grow)
                 for c in range(4):
                     i = i0 + (c & 1)
                     j = j0 + (c >> 1)
@@ -219,7 +223,13 @@ def _pair_flags(sat, grid, off, w, h, uv, has_b, n, grow, out, rect, poly, pts, 
                     pts[1, 0], pts[1, 1] = gp[g + 1, 0], gp[g + 1, 1]
                     pts[2, 0], pts[2, 1] = gp[g + 4, 0], gp[g + 4, 1]
                     pts[3, 0], pts[3, 1] = gp[g + 3, 0], gp[g + 3, 1]
-                    out[j, i] |= raster.polygon_flags_table(sat, grid, pts, 4, grow, buf_a, buf_b)
+                    points = no_points
+                    if points_first:
+                        points = vf[g] | vf[g + 1] | vf[g + 3] | vf[g + 4]
+                        if points == 3:
+                            out[j, i] |= 3
+                            continue
+                    out[j, i] |= raster.polygon_flags_table(sat, grid, pts, 4, grow, points, buf_a, buf_b)
                 continue
             for c in range(3, -1, -1):
                 st_i[top] = i0 + (c & 1) * half
@@ -239,14 +249,15 @@ def _bake_pairs(sat, grid, off, w, h, uv, has_b, n, grow, out):
         poly = np.empty((8, 2))
         pts = np.empty((8, 2))
         gp = np.empty((9, 2))
+        vf = np.empty(9, np.int64)
         buf_a = np.empty((POLY_MAX, 2))
         buf_b = np.empty((POLY_MAX, 2))
         st_i = np.empty(STACK, np.int64)
         st_j = np.empty(STACK, np.int64)
         st_n = np.empty(STACK, np.int64)
         for p in range(c * CHUNK, min((c + 1) * CHUNK, uv.shape[0])):
-            _pair_flags(sat, grid, off, w, h, uv[p], has_b[p], n, grow, out[p], rect, poly, pts, gp, buf_a, buf_b,
-                        st_i, st_j, st_n)
+            _pair_flags(sat, grid, off, w, h, uv[p], has_b[p], n, grow, out[p], rect, poly, pts, gp, vf, buf_a,
+                        buf_b, st_i, st_j, st_n)
 
 
 def bake_pair_flags(grid: FootprintGrid, corner_uv, has_b, n: int, grow: float = 0.0) -> np.ndarray:
