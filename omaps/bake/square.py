@@ -133,7 +133,10 @@ def _pair_flags(sat, grid, off, w, h, uv, has_b, n, grow, out, rect, poly, pts, 
     image in texture space (``flag_table.box_flag``) holds only T, only O, or only unmixed C
     cells, every cell of the block in that triangle reads exactly that flag, as ``_cell_flag``
     would find it cell by cell (each part has area, so it reads at least one cell of the box);
-    otherwise the block splits, down to single cells rasterised by ``_cell_flag``.
+    otherwise the block splits. A 2 x 2 block rasterises its four cells in place: their nine
+    corners (and, grown over an exact grid, the corners' own flags) are computed once; each cell
+    reads its box first, then a cell off the diagonal is rasterised as its whole square (what
+    ``_clip`` would return) and a diagonal one by ``_cell_flag``.
 
     Scratch from the caller: ``rect`` (4, 2), ``poly``, ``pts`` (8, 2), ``buf_*`` (POLY_MAX, 2),
     the block stack ``st_*`` (STACK,). It allocates nothing and runs without numba's reference
