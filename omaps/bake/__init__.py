@@ -7,7 +7,7 @@
 * ``pair_maps``: both on the corpus pair, and the savings metric.
 """
 
-import importlib
+from ..lazy import exports
 
 # each public name's module, imported on first use: ``omaps omm`` from a texture loads the micromap
 # baker alone (start-up is part of every run's time)
@@ -21,11 +21,4 @@ __all__ = ["GROW_TEXEL", "bake_micromaps", "bake_micromap_rows", "check_level", 
            "bake_pair_squares", "check_square_size", "or_downsample"]
 
 
-def __getattr__(name):
-    if name in _HOME:
-        return getattr(importlib.import_module(f".{_HOME[name]}", __name__), name)
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-
-
-def __dir__():
-    return sorted(list(globals()) + __all__)
+__getattr__, __dir__ = exports(__name__, _HOME)

@@ -2,13 +2,9 @@
 (indices, codebook, transforms), the encoder search and the decoders; ``registry`` gives them all
 one interface (``get_codec``), the raw ``sqN`` map included."""
 
+from ..lazy import exports
+
 __all__ = ["Codec", "get_codec", "codec_names", "ENCODERS", "EFFORTS"]
 
-
-def __getattr__(name):
-    # the registry on first use: the OMM format reads ``codecs.raw`` alone
-    if name in __all__:
-        from . import registry
-
-        return getattr(registry, name)
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+# the registry on first use: the OMM format reads ``codecs.raw`` alone
+__getattr__, __dir__ = exports(__name__, dict.fromkeys(__all__, "registry"))

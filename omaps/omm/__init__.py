@@ -13,7 +13,7 @@ Example::
     (dtype('uint8'), ('data_offset', 'level', 'format'), [0])
 """
 
-import importlib
+from ..lazy import exports
 
 # where each public name lives: imported on first use, so that a command (``omaps omm``) loads
 # only the modules, and the numba kernels, it needs
@@ -23,11 +23,4 @@ _HOME = {"read": "files", "write": "files", "expand": "pairs", "merge": "pairs",
 __all__ = ["Geometry", "OmmResult", "OmmSettings", "build", "read", "write", "expand", "merge", "verify"]
 
 
-def __getattr__(name):
-    if name in _HOME:
-        return getattr(importlib.import_module(f".{_HOME[name]}", __name__), name)
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-
-
-def __dir__():
-    return sorted(list(globals()) + __all__)
+__getattr__, __dir__ = exports(__name__, _HOME)
