@@ -8,7 +8,7 @@ from types import SimpleNamespace
 
 import numpy as np
 import pytest
-from gltf_files import write_quad_gltf
+from PIL import Image
 
 from omaps.cli.precompile import FAMILIES, families_for
 
@@ -39,7 +39,9 @@ def test_empty_cache_is_announced_once_and_compiled_kernels_are_found(tmp_path):
     """With an empty private cache every family is uncached; a command announces its compile
     (one line) the first time only, and afterwards its families count as cached while the
     others still do not."""
-    scene = write_quad_gltf(tmp_path / "quad.gltf", np.where(np.arange(64).reshape(8, 8) % 3 == 0, 255, 0))
+    alpha = np.where(np.arange(64).reshape(8, 8) % 3 == 0, 255, 0).astype(np.uint8)
+    Image.fromarray(np.dstack([alpha] * 4)).save(tmp_path / "leaf.png")
+    np.save(tmp_path / "uvs.npy", np.array([[[0.1, 0.1], [0.9, 0.2], [0.3, 0.8]]]))
     env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / "cache"), OMAPS_PROGRESS="1", OMAPS_PRECOMPILE="0")
     check = [sys.executable, "-c", "from omaps.cli.precompile import FAMILIES, uncached; "
              "print(','.join(uncached(list(FAMILIES))))"]
@@ -48,7 +50,8 @@ def test_empty_cache_is_announced_once_and_compiled_kernels_are_found(tmp_path):
         return subprocess.run(argv, env=env, capture_output=True, text=True, cwd=tmp_path)
 
     assert run(check).stdout.strip() == ",".join(FAMILIES)
-    cmd = [sys.executable, "-m", "omaps", "omm", str(scene), "-o", str(tmp_path / "omm"), "--quiet"]
+    cmd = [sys.executable, "-m", "omaps", "omm", str(tmp_path / "leaf.png"), str(tmp_path / "uvs.npy"), "--filter",
+           "linear", "-o", str(tmp_path / "omm"), "--quiet"]  # a texture: exactly the micromap and omm kernels
     first = run(cmd)
     assert first.returncode == 0, first.stderr
     notes = [ln for ln in first.stderr.splitlines() if "compiling numba kernels for first use" in ln]
