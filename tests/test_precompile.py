@@ -19,6 +19,7 @@ def test_families_of_commands():
 
     assert families_for(ns(command="eval", schemes="sq16,tri3,texel")) == ["square", "micromap"]
     assert families_for(ns(command="eval", schemes="vq2-paper,vq4x64-fast")) == ["square", "vq2", "vq4"]
+    assert families_for(ns(command="eval", schemes="vq4-synth,wavelet3-fast")) == ["square", "vq4", "synth", "wavelet"]
     assert families_for(ns(command="trace", schemes="none,vq4")) == ["trace", "square", "vq4"]
     assert families_for(ns(command="trace", schemes="none,file:vq4,omm")) == ["trace"]
     assert families_for(ns(command="trace", schemes="budget:1MiB")) == ["trace", "square", "vq2", "vq4", "budget"]
@@ -31,7 +32,7 @@ def test_families_of_commands():
     assert families_for(ns(command="encode", codec="vq4x64")) == ["square", "vq4"]
     assert families_for(ns(command="bake", scheme="tri4")) == ["micromap"]
     assert families_for(ns(command="decode", codec="vq4")) == []
-    assert all(f in FAMILIES for f in ["square", "micromap", "trace", "vq2", "vq4", "omm", "budget"])
+    assert all(f in FAMILIES for f in ["square", "micromap", "trace", "vq2", "vq4", "omm", "budget", "synth", "wavelet"])
 
 
 @pytest.mark.long

@@ -36,10 +36,14 @@ FAMILIES = {
     "vq4": (("omaps.codecs.vq4_encode",), 30),
     "omm": (("omaps.omm.resolve", "omaps.omm.format"), 6),
     "budget": (("omaps.budget", "omaps.omm.budget"), 10),
+    "synth": (("omaps.codecs.vq4_synth_encode", "omaps.codecs.vq4_synth_block"), 12),
+    "wavelet": (("omaps.codecs.wavelet3_encode", "omaps.codecs.wavelet3_block", "omaps.codecs.vec4_search"), 19),
 }
 # what the README's first command compiles ahead, beside its own evaluation (which compiles
-# "square" and "micromap"): two processes, the longest family alone
-AHEAD = (("vq4",), ("trace", "vq2", "omm", "budget"))
+# "square" and "micromap"): two processes, the VQ4 encoder with the two codecs built on its
+# search (synth needs the vq4 family's kernels; after vq4's warm trace, theirs compile no trace
+# kernel again)
+AHEAD = (("vq4", "synth", "wavelet"), ("trace", "vq2", "omm", "budget"))
 
 
 def _module_cached(name: str) -> bool:
@@ -83,7 +87,9 @@ def _scheme_families(text) -> list[str]:
         elif re.match(r"vq2(-|$)", name):
             out += ["square", "vq2"]
         elif re.match(r"vq4(x64)?(-|$)", name):
-            out += ["square", "vq4"]
+            out += ["square", "vq4"] + (["synth"] if name.startswith("vq4-synth") else [])
+        elif re.match(r"wavelet3(-|$)", name):
+            out += ["square", "wavelet"]
     return out
 
 
@@ -237,6 +243,10 @@ def warm(families) -> None:
             "vq4": [trace + ["--schemes", "none,vq4,vq4x64"],
                     ["eval", leaf, "--quiet", "--jobs", "1", "--schemes", "vq4,vq4x64"]],
             "omm": [["omm", scene, "-o", os.path.join(tmp, "omm"), "--quiet", "--threads", "1"]],
+            "synth": [["eval", leaf, "--quiet", "--jobs", "1", "--schemes", "vq4-synth"],
+                      trace + ["--schemes", "none,vq4-synth"]],
+            "wavelet": [["eval", leaf, "--quiet", "--jobs", "1", "--schemes", "wavelet3,wavelet3-fast"],
+                        trace + ["--schemes", "none,wavelet3-fast"]],
             "budget": [["omm", scene, "-o", os.path.join(tmp, "omm_budget"), "--quiet", "--threads", "1",
                         "--budget", "200"], trace + ["--schemes", "none,budget:1KiB"]],
         }
