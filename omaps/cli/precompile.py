@@ -234,21 +234,34 @@ def warm(families) -> None:
     with tempfile.TemporaryDirectory(prefix="omaps-precompile-") as tmp:
         scene = _quad_scene(tmp)
         leaf = os.path.join(tmp, "leaf.png")
+        uvs = os.path.join(tmp, "uvs.npy")
+        import numpy as np
+
+        np.save(uvs, np.random.default_rng(0).random((48, 3, 2)))
         trace = ["trace", scene, "--size", "16", "--camera", "0.5,0.5,2:0.5,0.5,0:60", "--quiet", "--jobs", "1"]
         runs = {
             "square": [["eval", leaf, "--quiet", "--jobs", "1", "--schemes", "sq4,sq16"]],
             "micromap": [["eval", leaf, "--quiet", "--jobs", "1", "--schemes", "tri2,tri3"]],
-            "trace": [trace + ["--schemes", "none,tri3,sq16", "--shadows"]],
+            "trace": [trace + ["--schemes", "none,tri3,sq16", "--shadows", "--two-state", "all"]],
             "vq2": [trace + ["--schemes", "none,vq2"], ["eval", leaf, "--quiet", "--jobs", "1", "--schemes", "vq2"]],
             "vq4": [trace + ["--schemes", "none,vq4,vq4x64"],
                     ["eval", leaf, "--quiet", "--jobs", "1", "--schemes", "vq4,vq4x64"]],
-            "omm": [["omm", scene, "-o", os.path.join(tmp, "omm"), "--quiet", "--threads", "1"]],
+            "omm": [["omm", scene, "-o", os.path.join(tmp, "omm"), "--quiet", "--threads", "1"],
+                    ["omm", scene, "-o", os.path.join(tmp, "omm_2"), "--quiet", "--threads", "1", "--format", "2state",
+                     "--promote", "hashed"],
+                    ["omm", scene, "-o", os.path.join(tmp, "omm.glb"), "--quiet", "--threads", "1"],
+                    ["trace", os.path.join(tmp, "omm.glb")] + trace[2:] + ["--schemes", "none,omm"]],
             "synth": [["eval", leaf, "--quiet", "--jobs", "1", "--schemes", "vq4-synth"],
                       trace + ["--schemes", "none,vq4-synth"]],
             "wavelet": [["eval", leaf, "--quiet", "--jobs", "1", "--schemes", "wavelet3,wavelet3-fast"],
                         trace + ["--schemes", "none,wavelet3-fast"]],
             "budget": [["omm", scene, "-o", os.path.join(tmp, "omm_budget"), "--quiet", "--threads", "1",
-                        "--budget", "200"], trace + ["--schemes", "none,budget:1KiB"]],
+                        "--budget", "200"], trace + ["--schemes", "none,budget:1KiB"],
+                       ["omm", scene, "-o", os.path.join(tmp, "omm_view"), "--quiet", "--threads", "1", "--budget", "200",
+                        "--weights", "view", "--size", "16"],
+                       # enough distinct micromaps for the budget's merged options (omaps.omm.budget's kernels)
+                       ["omm", leaf, uvs, "-o", os.path.join(tmp, "omm_merge"), "--quiet", "--threads", "1", "--budget",
+                        "3000", "--filter", "linear"]],
         }
         failed = []
         for f in families:  # one family failing (no Embree, say) leaves the others compiled
