@@ -244,7 +244,7 @@ def micro_fractions(test: AlphaTest, tris_uv, levels, starts=None) -> np.ndarray
     from .bake.micromap import micro_starts
 
     tris = texel_triangles(test, tris_uv)
-    lv = np.ascontiguousarray(np.broadcast_to(np.asarray(levels), (len(tris),)), dtype=np.int64)
+    lv = np.array(np.broadcast_to(np.asarray(levels), (len(tris),)), dtype=np.int64)  # writable: one specialisation
     starts = micro_starts(lv) if starts is None else np.asarray(starts, dtype=np.int64)
     out = np.empty(int(starts[-1]), dtype=np.float64)
     filt, mu, mv = test.codes()

@@ -359,7 +359,7 @@ def bake_micromaps(grid: FootprintGrid, tris_uv, levels, grow: float = 0.0,
     lv = np.broadcast_to(np.asarray(levels), (len(t),))
     for x in np.unique(lv):
         check_level(int(x))
-    lv = np.ascontiguousarray(lv, dtype=np.int64)
+    lv = np.array(lv, dtype=np.int64)  # writable (a broadcast view is not): one compiled specialisation
     starts = micro_starts(lv)
     out = np.empty(int(starts[-1]), dtype=np.uint8)
     if len(t):

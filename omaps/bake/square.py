@@ -267,7 +267,7 @@ def bake_pair_flags(grid: FootprintGrid, corner_uv, has_b, n: int, grow: float =
     """Footprint flags (P, n, n) uint8 of the pairs' square maps (0: a cell no hit reaches)."""
     n = check_square_size(n)
     uv = np.ascontiguousarray(corner_uv, dtype=np.float64).reshape(-1, 6, 2)
-    hb = np.ascontiguousarray(np.broadcast_to(np.asarray(has_b, dtype=np.bool_), (len(uv),)))
+    hb = np.array(np.broadcast_to(np.asarray(has_b, dtype=np.bool_), (len(uv),)))  # writable: one specialisation
     if not np.isfinite(uv).all():
         raise InputError("pair corner UVs must be finite")
     out = np.zeros((len(uv), n, n), np.uint8)

@@ -83,7 +83,7 @@ def resolve_counted(states3: np.ndarray, starts: np.ndarray, levels, test: Alpha
     (``states3``), then how many C ones became OMM state 0, 1, 2, 3."""
     mode = promotion_code(promotion)
     tris = texel_triangles(test, tris_uv)
-    lv = np.ascontiguousarray(np.broadcast_to(np.asarray(levels), (len(tris),)), dtype=np.int64)
+    lv = np.array(np.broadcast_to(np.asarray(levels), (len(tris),)), dtype=np.int64)  # writable: one specialisation
     out = np.empty_like(states3)
     counts = np.empty((len(tris), 7), dtype=np.int64)
     filt, mu, mv = test.codes()
