@@ -15,7 +15,7 @@ from numba import njit
 
 from .sampling import FootprintGrid
 
-__all__ = ["flag_table", "box_counts", "box_flag", "MARGIN"]
+__all__ = ["flag_table", "box_counts", "box_flag", "unmixed_flag", "MARGIN"]
 
 MARGIN = 1e-9  # relative widening of region boxes; float rounding of the coordinates is ~1e-15
 
@@ -96,6 +96,13 @@ def box_counts(sat, r0, r1, c0, c1, period_y, period_x):
             nm += _rect(sat, ya1, yb1, xa1, xb1, 2)
     n = (yb0 - ya0 + yb1 - ya1) * (xb0 - xa0 + xb1 - xa1)
     return nt, no, nm, n
+
+
+@njit(cache=True, inline="always")
+def unmixed_flag(nt, no, nm):
+    """The flag bits of a box's cells other than the mixed ones, from ``box_counts`` (a mixed
+    cell counts in all three, so a count above ``nm`` is an unmixed cell's)."""
+    return (1 if nt > nm else 0) | (2 if no > nm else 0)
 
 
 @njit(cache=True, inline="always")

@@ -16,7 +16,7 @@ from numba import njit
 
 from . import states
 from .bilinear import POLY_MAX, cell_flag, point_flag
-from .flag_table import box_counts
+from .flag_table import box_counts, unmixed_flag
 from .sampling import cell_index
 
 
@@ -146,10 +146,7 @@ def polygon_flags_table(sat, grid, poly, k, grow, points, buf_a, buf_b):
         if c1 <= c0:
             continue
         nt, no, nm, n = box_counts(sat, r, r + 1, c0, c1, period_y, period_x)
-        if nt > nm:  # cells other than mixed ones with the T bit
-            acc |= 1
-        if no > nm:
-            acc |= 2
+        acc |= unmixed_flag(nt, no, nm)
         if nm > 0 and acc != 3:  # the mixed cells, each decided on its own
             if not points_done:  # the vertices' own flags first (as ``polygon_flags``)
                 points_done = True

@@ -52,7 +52,7 @@ from numba import njit, prange
 from ..bilinear import POLY_MAX, cell_flag, point_flag
 from ..birdcurve import MAX_LEVEL
 from ..errors import InputError
-from ..flag_table import MARGIN, box_counts, box_flag, flag_table
+from ..flag_table import MARGIN, box_counts, box_flag, flag_table, unmixed_flag
 from ..raster import edge_extent
 from ..sampling import FootprintGrid, cell_index
 
@@ -129,10 +129,7 @@ def _leaf_flag(sat, flags, mixed, values, bounds, period_x, period_y, x0, y0, x1
         c0 = int(math.floor(xmin))
         c1 = int(math.ceil(xmax))
         nt, no, nm, n = box_counts(sat, r, r + 1, c0, c1, period_y, period_x)
-        if nt > nm:  # cells other than mixed ones with the T bit
-            acc |= 1
-        if no > nm:
-            acc |= 2
+        acc |= unmixed_flag(nt, no, nm)
         if nm > 0 and acc != 3:  # the mixed cells, each decided on its own
             if not points_done:  # the vertices' own flags first (``raster.polygon_flags`` does the same)
                 points_done = True
