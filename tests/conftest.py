@@ -30,6 +30,26 @@ def real_textures(min_size=0):
     return out
 
 
+def tile_maps(paths, size, tile=64, limit=300):
+    """The size x size map of every tile x tile texel tile of some real textures (bench/common.py's
+    maps), without all-T / all-O ones: at most ``limit``, spread over them."""
+    from omaps.alpha_test import StateRule
+    from omaps.bake import bake_square
+    from omaps.sampling import footprint_grid
+    from omaps.texture import load_alpha
+
+    rule = StateRule()
+    out = []
+    for p in paths:
+        s = rule.classify(load_alpha(p))
+        for y in range(0, s.shape[0] - tile + 1, tile):
+            for x in range(0, s.shape[1] - tile + 1, tile):
+                m = bake_square(footprint_grid(s[y:y + tile, x:x + tile]), size)
+                if len(np.unique(m)) > 1:
+                    out.append(m)
+    return np.stack(out[:: max(1, len(out) // limit)][:limit])
+
+
 needs_shared = pytest.mark.skipif(not TEXTURES.is_dir(),
                                   reason=f"real textures not found at {TEXTURES} (../shared is absent)")
 

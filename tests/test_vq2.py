@@ -8,7 +8,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
-from conftest import needs_shared, real_textures
+from conftest import needs_shared, real_textures, tile_maps
 from omaps import states
 from omaps.alpha_test import StateRule
 from omaps.bake import bake_pair_triangles, bake_square, known_fraction
@@ -291,24 +291,9 @@ def test_bulk_pack_rejects_fields_out_of_range():
         vq2_block.decode_many(np.zeros((2, 31), np.uint8))
 
 
-def _tile_maps(paths, size, tile=64, limit=300):
-    """The size x size map of every tile x tile texel tile of some real textures (bench/common.py's
-    maps), without all-T / all-O ones."""
-    rule = StateRule()
-    out = []
-    for p in paths:
-        s = rule.classify(load_alpha(p))
-        for y in range(0, s.shape[0] - tile + 1, tile):
-            for x in range(0, s.shape[1] - tile + 1, tile):
-                m = bake_square(footprint_grid(s[y:y + tile, x:x + tile]), size)
-                if len(np.unique(m)) > 1:
-                    out.append(m)
-    return np.stack(out[:: max(1, len(out) // limit)][:limit])
-
-
 @pytest.fixture(scope="module")
 def tile_maps16():
-    return _tile_maps(REAL[::8], 16)
+    return tile_maps(REAL[::8], 16)
 
 
 @needs_shared
