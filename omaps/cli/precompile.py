@@ -227,16 +227,16 @@ def _quad_scene(folder: str) -> str:
 
 def warm(families) -> None:
     """Compile the families' kernels by running the commands that use them on tiny inputs."""
-    from .main import main
-
     import tempfile
+
+    import numpy as np
+
+    from .main import main
 
     with tempfile.TemporaryDirectory(prefix="omaps-precompile-") as tmp:
         scene = _quad_scene(tmp)
         leaf = os.path.join(tmp, "leaf.png")
         uvs = os.path.join(tmp, "uvs.npy")
-        import numpy as np
-
         np.save(uvs, np.random.default_rng(0).random((48, 3, 2)))
         trace = ["trace", scene, "--size", "16", "--camera", "0.5,0.5,2:0.5,0.5,0:60", "--quiet", "--jobs", "1"]
         runs = {
