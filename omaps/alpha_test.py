@@ -242,7 +242,9 @@ def material_test(name: str, alpha_mode: str, cutoff: float, factor: float, alph
     False: the texture could not be read, the shader sees white and every texel is C."""
     if not rules.alpha_tested(alpha_mode):
         raise ValueError(f"{alpha_mode} materials are not alpha-tested under blend rule {rules.blend!r}")
-    value = np.full((1, 1), maxval, dtype=np.uint16) if alpha is None else alpha
+    # (the placeholder texel in the 8-bit textures' dtype when it fits: the kernels then run on
+    # the specialisation every 8-bit texture uses instead of compiling another)
+    value = np.full((1, 1), maxval, dtype=np.uint8 if maxval <= 255 else np.uint16) if alpha is None else alpha
     filt = rules.filter or filter
     wu = rules.wrap or wrap_u
     wv = rules.wrap or wrap_v

@@ -11,6 +11,7 @@ from omaps import bake, pair, states
 from omaps.codecs.registry import get_codec
 from omaps.omm import pairs
 from omaps.sampling import footprint_grid
+from omaps.codecs.bits import kernel_bytes
 
 FILTERS = ["nearest", "linear"]
 WRAPS = ["clamp", "wrap", "mirror"]
@@ -172,7 +173,7 @@ def test_codec_source_is_conservative_and_exact_after_decoding():
         ex = pairs.expand(dec[None], pair_of, corners)
         np.testing.assert_array_equal(pairs.merge(ex[None])[0], dec)
         assert states.is_conservative(pairs.expand(sq[None], pair_of, corners), ex)
-        lookups = [codec.lookup(np.frombuffer(codec.encode(sq, "best", "fast"), np.uint8), i, j)
+        lookups = [codec.lookup(kernel_bytes(codec.encode(sq, "best", "fast")), i, j)
                    for j in range(16) for i in range(16)]
         np.testing.assert_array_equal(np.array(lookups).reshape(16, 16), dec)
 

@@ -28,7 +28,9 @@ def test_families_of_commands():
     assert families_for(ns(command="omm", inputs=["a.glb"], expand=False, source="texture")) == ["micromap", "omm"]
     assert families_for(ns(command="omm", inputs=["a.glb"], expand=False, source="vq2")) == [
         "micromap", "omm", "square", "vq2"]
-    assert families_for(ns(command="omm", inputs=[], expand=False, source="texture")) == []  # --verify
+    # --verify compiles the coverage kernels (in the omm family); --expand none
+    assert families_for(ns(command="omm", inputs=[], verify="out", expand=False, source="texture")) == ["omm"]
+    assert families_for(ns(command="omm", inputs=[], verify=None, expand=True, source="texture")) == []
     assert families_for(ns(command="encode", codec="vq4x64")) == ["square", "vq4"]
     assert families_for(ns(command="bake", scheme="tri4")) == ["micromap"]
     assert families_for(ns(command="decode", codec="vq4")) == []

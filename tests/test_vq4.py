@@ -18,6 +18,7 @@ from omaps.codecs import vec4, vq4_block, vq4_encode
 from omaps.codecs.vq4_block import VQ4Block
 from omaps.sampling import footprint_grid
 from omaps.texture import load_alpha
+from omaps.codecs.bits import kernel_bytes
 
 T, O, C = states.T, states.O, states.C
 
@@ -72,7 +73,7 @@ def test_decoders_are_total_and_agree(data):
     m = vq4_block.decode(data)
     assert m.shape == (32, 32) and m.max() <= 2
     np.testing.assert_array_equal(m, reference_decode(data))
-    blk = np.frombuffer(data, dtype=np.uint8)
+    blk = kernel_bytes(data)
     ys, xs = np.mgrid[0:32, 0:32]
     got = vq4_block.lookup_batch(blk[None], np.zeros(1024, np.int64), xs.ravel(), ys.ravel())
     np.testing.assert_array_equal(got.reshape(32, 32), m)
@@ -87,7 +88,7 @@ def test_x64_is_four_blocks(data):
     for k in range(4):
         y, x = 32 * (k >> 1), 32 * (k & 1)
         np.testing.assert_array_equal(m[y:y + 32, x:x + 32], reference_decode(data[64 * k:64 * (k + 1)]))
-    blk = np.frombuffer(data, dtype=np.uint8)
+    blk = kernel_bytes(data)
     ys, xs = np.mgrid[0:64, 0:64]
     got = vq4_block.lookup_batch_x64(blk[None], np.zeros(4096, np.int64), xs.ravel(), ys.ravel())
     np.testing.assert_array_equal(got.reshape(64, 64), m)
@@ -359,7 +360,7 @@ def test_codec_bytes_are_the_packed_blocks_on_tile_maps(tile_maps32, encoder, ef
     from omaps.codecs import get_codec
     from omaps.codecs.options import EFFORTS, ENCODERS
 
-    maps = tile_maps32 if encoder == "best" and effort != "thorough" else tile_maps32[::5]
+    maps = tile_maps32 if encoder == "best" and effort != "thorough" else np.ascontiguousarray(tile_maps32[::5])
     blocks, decoded = get_codec("vq4").encode_many(maps, encoder, effort)
     idx, ent, tr = vq4_encode.encode_many_arrays(maps, ENCODERS.index(encoder), EFFORTS[effort])
     assert [b.tobytes() for b in blocks] == [reference_pack(idx[i], ent[i], tr[i]) for i in range(len(maps))]

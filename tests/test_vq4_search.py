@@ -104,9 +104,9 @@ def test_ranking_finds_transformed_copies(seed):
             m[oy + 4 * vy:oy + 4 * vy + 4, ox + 4 * vx:ox + 4 * vx + 4] = _shown(vecs[i], tr[q])
     blk = ve.encode(m, "best", "medium")
     np.testing.assert_array_equal(blk.decode(), m)
-    used = ve._quadrant_used(*ve.displayed_masks(m))
-    order = ve._rank_transforms(*ve.displayed_masks(m), used, ve.RANK_PRE, 1)
-    assert order[0] == tr[1] | tr[2] << 3 | tr[3] << 6  # the copies' own transforms rank first
+    # the vectors have no symmetry, so lossless means the copies' own transforms (medium scores
+    # only the few best-ranked combinations: the ranking put them among those)
+    assert [int(t) for t in blk.transforms] == tr
 
 
 def test_deterministic(rng):

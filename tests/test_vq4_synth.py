@@ -20,6 +20,7 @@ from omaps.codecs import get_codec, vq4_block, vq4_encode, vq4_synth_block as sb
 from omaps.codecs.vq4_block import VQ4Block
 from omaps.sampling import footprint_grid
 from omaps.texture import load_alpha
+from omaps.codecs.bits import kernel_bytes
 from test_vq4 import _thirteen, blob_maps, random_maps, reference_decode
 
 T, O, C = states.T, states.O, states.C
@@ -72,7 +73,7 @@ def reference_synth(block: bytes) -> np.ndarray:
 
 
 def _lookup_all(data):
-    blk = np.frombuffer(data, dtype=np.uint8)
+    blk = kernel_bytes(data)
     return np.array([[sb.lookup(blk, x, y) for x in range(32)] for y in range(32)], dtype=np.uint8)
 
 
@@ -102,7 +103,7 @@ def test_arrange_carries_the_extra(gen, two, extra, seed):
     ent = np.array(two + [int(rng.integers(0, 1 << 18)), int(rng.integers(0, 1 << 18))] + gen)
     blk = VQ4Block(rng.integers(0, 16, 64), ent, rng.integers(0, 8, 3))
     data = sb.VQ4SynthBlock(blk, extra).pack()
-    assert sb.synth_code(np.frombuffer(data, np.uint8)) == extra
+    assert sb.synth_code(kernel_bytes(data)) == extra
     assert sb.VQ4SynthBlock.unpack(data).extra == extra
     # every vector but index 2's shows what VQ4 shows
     plain = blk.decode()

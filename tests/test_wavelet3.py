@@ -18,6 +18,7 @@ from omaps.cli import main
 from omaps.codecs import get_codec, wavelet3_block as wb, wavelet3_encode as we
 from omaps.sampling import footprint_grid
 from omaps.texture import load_alpha
+from omaps.codecs.bits import kernel_bytes
 
 T, O, C = states.T, states.O, states.C
 
@@ -89,7 +90,7 @@ def reference_decode(block: bytes) -> np.ndarray:
 
 
 def _lookup_all(data):
-    blk = np.frombuffer(data, dtype=np.uint8)
+    blk = kernel_bytes(data)
     return np.array([[wb.lookup(blk, x, y) for x in range(64)] for y in range(64)], dtype=np.uint8)
 
 

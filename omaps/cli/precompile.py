@@ -34,7 +34,7 @@ FAMILIES = {
     "trace": (("omaps.trace.rays", "omaps.scene.pairing"), 10),
     "vq2": (("omaps.codecs.vq2_encode",), 10),
     "vq4": (("omaps.codecs.vq4_encode",), 30),
-    "omm": (("omaps.omm.resolve", "omaps.omm.format"), 6),
+    "omm": (("omaps.omm.resolve", "omaps.omm.format", "omaps.coverage"), 6),
     "budget": (("omaps.budget", "omaps.omm.budget"), 10),
     "synth": (("omaps.codecs.vq4_synth_encode", "omaps.codecs.vq4_synth_block"), 12),
     "wavelet": (("omaps.codecs.wavelet3_encode", "omaps.codecs.wavelet3_block", "omaps.codecs.vec4_search"), 19),
@@ -101,6 +101,8 @@ def families_for(args) -> list[str]:
         out = _scheme_families(args.schemes)
     elif cmd == "trace":
         out = ["trace"] + _scheme_families(args.schemes)
+    elif cmd == "omm" and getattr(args, "verify", None):
+        out = ["omm"]
     elif cmd == "omm" and getattr(args, "inputs", None) and not getattr(args, "expand", False):
         out = ["micromap", "omm"] + _scheme_families(getattr(args, "source", ""))
         if getattr(args, "budget", None) is not None:
@@ -243,13 +245,16 @@ def warm(families) -> None:
             "square": [["eval", leaf, "--quiet", "--jobs", "1", "--schemes", "sq4,sq16"]],
             "micromap": [["eval", leaf, "--quiet", "--jobs", "1", "--schemes", "tri2,tri3"]],
             "trace": [trace + ["--schemes", "none,tri3,sq16", "--shadows", "--two-state", "all"]],
-            "vq2": [trace + ["--schemes", "none,vq2"], ["eval", leaf, "--quiet", "--jobs", "1", "--schemes", "vq2"]],
+            # the deck's encoder and thorough are kernels of their own (vq4's share one)
+            "vq2": [trace + ["--schemes", "none,vq2"],
+                    ["eval", leaf, "--quiet", "--jobs", "1", "--schemes", "vq2,vq2-paper,vq2-thorough"]],
             "vq4": [trace + ["--schemes", "none,vq4,vq4x64"],
                     ["eval", leaf, "--quiet", "--jobs", "1", "--schemes", "vq4,vq4x64"]],
             "omm": [["omm", scene, "-o", os.path.join(tmp, "omm"), "--quiet", "--threads", "1"],
                     ["omm", scene, "-o", os.path.join(tmp, "omm_2"), "--quiet", "--threads", "1", "--format", "2state",
                      "--promote", "hashed"],
                     ["omm", scene, "-o", os.path.join(tmp, "omm.glb"), "--quiet", "--threads", "1"],
+                    ["omm", "--verify", os.path.join(tmp, "omm")],
                     ["trace", os.path.join(tmp, "omm.glb")] + trace[2:] + ["--schemes", "none,omm"]],
             "synth": [["eval", leaf, "--quiet", "--jobs", "1", "--schemes", "vq4-synth"],
                       trace + ["--schemes", "none,vq4-synth"]],

@@ -78,9 +78,19 @@ def pack_many(values, pos, width, nbytes: int) -> np.ndarray:
     return _pack_many(v, np.asarray(pos, dtype=np.int64), np.asarray(width, dtype=np.int64), int(nbytes))
 
 
+def kernel_bytes(data) -> np.ndarray:
+    """Bytes (bytes, bytearray, memoryview or an array) as a contiguous, writable uint8 array:
+    numba compiles a kernel once per argument layout, and a read-only buffer (``np.frombuffer``
+    of bytes) would cost a second compile of every decoder and lookup it reaches."""
+    if isinstance(data, (bytes, bytearray, memoryview)):
+        return np.frombuffer(bytearray(data), dtype=np.uint8)
+    b = np.ascontiguousarray(data, dtype=np.uint8)
+    return b if b.flags.writeable else b.copy()
+
+
 def unpack_many(blocks, pos, width) -> np.ndarray:
     """Blocks (n, nbytes) uint8 -> their fields (n, F) int64, the inverse of ``pack_many``."""
-    b = np.ascontiguousarray(blocks, dtype=np.uint8)
+    b = kernel_bytes(blocks)
     return _unpack_many(b.reshape(len(b), -1), np.asarray(pos, dtype=np.int64), np.asarray(width, dtype=np.int64))
 
 
@@ -97,8 +107,7 @@ def put_bits(block: np.ndarray, pos: int, n: int, value: int) -> None:
 
 def as_block(data, nbytes: int, name: str = "block") -> np.ndarray:
     """A physical block as a uint8 array of exactly ``nbytes``."""
-    b = np.frombuffer(bytes(data), dtype=np.uint8) if isinstance(data, (bytes, bytearray, memoryview)) \
-        else np.asarray(data, dtype=np.uint8)
+    b = kernel_bytes(data)
     if b.shape != (nbytes,):
         raise ValueError(f"{name} must be {nbytes} bytes, got {b.size}")
     return b

@@ -36,7 +36,7 @@ from numba import njit
 
 from .. import states
 from . import bits
-from .bits import as_block
+from .bits import as_block, kernel_bytes
 from .vec2 import CODE_STATES, FWD2, INV2
 
 BLOCK_BYTES = 32
@@ -175,7 +175,7 @@ def _decode_many(blocks):
 def decode_many(blocks) -> np.ndarray:
     """Physical blocks (n, 32) uint8 -> their 16x16 maps (n, 16, 16): ``lookup`` of every cell,
     compiled (the same maps as ``decode`` of each)."""
-    b = np.ascontiguousarray(blocks, dtype=np.uint8)
+    b = kernel_bytes(blocks)
     if b.ndim != 2 or b.shape[1] != BLOCK_BYTES:
         raise ValueError(f"VQ2 blocks must be (n, {BLOCK_BYTES}) bytes, got shape {b.shape}")
     return _decode_many(b)

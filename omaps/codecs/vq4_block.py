@@ -39,7 +39,7 @@ from numba import njit
 
 from .. import states
 from . import bits
-from .bits import as_block
+from .bits import as_block, kernel_bytes
 from .vec4 import CFLAG_BIT, FWD4, INV4, KIND_BITS, PALETTE_BIT, entry_pattern, pattern_states
 
 BLOCK_BYTES = 64
@@ -226,7 +226,7 @@ def _decode_many(data, n, size):
 
 
 def _rows(blocks, nbytes, name):
-    b = np.ascontiguousarray(blocks, dtype=np.uint8)
+    b = kernel_bytes(blocks)
     if b.ndim != 2 or b.shape[1] != nbytes:
         raise ValueError(f"{name} must be (n, {nbytes}) bytes, got shape {b.shape}")
     return b
