@@ -255,14 +255,14 @@ def test_palm(tmp_path, capsys):
     per = omm_decoder.triangle_states(out)
     a = tex.alpha
     h, w = a.shape
-    for t in range(0, 3840, 97):
+    for t in range(0, 3840, 193):  # a sample: the exact rational reference costs ~10 ms a micro-triangle
         lv, st_ = per[t]
         if lv is None:
             continue
         from omaps.birdcurve import uv_micro_triangles
 
         micro = uv_micro_triangles(at.uv[t], lv)
-        for k in np.flatnonzero(np.array(st_) < 2)[:20]:
+        for k in np.flatnonzero(np.array(st_) < 2)[:12]:
             lo, hi = ref.bilinear_extremes(a, "wrap", "wrap", list(micro[k] * [w, h]))  # exact, bilinear
             assert lo / 255 >= 0.25 if st_[k] == 1 else hi / 255 < 0.25
 
