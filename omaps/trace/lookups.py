@@ -2,7 +2,8 @@
 
 A state function ``(table, tri, b1, b2) -> T/O/C`` reads one scheme's *stored* data: nothing
 (``none``: always C), a per-triangle 2-bit micromap through the bird curve, or a pair's square
-map through its codec's random-access ``lookup`` (the raw ``sqN`` map included). The shader is
+map through its codec's random-access ``lookup`` (the raw ``sqN`` map included), chosen by
+a format code (``MAP_FORMATS``). The shader is
 ``alpha_test.sample_passes`` on the material's texture values -- the same numbers and comparison
 the bakers classified -- times the interpolated COLOR_0 alpha.
 """
@@ -13,8 +14,8 @@ import numpy as np
 from numba import carray, njit
 
 from .. import birdcurve, pair, states
-from ..budget import HIT_LEVEL
-from ..codecs import vq2_block, vq4_block
+from ..budget import HIT_LEVEL, PAIR_OPTIONS
+from ..codecs import vq2_block, vq4_block, vq4_synth_block, wavelet3_block
 from ..codecs.raw import read_state
 from ..sampling import sample_texture
 from .embree import f64_ptr, i8_ptr, i32_ptr, i64_ptr, u8_ptr, u16_ptr
@@ -22,8 +23,8 @@ from .tables import (T_COUNT, T_MAP_CODEC, T_MAP_DATA, T_MAP_FORMAT, T_MAP_LEVEL
                      T_MAT_TEX_START, T_MAT_THR, T_MAT_W, T_MAT_WRAP_U, T_MAT_WRAP_V, T_TEX, T_TRI_CORNER,
                      T_TRI_MAT, T_TRI_UV, T_TRI_VALPHA)
 
-__all__ = ["clamp_bary", "shader_alpha_test", "no_map_state", "micro_map_state", "codec_map_state", "mixed_map_state", "pair_map_state",
-           "codec_format", "state_function"]
+__all__ = ["clamp_bary", "shader_alpha_test", "no_map_state", "micro_map_state", "mixed_map_state", "pair_map_state",
+           "codec_format", "state_function", "MAP_FORMATS"]
 
 
 @njit(cache=True, inline="always")
@@ -100,16 +101,23 @@ def counting_state(table, tri, b1, b2):
     return states.C
 
 
+# The tracer's format codes of a pair's stored square map: the budget's options first (their
+# index in ``budget.PAIR_OPTIONS``: 0 none, 1..7 raw sq1..sq64, 8 vq2, 9 vq4, 10 vq4x64), then the
+# codecs a budget does not choose among. Every codec is read by one module-level kernel
+# (``pair_map_state``), whose filters numba compiles once and caches.
+MAP_FORMATS = PAIR_OPTIONS + ("vq4-synth", "wavelet3", "sq128")
+_F_SYNTH, _F_WAVELET, _F_SQ128 = (MAP_FORMATS.index(n) for n in ("vq4-synth", "wavelet3", "sq128"))
+
+
 @njit(cache=True, inline="always")
 def _pair_block_state(table, tri, b1, b2, fmt, off):
-    """The hit's state in a pair's block of format ``fmt`` (the index in ``budget.PAIR_OPTIONS``:
-    0 none, 1..7 raw sq1..sq64, 8 vq2, 9 vq4, 10 vq4x64) at byte ``off`` of the map data, read
-    with that format's random-access lookup."""
+    """The hit's state in a pair's block of format ``fmt`` (its index in ``MAP_FORMATS``) at byte
+    ``off`` of the map data, read with that format's random-access lookup."""
     if fmt == 0:
         return states.C
     s, t = pair.hit_st(i8_ptr(table[T_TRI_CORNER]), tri, b1, b2)
-    if fmt <= 7:
-        n = 1 << (fmt - 1)
+    if fmt <= 7 or fmt == _F_SQ128:
+        n = 128 if fmt == _F_SQ128 else 1 << (fmt - 1)
         i, j = pair.uv_to_cell(s, t, n)
         return read_state(u8_ptr(table[T_MAP_DATA]), off, j * n + i)
     if fmt == 8:
@@ -118,55 +126,38 @@ def _pair_block_state(table, tri, b1, b2, fmt, off):
     if fmt == 9:
         i, j = pair.uv_to_cell(s, t, vq4_block.SIZE)
         return vq4_block.lookup(carray(u8_ptr(table[T_MAP_DATA] + off), vq4_block.BLOCK_BYTES), i, j)
+    if fmt == _F_SYNTH:
+        i, j = pair.uv_to_cell(s, t, vq4_synth_block.SIZE)
+        return vq4_synth_block.lookup(carray(u8_ptr(table[T_MAP_DATA] + off), vq4_synth_block.BLOCK_BYTES), i, j)
+    if fmt == _F_WAVELET:
+        i, j = pair.uv_to_cell(s, t, wavelet3_block.SIZE)
+        return wavelet3_block.lookup(carray(u8_ptr(table[T_MAP_DATA] + off), wavelet3_block.BLOCK_BYTES), i, j)
     i, j = pair.uv_to_cell(s, t, vq4_block.X64_SIZE)
     return vq4_block.lookup_x64(carray(u8_ptr(table[T_MAP_DATA] + off), vq4_block.X64_BYTES), i, j)
 
 
 @njit(cache=True)
 def mixed_map_state(table, tri, b1, b2):
-    """A budget's maps (``trace.budget``): the pair's row has a format code (the index in
-    ``budget.PAIR_OPTIONS``: 0 none, 1..7 raw sq1..sq64, 8 vq2, 9 vq4, 10 vq4x64) and the byte
-    offset of its block; the hit's cell is read with that format's random-access lookup."""
+    """A budget's maps (``trace.budget``): the pair's row has a format code (``MAP_FORMATS``) and
+    the byte offset of its block; the hit's cell is read with that format's random-access lookup."""
     row = np.int64(i32_ptr(table[T_MAP_ROW])[tri])
     return _pair_block_state(table, tri, b1, b2, i32_ptr(table[T_MAP_FORMAT])[row], i64_ptr(table[T_MAP_OFFSET])[row])
 
 
 @njit(cache=True)
 def pair_map_state(table, tri, b1, b2):
-    """One codec's square maps (``sqN`` up to 64, vq2, vq4, vq4x64), format code in the table's
-    ``T_MAP_CODEC`` word: the pair's row of ``T_MAP_ROW_BYTES`` bytes read with the codec's lookup.
-    A module-level function (unlike ``codec_map_state``'s), so its filter is compiled once and cached."""
+    """One codec's square maps (any ``sqN`` or codec), format code in the table's ``T_MAP_CODEC``
+    word: the pair's row of ``T_MAP_ROW_BYTES`` bytes read with the codec's lookup."""
     row = np.int64(i32_ptr(table[T_MAP_ROW])[tri])
     return _pair_block_state(table, tri, b1, b2, table[T_MAP_CODEC], row * table[T_MAP_ROW_BYTES])
 
 
 def codec_format(codec) -> int:
-    """The codec's format code in ``budget.PAIR_OPTIONS`` (read by ``pair_map_state``), or -1 for
-    a codec it does not list (traced through ``codec_map_state``)."""
-    from ..budget import PAIR_OPTIONS
-
+    """The codec's format code (its index in ``MAP_FORMATS``), read by ``pair_map_state``."""
     name = getattr(codec, "name", None)
-    return PAIR_OPTIONS.index(name) if name in PAIR_OPTIONS and name != "none" else -1
-
-
-_CODEC_STATES: dict = {}
-
-
-def codec_map_state(codec):
-    """A state function reading the pair's stored square map with the codec's random-access lookup."""
-    if codec.name not in _CODEC_STATES:
-        lookup = codec.lookup
-
-        @njit
-        def state(table, tri, b1, b2):
-            s, t = pair.hit_st(i8_ptr(table[T_TRI_CORNER]), tri, b1, b2)
-            n = table[T_MAP_PARAM]
-            i, j = pair.uv_to_cell(s, t, n)
-            rb = table[T_MAP_ROW_BYTES]
-            row = np.int64(i32_ptr(table[T_MAP_ROW])[tri])
-            return lookup(carray(u8_ptr(table[T_MAP_DATA] + row * rb), rb), i, j)
-        _CODEC_STATES[codec.name] = state
-    return _CODEC_STATES[codec.name]
+    if name not in MAP_FORMATS or name == "none":
+        raise ValueError(f"the tracer has no format code for codec {name!r} (known: {', '.join(MAP_FORMATS[1:])})")
+    return MAP_FORMATS.index(name)
 
 
 def state_function(sm):
@@ -181,6 +172,4 @@ def state_function(sm):
         return counting_state
     if sm.kind == "mixed":
         return mixed_map_state
-    if codec_format(sm.codec) > 0:
-        return pair_map_state
-    return codec_map_state(sm.codec)
+    return pair_map_state
