@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["row_hashes", "unique_rows"]
+__all__ = ["row_hashes", "unique_rows", "first_occurrences"]
 
 _CHUNK_BYTES = 1 << 24  # rows hashed this many bytes at a time (bounded temporaries)
 _MIX = np.uint64(0xBF58476D1CE4E5B9)
@@ -77,3 +77,22 @@ def unique_rows(rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         return uniq.reshape((len(uniq),) + a.shape[1:]), inv.ravel().astype(np.int64)
     uniq, order = np.unique(flat[first], axis=0, return_inverse=True)
     return uniq.reshape((len(uniq),) + a.shape[1:]), order.ravel()[inverse].astype(np.int64)
+
+
+def first_occurrences(rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(first, inverse) of rows (M, ...): the index of each distinct row's first occurrence, in
+    the order of first use, and each row's index among them (``rows[first][inverse]`` equals
+    ``rows``). Found by hashing, checked byte for byte."""
+    a = np.ascontiguousarray(rows)
+    flat = a.reshape(len(a), int(np.prod(a.shape[1:]))).view(np.uint8)
+    if len(flat) == 0:
+        return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
+    _, first, inverse = np.unique(row_hashes(flat), return_index=True, return_inverse=True)
+    inverse = inverse.ravel()
+    if not all(np.array_equal(flat[s:s + 4096], flat[first[inverse[s:s + 4096]]]) for s in range(0, len(flat), 4096)):
+        _, first, inverse = np.unique(flat, axis=0, return_index=True, return_inverse=True)  # a hash collision
+        inverse = inverse.ravel()
+    order = np.argsort(first, kind="stable")
+    rank = np.empty(len(first), dtype=np.int64)
+    rank[order] = np.arange(len(first))
+    return first[order].astype(np.int64), rank[inverse]

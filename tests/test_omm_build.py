@@ -375,3 +375,27 @@ def test_chunked_baking_gives_the_same_buffers(rng, monkeypatch, source, dynamic
     a, b = parts.summary["statistics"], whole.summary["statistics"]
     assert a.pop("known_area_fraction") == pytest.approx(b.pop("known_area_fraction"), rel=1e-12)
     assert a == b, {k: (a[k], b[k]) for k in a if a[k] != b[k]}
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.integers(0, 2**32 - 1), st.sampled_from(["4state", "2state"]), st.booleans(), st.booleans(),
+       st.sampled_from(["nearest", "hashed"]))
+def test_repeated_triangles_are_baked_once_with_the_same_result(seed, fmt, dynamic, with_unknown, promote):
+    """Identical triangles (UVs, level, unknown flag) are baked and resolved once: the buffers and
+    statistics are what baking every triangle gives (the search for repeats switched off)."""
+    rng = np.random.default_rng(seed)
+    base = _tris(rng, 12)
+    tris = base[rng.integers(0, len(base), 40)]  # repeats, in any order
+    unknown = rng.random(len(tris)) < 0.2 if with_unknown else None
+    test = _cutoff(_alpha(rng), 0.5, "linear")
+    s = OmmSettings(format=fmt, level=3, dynamic_scale=1.5 if dynamic else None, max_level=4, promotion=promote)
+    got = build([Geometry("g", test, tris, unknown=unknown)], s)
+    with pytest.MonkeyPatch.context() as mp:  # every triangle its own: no reuse of a bake
+        mp.setattr(omaps.rows, "first_occurrences", lambda r: (np.arange(len(r)), np.arange(len(r))))
+        want = build([Geometry("g", test, tris, unknown=unknown)], s)
+    np.testing.assert_array_equal(got.index, want.index)
+    np.testing.assert_array_equal(got.data, want.data)
+    np.testing.assert_array_equal(got.triangles, want.triangles)
+    a, b = got.summary["statistics"], want.summary["statistics"]
+    assert a.pop("known_area_fraction") == pytest.approx(b.pop("known_area_fraction"), rel=1e-12)
+    assert a == b and got.usage == want.usage

@@ -7,7 +7,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import omaps.rows
-from omaps.rows import row_hashes, unique_rows
+from omaps.rows import first_occurrences, row_hashes, unique_rows
 
 
 def _rows(data, dtype):
@@ -74,6 +74,21 @@ def test_top_bits_of_two_words():
     a = np.zeros((2, 16), np.uint8)
     a[1, 7] = a[1, 15] = 0x80  # bit 63 of both words
     assert row_hashes(a)[0] != row_hashes(a)[1]
+
+
+@settings(max_examples=100, deadline=None)
+@given(st.data(), st.booleans())
+def test_first_occurrences(data, collide):
+    a = _rows(data, np.uint8)
+    with pytest.MonkeyPatch.context() as mp:
+        if collide:
+            mp.setattr(omaps.rows, "row_hashes", lambda f: np.zeros(len(f), np.uint64))
+        first, inverse = omaps.rows.first_occurrences(a)
+    np.testing.assert_array_equal(a[first][inverse], a)
+    seen = {}
+    for i, r in enumerate(a):
+        seen.setdefault(r.tobytes(), i)
+    assert first.tolist() == list(seen.values())  # each distinct row's first index, in order of first use
 
 
 def test_only_integer_rows():

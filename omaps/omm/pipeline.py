@@ -175,9 +175,9 @@ class _Packer:
         self.stored: dict[tuple[int, int], tuple[np.ndarray, np.ndarray, np.ndarray]] = {}  # sorted hashes, rows, ids
         self.needing = 0  # micromaps before reuse of identical ones
 
-    def add(self, omm_states: np.ndarray, level: int, fmt: int | None = None) -> np.ndarray:
+    def add(self, omm_states: np.ndarray, level: int, fmt: int | None = None, weights=None) -> np.ndarray:
         """Index buffer entries for micromaps (n, 4**level) of one level (and format: default the
-        settings')."""
+        settings'); ``weights``: how many triangles each row stands for (default one)."""
         fmt = self.s.format_code if fmt is None else fmt
         idx = np.empty(len(omm_states), dtype=np.int32)
         need = np.ones(len(omm_states), dtype=bool)
@@ -186,7 +186,7 @@ class _Packer:
             idx[uniform] = omm_format.SPECIAL_INDEX[omm_states[uniform, 0]]
             need = ~uniform
         rows = np.flatnonzero(need)
-        self.needing += len(rows)
+        self.needing += len(rows) if weights is None else int(np.sum(weights[rows]))
         if len(rows) == 0:
             return idx
         packed = omm_format.pack(omm_states[rows], fmt)
@@ -319,10 +319,28 @@ def build(geometries: list[Geometry], settings: OmmSettings = OmmSettings()) -> 
         plan, budget_report = budget_levels(geometries, settings, settings.budget)
     for gi, g in enumerate(geometries):
         tris = check_uv_triangles(g.tris_uv) if len(g.tris_uv) else np.zeros((0, 3, 2))
+        n_tris = len(tris)
         grid = g.test.grid()
         sat = flag_table(grid)
         levels, merged = plan[gi] if plan is not None else (_triangle_levels(g.test, tris, settings, n_map), {})
         area = g.areas(tris)
+        unknown = None if g.unknown is None else np.asarray(g.unknown, dtype=bool)
+        # identical triangles (the same UVs, level and unknown flag: instanced and repeated foliage
+        # cards) are baked and resolved once; ``weight`` says how many triangles each one stands for
+        inverse = None
+        if settings.dedup and n_map is None and plan is None and len(tris):  # (no reuse: a micromap each)
+            key = [np.ascontiguousarray(tris, dtype=np.float64).reshape(len(tris), 6).view(np.uint64),
+                   levels.astype(np.uint64)[:, None]] + ([] if unknown is None else [unknown.astype(np.uint64)[:, None]])
+            first_of, inverse = omaps_rows.first_occurrences(np.concatenate(key, axis=1))
+            if len(first_of) == len(tris):
+                inverse = None
+        if inverse is None:
+            weight = np.ones(len(tris), dtype=np.int64)
+        else:
+            weight = np.bincount(inverse, minlength=len(first_of))
+            area = np.bincount(inverse, weights=area, minlength=len(first_of))
+            tris, levels = tris[first_of], levels[first_of]
+            unknown = None if unknown is None else unknown[first_of]
         idx = np.empty(len(tris), dtype=np.int32)
         n_blocks = 0
         if n_map is not None:
@@ -339,8 +357,8 @@ def build(geometries: list[Geometry], settings: OmmSettings = OmmSettings()) -> 
             else:
                 s3 = s3_all[starts_all[a]:starts_all[b]]
                 starts = starts_all[a:b + 1] - starts_all[a]
-            if g.unknown is not None:
-                for i in np.flatnonzero(g.unknown[a:b]):
+            if unknown is not None:
+                for i in np.flatnonzero(unknown[a:b]):
                     s3[starts[i]:starts[i + 1]] = states.C
             mine = [t for t in merged if a <= t < b]  # --budget: micromaps shared by merging (their meet)
             for t in mine:
@@ -351,9 +369,10 @@ def build(geometries: list[Geometry], settings: OmmSettings = OmmSettings()) -> 
                 row = merged[t][1]
                 omm[starts[t - a]:starts[t - a + 1]] = row
                 tri_counts[t - a, 3:] = np.bincount(np.where(merged[t][0] == states.C, row, 4), minlength=5)[:4]
-            counts3 += tri_counts[:, :3].sum(axis=0)
-            promoted += tri_counts[:, 3:].sum(axis=0)
-            micro_total += len(s3)
+            w = weight[a:b]
+            counts3 += (tri_counts[:, :3] * w[:, None]).sum(axis=0)
+            promoted += (tri_counts[:, 3:] * w[:, None]).sum(axis=0)
+            micro_total += int(np.sum(w << (2 * lv)))
             per_tri_known = tri_counts[:, 0] + tri_counts[:, 1]
             known_area += float(np.sum(area[a:b] * per_tri_known / np.left_shift(1, 2 * lv)))
             total_area += float(np.sum(area[a:b]))
@@ -364,17 +383,17 @@ def build(geometries: list[Geometry], settings: OmmSettings = OmmSettings()) -> 
                 else:
                     rows = omm[starts[sel][:, None] + np.arange(1 << (2 * int(lvl)))]
                 if plan is None:
-                    idx[a + sel] = packer.add(rows, int(lvl))
-                    bytes_no_reuse += len(sel) * omm_format.micromap_bytes(int(lvl), fmt)
+                    idx[a + sel] = packer.add(rows, int(lvl), weights=w[sel])
+                    bytes_no_reuse += int(w[sel].sum()) * omm_format.micromap_bytes(int(lvl), fmt)
                 else:  # a micromap with no unknown micro-triangle is stored 2-state (the budget's bytes)
                     two = (rows <= omm_format.OPAQUE).all(axis=1)
                     for f, part in ((omm_format.FORMAT_2_STATE, two), (fmt, ~two)):
                         if part.any():
                             idx[a + sel[part]] = packer.add(rows[part], int(lvl), f)
                             bytes_no_reuse += int(part.sum()) * omm_format.micromap_bytes(int(lvl), f)
-                level_hist[int(lvl)] = level_hist.get(int(lvl), 0) + len(sel)
-        index_parts.append(idx)
-        info = {"name": g.name, "first_triangle": first, "triangles": len(tris), "texture": g.test.name,
+                level_hist[int(lvl)] = level_hist.get(int(lvl), 0) + int(w[sel].sum())
+        index_parts.append(idx if inverse is None else idx[inverse])
+        info = {"name": g.name, "first_triangle": first, "triangles": n_tris, "texture": g.test.name,
                 "width": g.test.width, "height": g.test.height, "filter": g.test.filter,
                 "wrap_u": g.test.wrap_u, "wrap_v": g.test.wrap_v, "threshold": g.test.threshold,
                 "inclusive": g.test.inclusive, "state_rule": g.test.rule, **g.info}
@@ -383,7 +402,7 @@ def build(geometries: list[Geometry], settings: OmmSettings = OmmSettings()) -> 
             info["first_pair_block"] = n_blocks_total
         geo_info.append(info)
         n_blocks_total += n_blocks
-        first += len(tris)
+        first += n_tris
     index = np.concatenate(index_parts) if index_parts else np.zeros(0, dtype=np.int32)
     triangles = np.array(packer.records, dtype=omm_format.TRIANGLE_RECORD)
     data = np.frombuffer(b"".join(packer.chunks), dtype=np.uint8).copy()
