@@ -171,7 +171,9 @@ class _Packer:
         self.s = settings
         self.chunks: list[bytes] = []
         self.size = 0
-        self.records: list[tuple[int, int, int]] = []
+        self.records: list[np.ndarray] = []  # TRIANGLE_RECORD arrays, in order
+        self.singles: list[tuple[int, int, int]] = []  # records added one by one, after those
+        self.n_records = 0
         self.stored: dict[tuple[int, int], tuple[np.ndarray, np.ndarray, np.ndarray]] = {}  # sorted hashes, rows, ids
         self.needing = 0  # micromaps before reuse of identical ones
 
@@ -213,9 +215,13 @@ class _Packer:
         if len(fresh):
             if self.size + len(fresh) * nbytes > 0xFFFFFFFF:
                 raise InputError("micromap data exceeds the 4 GiB a 32-bit data offset can address; lower the level")
-            ids[fresh] = len(self.records) + np.arange(len(fresh))
-            self.records.extend(zip(range(self.size, self.size + len(fresh) * nbytes, nbytes), [level] * len(fresh),
-                                    [fmt] * len(fresh)))
+            ids[fresh] = self.n_records + np.arange(len(fresh))
+            rec = np.empty(len(fresh), dtype=omm_format.TRIANGLE_RECORD)
+            rec["data_offset"] = self.size + nbytes * np.arange(len(fresh), dtype=np.int64)
+            rec["level"], rec["format"] = level, fmt
+            self.record_array()
+            self.records.append(rec)
+            self.n_records += len(fresh)
             self.chunks.append(r_new[fresh].tobytes())
             self.size += len(fresh) * nbytes
             h_all = np.concatenate([s_h, h_new[fresh]])
@@ -243,13 +249,23 @@ class _Packer:
         self.stored[(level, fmt)] = (h[keep], stored[keep], ids[keep])
         return idx
 
+    def record_array(self) -> np.ndarray:
+        """Every record so far, as one TRIANGLE_RECORD array."""
+        if self.singles:
+            self.records.append(np.array(self.singles, dtype=omm_format.TRIANGLE_RECORD))
+            self.singles = []
+        if len(self.records) != 1:
+            self.records = [np.concatenate(self.records) if self.records else np.zeros(0, omm_format.TRIANGLE_RECORD)]
+        return self.records[0]
+
     def _new(self, raw: bytes, level: int, fmt: int) -> int:
-        self.records.append((self.size, level, fmt))
+        self.singles.append((self.size, level, fmt))
+        self.n_records += 1
         self.chunks.append(raw)
         self.size += len(raw)
         if self.size > 0xFFFFFFFF:
             raise InputError("micromap data exceeds the 4 GiB a 32-bit data offset can address; lower the level")
-        return len(self.records) - 1
+        return self.n_records - 1
 
 
 def _chunks(levels: np.ndarray):
@@ -404,7 +420,7 @@ def build(geometries: list[Geometry], settings: OmmSettings = OmmSettings()) -> 
         n_blocks_total += n_blocks
         first += n_tris
     index = np.concatenate(index_parts) if index_parts else np.zeros(0, dtype=np.int32)
-    triangles = np.array(packer.records, dtype=omm_format.TRIANGLE_RECORD)
+    triangles = packer.record_array()
     data = np.frombuffer(b"".join(packer.chunks), dtype=np.uint8).copy()
     usage = omm_format.usage_histograms(triangles["level"], triangles["format"], index)
     special = {str(int(v)): int(np.count_nonzero(index == v)) for v in omm_format.SPECIAL_INDEX}
