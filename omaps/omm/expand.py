@@ -56,7 +56,7 @@ def expand_result(res: OmmResult) -> OmmResult:
     if first != len(three):
         raise RuntimeError(f"internal error: {first} triangles in the scene, {len(three)} pair records")
     index = np.concatenate(parts) if parts else np.zeros(0, np.int32)
-    triangles = np.array(packer.records, dtype=omm_format.TRIANGLE_RECORD)
+    triangles = packer.record_array()
     data = np.frombuffer(b"".join(packer.chunks), dtype=np.uint8).copy()
     usage = omm_format.usage_histograms(triangles["level"], triangles["format"], index)
     summary = {k: v for k, v in res.summary.items() if k != "pair_blocks"}
