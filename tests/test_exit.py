@@ -53,3 +53,24 @@ def test_run_under_a_profiler_exits_as_usual(tmp_path):
                        capture_output=True, text=True, env=ENV)
     assert "absent.png" in r.stderr  # (cProfile itself ends with 0 whatever the program's code)
     assert (tmp_path / "p.prof").stat().st_size > 0
+
+
+def test_run_waits_for_a_running_thread(tmp_path):
+    """A non-daemon thread still running when ``main`` returns (an interrupted worker pool's
+    manager, unlinking its semaphores) finishes before the process ends."""
+    script = """
+import sys, threading, time
+import importlib
+m = importlib.import_module("omaps.cli.main")
+def main(argv):
+    def late():
+        time.sleep(0.3)
+        open(sys.argv[1], "w").write("done")
+    threading.Thread(target=late).start()
+    return 3
+m.main = main
+m.run([])
+"""
+    r = subprocess.run([sys.executable, "-c", script, str(tmp_path / "mark")], capture_output=True, text=True, env=ENV)
+    assert r.returncode == 3, r.stderr
+    assert (tmp_path / "mark").read_text() == "done"

@@ -6,6 +6,7 @@ import argparse
 import atexit
 import os
 import sys
+import threading
 import warnings
 from typing import NoReturn
 
@@ -83,7 +84,12 @@ def run(argv=None) -> NoReturn:
     ends there with ``main``'s exit code. Under a profiler, tracer or debugger (``python -m
     cProfile -m omaps ...``, coverage), which reports after the program returns, it exits as usual."""
     rc = main(argv)
-    if sys.getprofile() is not None or sys.gettrace() is not None:
+    # ... and as usual while a non-daemon thread still runs: the interpreter's exit joins it first
+    # (an interrupted worker pool's manager thread unlinks its semaphores; cut short between unlink
+    # and unregister, multiprocessing's resource tracker printed "leaked semaphore" warnings after
+    # "omaps: interrupted")
+    others = [t for t in threading.enumerate() if t is not threading.main_thread() and not t.daemon]
+    if sys.getprofile() is not None or sys.gettrace() is not None or others:
         sys.exit(rc)
     atexit._run_exitfuncs()  # noqa: SLF001 - what the interpreter's own exit would run first
     for stream in (sys.stdout, sys.stderr):
