@@ -196,16 +196,20 @@ def test_trace_serial_matches_single_run(tmp_path):
 def test_local_cluster_eval_equals_single_eval_on_the_folder(tmp_path):
     """The one LocalCluster of the tests (subprocess: the CLI as a user runs it)."""
     out = tmp_path / "out"
-    r = subprocess.run([sys.executable, "-m", "omaps", "batch", "eval", str(TEXTURES), "-o", str(out),
+    folder = tmp_path / "textures"  # every fourth real texture (links): the cluster's work, not the corpus, is tested
+    folder.mkdir()
+    for p in sorted(TEXTURES.iterdir())[::4]:
+        (folder / p.name).symlink_to(p)
+    r = subprocess.run([sys.executable, "-m", "omaps", "batch", "eval", str(folder), "-o", str(out),
                         "--scheduler", "local", "--schemes", "sq16,tri3", "--min-size", "64", "--quiet"],
                        capture_output=True, text=True)
     assert r.returncode in (0, 1), r.stderr
-    assert main(["eval", str(TEXTURES), "--schemes", "sq16,tri3", "--min-size", "64", "--quiet",
+    assert main(["eval", str(folder), "--schemes", "sq16,tri3", "--min-size", "64", "--quiet",
                  "--json", str(tmp_path / "all.json")]) in (0, 1)
     whole = {t["name"]: t["schemes"] for t in json.loads((tmp_path / "all.json").read_text())["textures"]}
     s, _ = _summary(out)
     ok = [x for x in s["inputs"] if x["status"] == "ok"]
-    assert len(ok) == len(whole) >= 40
+    assert len(ok) == len(whole) >= 10
     for x in ok:
         name = json.loads((out / x["output"]).read_text())["textures"][0]["name"]
         assert x["figures"]["savings"] == {k: v["savings"] for k, v in whole[name].items()}
