@@ -21,9 +21,7 @@ import numpy as np
 __all__ = ["row_hashes", "unique_rows", "first_occurrences"]
 
 _CHUNK_BYTES = 1 << 24  # rows hashed this many bytes at a time (bounded temporaries)
-_MIX = np.uint64(0xBF58476D1CE4E5B9)
-
-
+_MIX = np.uint64(0xBF58476D1CE4E5B9)  # splitmix64's finaliser multipliers
 _MIX2 = np.uint64(0x94D049BB133111EB)
 
 
@@ -70,11 +68,7 @@ def unique_rows(rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     flat = a.reshape(len(a), int(np.prod(a.shape[1:])))
     if len(flat) == 0:
         return a[:0].copy(), np.zeros(0, dtype=np.int64)
-    _, first, inverse = np.unique(row_hashes(flat), return_index=True, return_inverse=True)
-    inverse = inverse.ravel()
-    if not all(np.array_equal(flat[s:s + 4096], flat[first[inverse[s:s + 4096]]]) for s in range(0, len(flat), 4096)):
-        uniq, inv = np.unique(flat, axis=0, return_inverse=True)  # two distinct rows share a hash
-        return uniq.reshape((len(uniq),) + a.shape[1:]), inv.ravel().astype(np.int64)
+    first, inverse = first_occurrences(flat)
     uniq, order = np.unique(flat[first], axis=0, return_inverse=True)
     return uniq.reshape((len(uniq),) + a.shape[1:]), order.ravel()[inverse].astype(np.int64)
 
