@@ -30,7 +30,7 @@ from numba import njit
 from . import states
 from .errors import InputError
 
-__all__ = ["HIT_LEVEL", "allocate", "upper_hull", "parse_bytes", "triangle_weights", "half_known", "PAIR_OPTIONS", "pair_option_bytes"]
+__all__ = ["HIT_LEVEL", "allocate", "allocate_arrays", "upper_hull", "parse_bytes", "triangle_weights", "half_known", "PAIR_OPTIONS", "pair_option_bytes"]
 
 # What a pair may store under a budget, in the order of the tracer's per-pair format code
 # (``trace.lookups.mixed_map_state``): no map (all C), a raw N x N square, or a codec block.
@@ -118,6 +118,23 @@ def _take(item, src, dst, cost, order, start, budget, spent):
     return choice, spent
 
 
+@njit(cache=True)
+def allocate_arrays(nbytes, value, budget):
+    """``allocate`` on arrays it has checked (int64 and float64, at least one item), for kernels
+    that allocate many times: (choice, bytes of the cheapest options); the choice is empty when
+    those exceed ``budget``."""
+    item, src, dst, cost, gain, start = _steps(nbytes, value)
+    base = 0
+    for p in range(start.shape[0]):
+        base += nbytes[p, start[p]]
+    if base > budget:
+        return np.zeros(0, np.int64), base
+    # falling value per byte, ties by item: the steps come item by item and the sort is stable
+    order = np.argsort(-gain, kind="mergesort")
+    choice, _ = _take(item, src, dst, cost, order, start, budget, base)
+    return choice, base
+
+
 def allocate(nbytes, value, budget: int) -> np.ndarray:
     """Per item, the index of the option to take (items (P,) by options (K,) arrays of bytes, int,
     and value, float) so that the total bytes stay within ``budget`` and the total value is the
@@ -130,12 +147,9 @@ def allocate(nbytes, value, budget: int) -> np.ndarray:
         raise ValueError("option values must be finite and bytes non-negative")
     if len(b) == 0:
         return np.zeros(0, np.int64)
-    item, src, dst, cost, gain, start = _steps(b, v)
-    base = int(b[np.arange(len(b)), start].sum())
+    choice, base = allocate_arrays(b, v, int(budget))
     if base > budget:
         raise InputError(f"the budget of {budget} bytes is below the {base} bytes the cheapest options need")
-    order = np.lexsort((item, -gain))  # falling value per byte; ties by item, for determinism
-    choice, _ = _take(item, src, dst, cost, order, start, int(budget), base)
     return choice
 
 

@@ -37,7 +37,8 @@ FAMILIES = {
     "omm": (("omaps.omm.resolve", "omaps.omm.format", "omaps.coverage"), 6),
     "budget": (("omaps.budget", "omaps.omm.budget"), 10),
     "synth": (("omaps.codecs.vq4_synth_encode", "omaps.codecs.vq4_synth_block"), 12),
-    "wavelet": (("omaps.codecs.wavelet3_encode", "omaps.codecs.wavelet3_block", "omaps.codecs.vec4_search"), 19),
+    "wavelet": (("omaps.codecs.wavelet3_encode", "omaps.codecs.wavelet3_block", "omaps.codecs.vec4_search", "omaps.budget"),
+                19),
 }
 # what the README's first command compiles ahead, beside its own evaluation (which compiles
 # "square" and "micromap"): two processes, the VQ4 encoder with the two codecs built on its

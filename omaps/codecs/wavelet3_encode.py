@@ -26,7 +26,7 @@ import numpy as np
 from numba import njit
 
 from .. import states
-from ..budget import allocate
+from ..budget import allocate_arrays
 from .options import check_maps, check_options
 from .symmetry import position_tables
 from .vec4 import FULL, GENERAL, entry_code, untransform_mask
@@ -88,50 +88,6 @@ def _coarse(ct, co):
         elif (co[k] & m) == m:
             vo |= 1 << e
     return vt, vo
-
-
-@njit(cache=True)
-def _best_entry(pt, po, et, eo, n_e):
-    """(cells kept, index) of the covering entry among the first n_e that keeps most; (0, 15) if
-    none keeps anything."""
-    best, bi = 0, MAX_ENTRIES
-    for i in range(n_e):
-        r = keeps(et[i], eo[i], pt, po)
-        if r > best:
-            best, bi = r, i
-    return best, bi
-
-
-@njit(cache=True)
-def _options(l1, l2, ct, co, vt, vo, et, eo, n_e):
-    """Per block: option bits (64, 7) and cells kept (64, 7) -- C, 32x32, 64x64 with 0..4 R
-    children -- and the entries: coarse index (64,), child indices (64, 4) in falling value."""
-    bits = np.zeros((64, 7), dtype=np.int64)
-    val = np.zeros((64, 7), dtype=np.float64)
-    cidx = np.full(64, MAX_ENTRIES, dtype=np.int64)
-    kidx = np.full((64, 4), MAX_ENTRIES, dtype=np.int64)
-    korder = np.zeros((64, 4), dtype=np.int64)
-    w = index_bits(n_e)
-    for c in range(64):
-        if l1[c] != R:
-            continue
-        v, cidx[c] = _best_entry(vt[c], vo[c], et, eo, n_e)
-        bits[c, 1], val[c, 1] = 1 + w, 4 * v
-        base = 0
-        kv = np.zeros(4, dtype=np.int64)
-        for k in range(4):
-            if l2[c, k] == R:
-                kv[k], kidx[c, k] = _best_entry(ct[c, k], co[c, k], et, eo, n_e)
-            elif l2[c, k] != states.C:
-                base += 16
-        korder[c] = np.argsort(-kv, kind="mergesort")
-        acc = base
-        for n in range(5):
-            if n > 0:
-                acc += kv[korder[c, n - 1]]
-            bits[c, 2 + n] = 1 + CHILD_BITS + w * n
-            val[c, 2 + n] = acc
-    return bits, val, cidx, kidx, korder
 
 
 @njit(cache=True)
@@ -213,16 +169,17 @@ def _encode_one(m, passes: int) -> Wavelet3Block:
     coordinate descent: each quadrant 1..3 in turn tries its 7 other transforms. It stops as soon
     as every known cell is kept (no transform can do better: most real maps are that simple)."""
     known = int((m != states.C).sum())
-    best, blk = _encode_with(m, np.zeros(4, np.int64))
-    if best >= known:
-        return blk
-    tr = aligned_transforms(m)
-    if tr.any():
-        t2, b2 = _encode_with(m, tr)
-        if t2 > best:
-            best, blk = t2, b2
-    tr = blk.transforms.astype(np.int64)
+    tr = np.zeros(4, np.int64)
+    best, found = _search(m, tr)
+    if best < known:
+        aligned = aligned_transforms(m)
+        if aligned.any():
+            t2, f2 = _search(m, aligned)
+            if t2 > best:
+                best, found, tr = t2, f2, aligned
     for _ in range(passes):
+        if best >= known:
+            break
         improved = False
         for q in range(1, 4):
             for t in range(8):
@@ -230,38 +187,121 @@ def _encode_one(m, passes: int) -> Wavelet3Block:
                     continue
                 trial = tr.copy()
                 trial[q] = t
-                v, b = _encode_with(m, trial)
+                v, f = _search(m, trial)
                 if v > best:
-                    best, blk, tr, improved = v, b, trial, True
-        if not improved or best >= known:
+                    best, found, tr, improved = v, f, trial, True
+        if not improved:
             break
-    return blk
+    return _block(found, tr)
 
 
-def _encode_with(m, tr) -> tuple[float, Wavelet3Block]:
+@njit(cache=True)
+def _best_prefix(l1, l2, ct, co, vt, vo, et, eo, rb, fixed):
+    """Of the codebook's prefixes (sizes 0 .. len(et)), the one whose bit allocation keeps most
+    cells (the smallest on a tie): (cells kept, size, choice per R block, and at that size each
+    R block's coarse entry (64,), its children's entries (64, 4) and its children by falling
+    value (64, 4)). A node takes the covering entry that keeps most (the first on a tie; 15 when
+    none keeps anything). Each size adds one entry, so a node's best entry is updated, not
+    searched again. Per R block the options are (bits, cells kept): C (0, 0), 32x32 (1 + w,
+    its vector's cells), 64x64 with its n = 0..4 best R children (1 + 8 + w n, its T/O
+    children's cells and those n's), w the index bits of the size."""
+    nr = rb.shape[0]
+    bits = np.zeros((nr, 7), dtype=np.int64)
+    val = np.zeros((nr, 7), dtype=np.float64)
+    cv = np.zeros(nr, dtype=np.int64)
+    kv = np.zeros((nr, 4), dtype=np.int64)
+    base = np.zeros(nr, dtype=np.int64)
+    cidx = np.full(64, MAX_ENTRIES, dtype=np.int64)
+    kidx = np.full((64, 4), MAX_ENTRIES, dtype=np.int64)
+    korder = np.zeros((64, 4), dtype=np.int64)
+    for r in range(nr):
+        for k in range(4):
+            if l2[rb[r], k] != R and l2[rb[r], k] != states.C:
+                base[r] += 16
+    best = -1.0
+    best_n = 0
+    best_choice = np.zeros(nr, dtype=np.int64)
+    best_c, best_k, best_o = cidx.copy(), kidx.copy(), korder.copy()
+    for n_e in range(et.shape[0] + 1):
+        if n_e > 0:
+            e = n_e - 1
+            for r in range(nr):
+                c = rb[r]
+                v = keeps(et[e], eo[e], vt[c], vo[c])
+                if v > cv[r]:
+                    cv[r], cidx[c] = v, e
+                for k in range(4):
+                    if l2[c, k] == R:
+                        v = keeps(et[e], eo[e], ct[c, k], co[c, k])
+                        if v > kv[r, k]:
+                            kv[r, k], kidx[c, k] = v, e
+        w = index_bits(n_e)
+        for r in range(nr):
+            c = rb[r]
+            bits[r, 1], val[r, 1] = 1 + w, 4 * cv[r]
+            for k in range(4):  # children by falling value, ties by position (a stable sort)
+                korder[c, k] = k
+            for a in range(1, 4):
+                b = a
+                while b > 0 and kv[r, korder[c, b]] > kv[r, korder[c, b - 1]]:
+                    korder[c, b], korder[c, b - 1] = korder[c, b - 1], korder[c, b]
+                    b -= 1
+            acc = base[r]
+            for n in range(5):
+                if n > 0:
+                    acc += kv[r, korder[c, n - 1]]
+                bits[r, 2 + n] = 1 + CHILD_BITS + w * n
+                val[r, 2 + n] = acc
+        choice = np.zeros(nr, dtype=np.int64)
+        if nr:
+            choice, _ = allocate_arrays(bits, val, BLOCK_BITS - MODE_POS - ENTRY_BITS * n_e)
+        total = float(fixed)
+        for r in range(nr):
+            total += val[r, choice[r]]
+        if total > best:
+            best, best_n, best_choice = total, n_e, choice
+            best_c[:], best_k[:], best_o[:] = cidx, kidx, korder
+    return best, best_n, best_choice, best_c, best_k, best_o
+
+
+@njit(cache=True)
+def _search(m, tr):
+    """One transform set's encoding: (cells kept, and what ``_block`` makes the block of)."""
     l1, l2, ct, co = _tree(m)
     vt, vo = _coarse_all(l1, ct, co)
     _to_stored(l1, ct, co, vt, vo, tr)
     rb = np.flatnonzero(l1 == R)
-    fixed = 64 * int(np.isin(l1, (states.T, states.O)).sum())
-    use_c, use_f = np.ones(64, np.bool_), np.ones((64, 4), np.bool_)
-    best = None
+    fixed = 0
+    for c in range(64):
+        if l1[c] == states.T or l1[c] == states.O:
+            fixed += 64
+    use_c = np.ones(64, np.bool_)
+    use_f = np.ones((64, 4), np.bool_)
+    best = -1.0
+    best_et = best_eo = np.zeros(0, np.int64)
+    best_choice = np.zeros(rb.shape[0], np.int64)
+    best_c = np.zeros(64, np.int64)
+    best_k = best_o = np.zeros((64, 4), np.int64)
     for _ in range(3):  # the codebook from every node, then (twice) from the nodes the allocation kept
-        et, eo = greedy_codebook(*_items(l1, l2, ct, co, vt, vo, use_c, use_f), MAX_ENTRIES)
-        for n_e in range(len(et) + 1):
-            bits, val, cidx, kidx, korder = _options(l1, l2, ct, co, vt, vo, et, eo, n_e)
-            budget = BLOCK_BITS - MODE_POS - ENTRY_BITS * n_e
-            choice = allocate(bits[rb], val[rb], budget) if len(rb) else np.zeros(0, np.int64)
-            total = fixed + float(val[rb, choice].sum())
-            if best is None or total > best[0]:
-                best = (total, et[:n_e].copy(), eo[:n_e].copy(), choice, cidx, kidx, korder)
-        _, _, _, choice, _, _, korder = best
-        use_c[:], use_f[:] = False, False
-        for c, ch in zip(rb, choice):
+        it, io, iw = _items(l1, l2, ct, co, vt, vo, use_c, use_f)
+        et, eo = greedy_codebook(it, io, iw, MAX_ENTRIES)
+        total, n_e, choice, cidx, kidx, korder = _best_prefix(l1, l2, ct, co, vt, vo, et, eo, rb, fixed)
+        if total > best:
+            best, best_et, best_eo, best_choice = total, et[:n_e].copy(), eo[:n_e].copy(), choice
+            best_c, best_k, best_o = cidx, kidx, korder
+        use_c[:] = False
+        use_f[:] = False
+        for r in range(rb.shape[0]):
+            c, ch = rb[r], best_choice[r]
             use_c[c] = ch == 1
             for n in range(max(0, ch - 2)):
-                use_f[c, korder[c, n]] = True
-    _, et, eo, choice, cidx, kidx, korder = best
+                use_f[c, best_o[c, n]] = True
+    return best, (l1, l2, rb, best_et, best_eo, best_choice, best_c, best_k, best_o)
+
+
+def _block(found, tr) -> Wavelet3Block:
+    """The symbolic block of ``_search``'s result."""
+    l1, l2, rb, et, eo, choice, cidx, kidx, korder = found
     level1, mode, children, coarse, fine = l1.copy(), [], [], [], []
     for c, ch in zip(rb, choice):
         if ch == 0:
@@ -276,7 +316,7 @@ def _encode_with(m, tr) -> tuple[float, Wavelet3Block]:
             children.append(row)
             fine += [kidx[c, k] for k in range(4) if row[k] == R]
     codes = [entry_code(GENERAL, int(t), int(o)) for t, o in zip(et, eo)]
-    return best[0], Wavelet3Block(level1, mode, np.array(children, np.int64).reshape(-1, 4), coarse, fine, codes, tr)
+    return Wavelet3Block(level1, mode, np.array(children, np.int64).reshape(-1, 4), coarse, fine, codes, tr)
 
 
 def encode(map64, encoder: str = "best", effort: str = "medium") -> Wavelet3Block:
