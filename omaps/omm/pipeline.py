@@ -219,7 +219,7 @@ class _Packer:
             rec = np.empty(len(fresh), dtype=omm_format.TRIANGLE_RECORD)
             rec["data_offset"] = self.size + nbytes * np.arange(len(fresh), dtype=np.int64)
             rec["level"], rec["format"] = level, fmt
-            self.record_array()
+            self._flush_singles()  # (they came first)
             self.records.append(rec)
             self.n_records += len(fresh)
             self.chunks.append(r_new[fresh].tobytes())
@@ -249,11 +249,14 @@ class _Packer:
         self.stored[(level, fmt)] = (h[keep], stored[keep], ids[keep])
         return idx
 
-    def record_array(self) -> np.ndarray:
-        """Every record so far, as one TRIANGLE_RECORD array."""
+    def _flush_singles(self) -> None:
         if self.singles:
             self.records.append(np.array(self.singles, dtype=omm_format.TRIANGLE_RECORD))
             self.singles = []
+
+    def record_array(self) -> np.ndarray:
+        """Every record so far, as one TRIANGLE_RECORD array."""
+        self._flush_singles()
         if len(self.records) != 1:
             self.records = [np.concatenate(self.records) if self.records else np.zeros(0, omm_format.TRIANGLE_RECORD)]
         return self.records[0]
