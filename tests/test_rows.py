@@ -7,7 +7,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import omaps.rows
-from omaps.rows import first_occurrences, row_hashes, unique_rows
+from omaps.rows import row_hashes, unique_rows
 
 
 def _rows(data, dtype):

@@ -15,7 +15,6 @@ from omaps.bake import GROW_TEXEL, bake_micromap_rows, bake_pair_flags, or_downs
 from omaps.bake.square import flags_to_states
 from omaps.codecs.registry import codec_names
 from omaps.pair import CORNERS
-from omaps.sampling import footprint_grid
 from omaps.scene import Material, Mesh, Primitive, Scene, Texture
 from omaps.scene.alpha import alpha_triangles, pair_corner_uvs
 from omaps.schemes import parse_schemes
