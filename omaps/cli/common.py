@@ -11,19 +11,55 @@ from ..errors import InputError
 from ..names import BLEND_RULES, EFFORTS, ENCODERS, FILTERS, MODES, WRAP_MODES  # numba-free: parsing loads no kernel
 
 
+class _Default(float):
+    """A state option's default value: the same number, but told apart from one given on the
+    command line (so an option of the other mode is an error, not silently unused)."""
+
+
+class _DefaultMode(str):
+    """``--mode``'s default, told apart from ``--mode`` given (``--cutoff`` alone selects cutoff)."""
+
+
 def add_state_options(p: argparse.ArgumentParser, default_mode: str) -> None:
     """The corpus rules of a texture (``alpha_test.StateRule``), filter, wrap and channel."""
     g = p.add_argument_group("texel states")
-    g.add_argument("--mode", choices=MODES, default=default_mode,
+    g.add_argument("--mode", choices=MODES, default=_DefaultMode(default_mode),
                    help="levels: T if alpha <= t-max, O if alpha >= o-min (the deck's corpus rule); "
-                        "cutoff: opaque iff alpha > cutoff (default: %(default)s)")
-    g.add_argument("--t-max", type=float, default=30.0, help="levels: T at or below this 8-bit alpha (30)")
-    g.add_argument("--o-min", type=float, default=225.0, help="levels: O at or above this 8-bit alpha (225)")
-    g.add_argument("--cutoff", type=float, default=0.5, help="cutoff: opaque iff alpha > cutoff, in [0, 1] (0.5)")
+                        f"cutoff: opaque iff alpha > cutoff (default: {default_mode}, or cutoff when --cutoff is "
+                        "given)")
+    g.add_argument("--t-max", type=float, default=_Default(30.0), help="levels: T at or below this 8-bit alpha (30)")
+    g.add_argument("--o-min", type=float, default=_Default(225.0),
+                   help="levels: O at or above this 8-bit alpha (225)")
+    g.add_argument("--cutoff", type=float, default=_Default(0.5),
+                   help="cutoff: opaque iff alpha > cutoff, in [0, 1] (0.5); selects --mode cutoff")
     g.add_argument("--filter", choices=FILTERS, default="nearest", help="texture filter of the alpha test")
     g.add_argument("--wrap", choices=WRAP_MODES, default="clamp", help="texture addressing (clamp)")
     g.add_argument("--channel", default=None,
                    help="read coverage from this channel (R, G, B, A, L or an index) instead of alpha")
+
+
+def state_mode(a) -> str:
+    """The texel-state mode of the options: ``--mode``, else cutoff when ``--cutoff`` is given,
+    else the command's default; an option of the other mode is an error (it would do nothing).
+    The mode is set in ``a`` (``omaps batch`` records it with the other options)."""
+    given = {opt for opt, name in (("--t-max", "t_max"), ("--o-min", "o_min"), ("--cutoff", "cutoff"))
+             if not isinstance(getattr(a, name), _Default)}
+    levels_only = [o for o in ("--t-max", "--o-min") if o in given]
+    mode = a.mode
+    if isinstance(mode, _DefaultMode):
+        if "--cutoff" in given and levels_only:
+            raise InputError(f"--cutoff (mode cutoff) and {levels_only[0]} (mode levels) belong to different modes: "
+                             "give the options of one")
+        mode = "cutoff" if "--cutoff" in given else mode
+    if mode == "levels" and "--cutoff" in given:
+        raise InputError("--cutoff applies only to --mode cutoff, and the mode is levels (give --mode cutoff, or "
+                         "--t-max / --o-min for levels)")
+    if mode == "cutoff" and levels_only:
+        raise InputError(f"{levels_only[0]} applies only to --mode levels, and the mode is cutoff (give --cutoff "
+                         "for cutoff)")
+    if mode != a.mode:
+        a.mode = mode
+    return mode
 
 
 def eval_config(a):
@@ -31,7 +67,7 @@ def eval_config(a):
     from ..alpha_test import StateRule
     from ..corpus.evaluate import EvalConfig
 
-    rule = StateRule(a.mode, a.t_max, a.o_min, a.cutoff)
+    rule = StateRule(state_mode(a), float(a.t_max), float(a.o_min), float(a.cutoff))
     return EvalConfig(rule, a.filter, a.wrap, a.channel, getattr(a, "encoder", None), getattr(a, "effort", None))
 
 
