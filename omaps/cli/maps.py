@@ -222,6 +222,10 @@ def cmd_decode(a) -> int:
             data = f.read()
     except FileNotFoundError:
         raise InputError("no such file", a.block) from None
+    except IsADirectoryError:
+        raise InputError("is a folder; decode reads one block file", a.block) from None
+    except OSError as exc:  # an input that cannot be read is bad input (exit 2), not a failed write
+        raise InputError(f"cannot read the file ({exc.strerror or exc})", a.block) from None
     if len(data) != codec.block_bytes:
         raise InputError(f"a {codec.name} block is {codec.block_bytes} bytes, this file has {len(data)}", a.block)
     try:
