@@ -12,8 +12,8 @@ On top: ``corpus`` (``omaps eval``), ``trace`` (``omaps trace``), ``omm`` (``oma
 Example::
 
     >>> import numpy as np, omaps
-    >>> tex = omaps.load_alpha(np.array([[0, 40, 250, 255]], np.uint8))
-    >>> grid = omaps.StateRule("levels").alpha_test(tex).grid()
+    >>> alpha = np.array([[0, 40, 250, 255]], np.uint8)
+    >>> grid = omaps.StateRule("levels").alpha_test(alpha).grid()
     >>> omaps.bake_square(grid, 4).tolist()[0]
     [0, 2, 1, 1]
 """
@@ -33,7 +33,7 @@ _LAZY = {
     "evaluate_texture": (".corpus", "evaluate_texture"), "InputError": (".errors", "InputError"),
     "footprint_grid": (".sampling", "footprint_grid"), "get_scheme": (".schemes", "get_scheme"),
     "parse_schemes": (".schemes", "parse_schemes"), "AlphaTexture": (".texture", "AlphaTexture"),
-    "load_alpha": (".texture", "load_alpha"),
+    "load_alpha": (".texture", "load_alpha"), "as_texture": (".texture", "as_texture"),
 }
 
 
@@ -64,5 +64,5 @@ __all__ = [
     "states", "AlphaTest", "MaterialRules", "StateRule", "bake_micromaps", "bake_pair_squares", "bake_pair_triangles",
     "bake_square", "known_fraction", "texel_limit", "get_codec", "EvalConfig", "default_corpus", "evaluate_many",
     "evaluate_texture", "InputError", "footprint_grid", "get_scheme", "parse_schemes", "AlphaTexture", "load_alpha",
-    "load_scene",
+    "as_texture", "load_scene",
 ]

@@ -38,7 +38,7 @@ from numba import njit
 from . import states
 from .errors import InputError
 from .sampling import FootprintGrid, filter_code, footprint_grid, sample_texture, wrap_code
-from .texture import AlphaTexture
+from .texture import as_texture
 
 __all__ = ["AlphaTest", "StateRule", "MaterialRules", "material_test", "sample_passes", "MODES", "BLEND_RULES",
            "RULES", "CUTOFF_TOLERANCE"]
@@ -175,18 +175,45 @@ class StateRule:
         if self.mode == "cutoff" and not (0 <= self.cutoff <= 1):
             raise InputError(f"cutoff must be in [0, 1], got {self.cutoff}")
 
-    def alpha_test(self, texture: AlphaTexture, filter: str = "nearest", wrap: str = "clamp",
+    def alpha_test(self, texture, filter: str = "nearest", wrap: str = "clamp",
                    wrap_v: str | None = None) -> AlphaTest:
-        """The test of a texture under this rule. ``levels`` has no shader decision of its own;
-        its threshold (alpha8 > 127.5) only serves promotions to 2-state."""
+        """The test of a texture under this rule.
+
+        Parameters
+        ----------
+        texture : AlphaTexture, numpy array or path
+            Anything ``omaps.texture.as_texture`` takes: an (H, W) or (H, W, C) array of uint8,
+            uint16, bool or float in [0, 1] (greyscale, LA, RGB with ``channel``, RGBA), or an
+            image file.
+        filter, wrap, wrap_v : str
+            How the shader samples: ``nearest`` / ``linear``; ``clamp`` / ``wrap`` / ``mirror``
+            (``wrap_v`` defaults to ``wrap``).
+
+        Returns
+        -------
+        AlphaTest
+            ``levels`` has no shader decision of its own; its threshold (alpha8 > 127.5) only
+            serves promotions to 2-state. ``cutoff`` on a float texture compares the floats with
+            ``cutoff`` itself, exactly (alpha 0.5 does not pass a cut-off of 0.5).
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> StateRule("cutoff", cutoff=0.5).alpha_test(np.array([[0.5, 0.75]])).texel_states().tolist()
+        [[0, 1]]
+        """
+        texture = as_texture(texture)
         a8 = texture.alpha8
         wv = wrap if wrap_v is None else wrap_v
         if self.mode == "levels":
             return AlphaTest(texture.name, a8, 127.5, False, filter, wrap, wv, "levels", self.t_max, self.o_min)
+        if texture.is_float:  # the floats themselves: x 255 could round a cut-off onto an alpha
+            return AlphaTest(texture.name, texture.values, float(self.cutoff), False, filter, wrap, wv, "test")
         return AlphaTest(texture.name, a8, self.cutoff * 255.0, False, filter, wrap, wv, "test")
 
-    def classify(self, texture: AlphaTexture) -> np.ndarray:
-        """Texel states (uint8 codes of ``omaps.states``), shape (H, W)."""
+    def classify(self, texture) -> np.ndarray:
+        """Texel states (uint8 codes of ``omaps.states``), shape (H, W), of a texture, an array
+        or an image path."""
         return self.alpha_test(texture).texel_states()
 
     def settings(self) -> dict:

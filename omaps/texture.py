@@ -25,7 +25,7 @@ class AlphaTexture:
     """Coverage values of one texture: ``values[y, x]``, row 0 is the first image row (v = 0)."""
 
     name: str
-    values: np.ndarray  # uint8 / uint16 / uint32, shape (H, W)
+    values: np.ndarray  # uint8 / uint16 raw values, or float64 in [0, 1] (maxval 1); shape (H, W)
     maxval: int
 
     def __post_init__(self):
@@ -52,14 +52,66 @@ class AlphaTexture:
         return self.values.astype(np.float64) * 255.0 / self.maxval
 
     @classmethod
-    def from_array(cls, name: str, alpha) -> "AlphaTexture":
-        """Wrap an array: integers are taken as 8-bit (or 16-bit if any value exceeds 255);
-        floats must lie in [0, 1]."""
+    def from_array(cls, name: str, alpha, channel=None) -> "AlphaTexture":
+        """Wrap an array as a numpy user holds a texture.
+
+        Parameters
+        ----------
+        name : str
+            The name reported in errors and results.
+        alpha : array_like
+            ``(H, W)`` coverage, or ``(H, W, C)`` pixels with C = 1 (L), 2 (LA), 3 (RGB) or
+            4 (RGBA), the bands read as an image file's are: the alpha of LA / RGBA, the one
+            channel of L; RGB has no alpha and needs ``channel``. Integers are 8-bit (16-bit if any
+            value exceeds 255); floats must lie in [0, 1] and are kept exactly (``maxval`` 1).
+        channel : str or int, optional
+            A band name (R, G, B, A, L) or index, to read coverage from another channel.
+
+        Returns
+        -------
+        AlphaTexture
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> rgba = np.zeros((2, 2, 4), np.uint8); rgba[..., 3] = [[0, 255], [128, 64]]
+        >>> AlphaTexture.from_array("leaf", rgba).values.tolist()
+        [[0, 255], [128, 64]]
+        >>> AlphaTexture.from_array("half", np.full((1, 1), 0.5)).alpha8.tolist()
+        [[127.5]]
+        """
         a = np.asarray(alpha)
+        if a.ndim == 3:
+            bands = ARRAY_BANDS.get(a.shape[2])
+            bands = None if bands is None else tuple(bands)
+            if bands is None:
+                raise InputError(f"an (H, W, C) texture needs 1 to 4 channels, got shape {a.shape}", name)
+            if channel is None:
+                if "A" in bands:
+                    idx = bands.index("A")
+                elif len(bands) == 1:
+                    idx = 0
+                else:
+                    raise InputError(f"an {''.join(bands)} array has no alpha channel; pick one with channel=", name)
+            else:
+                try:
+                    idx = _channel_index(channel, bands)
+                except KeyError:
+                    raise InputError(f"no channel {channel!r} in an {''.join(bands)} array", name) from None
+            a = a[:, :, idx]
+        elif channel is not None and a.ndim == 2:
+            try:
+                _channel_index(channel, ("L",))
+            except KeyError:
+                raise InputError(f"no channel {channel!r} in a single-channel (H, W) array", name) from None
+        if a.ndim != 2:
+            raise InputError(f"a texture array must be (H, W) or (H, W, C), got shape {a.shape}", name)
         if a.dtype.kind == "f":
             if not np.all(np.isfinite(a)) or a.min(initial=0) < 0 or a.max(initial=0) > 1:
                 raise InputError("float alpha must be finite and in [0, 1]", name)
-            return cls(name, np.round(a * 65535).astype(np.uint16), 65535)
+            return cls(name, np.ascontiguousarray(a, dtype=np.float64), 1)
+        if a.dtype.kind == "b":
+            return cls(name, np.ascontiguousarray(a, dtype=np.uint8) * np.uint8(255), 255)
         if a.dtype.kind not in "ui":
             raise InputError(f"unsupported alpha dtype {a.dtype}", name)
         if a.size and a.min() < 0:
@@ -67,7 +119,38 @@ class AlphaTexture:
         maxval = 255 if (a.size == 0 or a.max() <= 255) else 65535
         if a.size and a.max() > 65535:
             raise InputError("integer alpha above 65535", name)
-        return cls(name, a.astype(np.uint8 if maxval == 255 else np.uint16), maxval)
+        return cls(name, np.ascontiguousarray(a, dtype=np.uint8 if maxval == 255 else np.uint16), maxval)
+
+    @property
+    def is_float(self) -> bool:
+        """True for float coverage in [0, 1] (kept exactly; ``maxval`` is 1)."""
+        return self.values.dtype.kind == "f"
+
+
+# the bands of an (H, W, C) array, as an image file with C channels has them
+ARRAY_BANDS = {1: "L", 2: "LA", 3: "RGB", 4: "RGBA"}
+
+
+def as_texture(texture, name: str = "array", channel=None) -> AlphaTexture:
+    """What every function taking a texture accepts: an ``AlphaTexture`` (returned as it is), a
+    numpy array (``AlphaTexture.from_array``) or an image file's path (``load_alpha``).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> as_texture(np.array([[0, 65535]], np.uint16)).maxval
+    65535
+    """
+    if isinstance(texture, AlphaTexture):
+        if channel is not None:
+            raise InputError("channel= applies to arrays and files, not to an AlphaTexture", texture.name)
+        return texture
+    if isinstance(texture, (str, os.PathLike)):
+        return load_alpha(texture, channel)
+    if isinstance(texture, (np.ndarray, list, tuple)):
+        return AlphaTexture.from_array(name, texture, channel)
+    raise InputError(f"a texture is an AlphaTexture, a numpy array or an image path, not {type(texture).__name__}",
+                     name)
 
 
 def _channel_index(channel, bands) -> int:
@@ -90,7 +173,8 @@ def _mode_maxval(im: Image.Image) -> int:
 
 
 def load_alpha(path, channel=None, name: str = "array") -> AlphaTexture:
-    """Load the coverage of an image file, or wrap an array (``AlphaTexture.from_array``).
+    """Load the coverage of an image file, or wrap an array (``AlphaTexture.from_array``: (H, W)
+    or (H, W, C) greyscale, LA, RGB or RGBA; uint8, uint16, bool or float in [0, 1]).
 
     ``channel=None``: the alpha of RGBA / LA / PA, of P with a tRNS transparency, or the single
     channel of a greyscale mask (L, I;16). An image with colour but no alpha is an error.
@@ -104,7 +188,7 @@ def load_alpha(path, channel=None, name: str = "array") -> AlphaTexture:
         [[0.0, 255.0]]
     """
     if isinstance(path, np.ndarray):
-        return AlphaTexture.from_array(name, path)
+        return AlphaTexture.from_array(name, path, channel)
     path = os.fspath(path)
     name = os.path.basename(path)
     if not os.path.exists(path):

@@ -161,3 +161,96 @@ def test_state_rules():
                 dict(t_max=float("nan"))):
         with pytest.raises(InputError):
             StateRule(**bad)
+
+
+# ---- numpy arrays, as a numpy user passes them ---------------------------------------------------
+
+from hypothesis import given, settings, strategies as st  # noqa: E402
+from hypothesis.extra import numpy as hnp  # noqa: E402
+
+from omaps.corpus import evaluate_texture  # noqa: E402
+
+
+@pytest.mark.parametrize("mode,shape", [("L", ()), ("LA", (2,)), ("RGBA", (4,))])
+def test_array_equals_the_same_pixels_as_a_file(tmp_path, alpha, mode, shape):
+    """An (H, W[, C]) array and a PNG of the same pixels give the same texture (the file read by
+    Pillow is the reference)."""
+    if mode == "L":
+        px = alpha
+    elif mode == "LA":
+        px = np.dstack([np.full_like(alpha, 90), alpha])
+    else:
+        px = _rgba(alpha)
+    Image.fromarray(px, mode).save(tmp_path / "t.png")
+    from_file = load_alpha(tmp_path / "t.png")
+    from_array = load_alpha(px)
+    assert from_array.maxval == from_file.maxval == 255
+    np.testing.assert_array_equal(from_array.values, from_file.values)
+    for ch in ("R", 0) if mode == "RGBA" else ():
+        np.testing.assert_array_equal(load_alpha(px, ch).values, load_alpha(tmp_path / "t.png", ch).values)
+
+
+def test_array_rgb_needs_a_channel_and_bad_shapes_are_named():
+    rgb = np.zeros((4, 4, 3), np.uint8)
+    with pytest.raises(InputError, match="no alpha channel"):
+        load_alpha(rgb)
+    np.testing.assert_array_equal(load_alpha(rgb, "G").values, rgb[..., 1])
+    with pytest.raises(InputError, match="1 to 4 channels"):
+        load_alpha(np.zeros((4, 4, 5), np.uint8))
+    with pytest.raises(InputError, match="no channel 'G'"):
+        load_alpha(np.zeros((4, 4), np.uint8), "G")
+    with pytest.raises(InputError, match="shape"):
+        load_alpha(np.zeros((2, 2, 2, 2), np.uint8))
+
+
+@pytest.mark.parametrize("dtype", [np.uint8, np.uint16, np.float32, np.float64, bool])
+def test_state_rule_takes_arrays(dtype):
+    """``StateRule(...).alpha_test`` and ``classify`` take a plain array of every dtype a numpy
+    user holds, greyscale or RGBA; states agree with the rule written out on the values."""
+    a8 = np.array([[0, 30, 31, 127, 128, 224, 225, 255]], np.uint8)
+    if dtype is bool:
+        arr, frac = a8 > 127, (a8 > 127).astype(float)
+    elif np.dtype(dtype).kind == "f":
+        arr = (a8 / 255.0).astype(dtype)
+        frac = arr.astype(np.float64)
+    elif dtype is np.uint16:
+        arr, frac = a8.astype(np.uint16) * 257, a8 / 255.0
+    else:
+        arr, frac = a8, a8 / 255.0
+    for pixels in (arr, np.dstack([np.zeros_like(arr)] * 3 + [arr])):
+        got = StateRule("cutoff", cutoff=0.5).alpha_test(pixels).texel_states()
+        assert got.tolist() == np.where(frac > 0.5, states.O, states.T).tolist()
+        lv = StateRule("levels").classify(pixels)
+        want = np.where(frac * 255 <= 30 + 1e-9, states.T, np.where(frac * 255 >= 225 - 1e-9, states.O, states.C))
+        assert lv.tolist() == want.tolist()
+
+
+def test_float_alpha_is_kept_exactly():
+    """A float alpha of exactly the cut-off does not pass ``alpha > cutoff`` (it did once, as
+    0.5 was quantised to 16 bits: 127.502 in 8-bit units)."""
+    tex = load_alpha(np.array([[0.5, 0.25, 0.75]], np.float32))
+    assert tex.alpha8.tolist() == [[127.5, 63.75, 191.25]]
+    for c in (0.25, 0.5, 0.75):
+        got = StateRule("cutoff", cutoff=c).classify(tex)
+        assert got.tolist() == [[states.O if a > c else states.T for a in (0.5, 0.25, 0.75)]]
+
+
+@settings(max_examples=40, deadline=None)
+@given(hnp.arrays(np.float64, st.tuples(st.integers(1, 6), st.integers(1, 6)),
+                  elements=st.floats(0, 1, allow_nan=False)),
+       st.floats(0, 1, allow_nan=False))
+def test_float_cutoff_matches_the_shader(a, cutoff):
+    """Property: on float arrays the cutoff rule's texel states are the shader's ``a > cutoff``."""
+    got = StateRule("cutoff", cutoff=cutoff).classify(a)
+    want = np.where(a > cutoff, states.O, states.T)
+    np.testing.assert_array_equal(got, want)
+
+
+def test_evaluate_texture_takes_an_array_and_names():
+    y, x = np.mgrid[:32, :32]
+    disc = ((x - 15.5) ** 2 + (y - 15.5) ** 2 < 12 ** 2).astype(np.uint8) * 255
+    rgba = np.dstack([np.zeros_like(disc)] * 3 + [disc])
+    a = evaluate_texture(disc, "sq8,tri2")
+    b = evaluate_texture(rgba, ["sq8", "tri2"])
+    assert a.savings == b.savings and set(a.savings) == {"sq8", "tri2"}
+    assert a.bits == {"sq8": 128, "tri2": 64}

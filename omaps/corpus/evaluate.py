@@ -26,7 +26,7 @@ from ..alpha_test import StateRule
 from ..bake import bake_pair_triangles, bake_square, known_fraction, texel_limit
 from ..errors import InputError
 from ..schemes import EVAL_KINDS, Scheme, parse_schemes
-from ..texture import AlphaTexture, load_alpha
+from ..texture import AlphaTexture, as_texture, load_alpha
 from ..workers import process_pool
 
 __all__ = ["EvalConfig", "TextureResult", "evaluate_texture", "evaluate_many", "mean_results", "scheme_map"]
@@ -85,8 +85,45 @@ class TextureResult:
     path: str | None = None
 
 
-def evaluate_texture(texture: AlphaTexture, schemes: list[Scheme], config: EvalConfig = EvalConfig(),
+def evaluate_texture(texture, schemes, config: EvalConfig = EvalConfig(),
                      keep_maps: bool = False) -> TextureResult:
+    """Every scheme's savings and bits on one texture (the corpus pair over its whole area).
+
+    Parameters
+    ----------
+    texture : AlphaTexture, numpy array or path
+        What ``omaps.texture.as_texture`` takes: (H, W) or (H, W, C) uint8 / uint16 / bool /
+        float arrays (greyscale, LA, RGBA; RGB with ``config.channel``), or an image file.
+    schemes : str or list
+        Scheme names (``"sq16,vq2,tri3"`` or a list) or ``Scheme`` objects.
+    config : EvalConfig
+        The state rule, filter, wrap, channel and encoder settings.
+    keep_maps : bool
+        Keep each scheme's map (decoded) and the coverage values in the result.
+
+    Returns
+    -------
+    TextureResult
+        ``savings[name]`` (the fraction of uniformly spread hits that land in T or O regions)
+        and ``bits[name]`` per scheme.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> y, x = np.mgrid[:64, :64]
+    >>> disc = np.where((x - 31.5) ** 2 + (y - 31.5) ** 2 < 24 ** 2, 255, 0).astype(np.uint8)
+    >>> r = evaluate_texture(disc, "sq16,tri3")
+    >>> r.savings, r.bits
+    ({'sq16': 0.890625, 'tri3': 0.734375}, {'sq16': 512, 'tri3': 256})
+    """
+    if isinstance(texture, AlphaTexture):
+        if config.channel is not None:
+            raise InputError("config.channel applies to arrays and files, not to an AlphaTexture", texture.name)
+    else:
+        texture = as_texture(texture, channel=config.channel)
+    if isinstance(schemes, str) or any(isinstance(s, str) for s in schemes):
+        names = schemes if isinstance(schemes, str) else [s if isinstance(s, str) else s.name for s in schemes]
+        schemes = parse_schemes(names, EVAL_KINDS, config.encoder, config.effort, "evaluate_texture")
     grid = config.grid(texture)
     savings, bits, kept = {}, {}, {}
     for s in schemes:
