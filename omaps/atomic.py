@@ -12,6 +12,11 @@ The overwrite rule (README, "Outputs"):
   ``omaps omm``, ``show.json`` for ``omaps eval --show``): a folder omaps did not write is never
   deleted.
 
+Names: an output file ends in the suffix of its format where it has one (``-o`` of ``omaps bake``
+``.npy``, ``--json`` ``.json``, ``--csv`` ``.csv``, pictures ``.png``), a file of raw bytes
+(``omaps encode -o``) in none of a file format, and an output folder's name in no file format's
+suffix (``FILE_SUFFIXES``: ``x.txt`` or ``x.png`` is a file's name, never a folder's).
+
 ``Outputs`` gathers a command's outputs: ``file`` / ``folder`` check a path when the option is
 read (before any work: an error is ``InputError`` naming the path, exit 2, nothing written);
 ``writing()`` stages every output under a temporary name and renames them all into place when
@@ -30,6 +35,16 @@ import threading
 from .errors import InputError
 
 TEMP_PREFIX = ".omaps-"
+
+# suffixes of file formats: an output folder's name never ends in one (``x.txt`` is no folder
+# name), and an output of raw bytes (``omaps encode -o``) is not named as another format
+FILE_SUFFIXES = frozenset({
+    ".txt", ".log", ".md", ".json", ".csv", ".tsv", ".xml", ".html", ".yaml", ".yml", ".toml",
+    ".npy", ".npz", ".png", ".jpg", ".jpeg", ".gif", ".bmp", ".tga", ".tif", ".tiff", ".webp", ".exr",
+    ".hdr", ".dds", ".ktx", ".ktx2", ".svg", ".pdf", ".ps", ".eps", ".glb", ".gltf", ".obj", ".zip",
+    ".gz", ".tar", ".xz", ".bz2", ".7z", ".py"})
+# the suffix of a file option that writes one format in every command
+OPTION_SUFFIXES = {"--json": (".json",), "--csv": (".csv",)}
 
 
 def _temp_name(folder: str, suffix: str = "") -> str:
@@ -107,15 +122,23 @@ def _target(path) -> str:
     return p
 
 
-def check_file(path, option: str | None = None, suffixes=None, inputs=()) -> str:
-    """The absolute path of an output file, when it may be written (see the module's rule)."""
+def _suffix(p: str) -> str:
+    return os.path.splitext(os.path.basename(os.path.normpath(p)))[1].lower()
+
+
+def check_file(path, option: str | None = None, suffixes=None, inputs=(), raw: bool = False) -> str:
+    """The absolute path of an output file, when it may be written (see the module's rule).
+    ``suffixes``: the name must end in one of them (by default the option's own format:
+    ``OPTION_SUFFIXES``); ``raw``: a file of raw bytes, whose name must not end in the suffix
+    of a file format (``FILE_SUFFIXES``)."""
     p = _target(path)
     shown = os.fspath(path)
+    what = option or "this output"
     if os.path.isdir(p):
-        raise InputError(f"is a folder; {option or 'this output'} is a file", shown)
+        raise InputError(f"is a folder; {what} is a file", shown)
     if os.path.lexists(p):
         if not os.path.isfile(p):
-            raise InputError(f"exists and is not a regular file; {option or 'this output'} is a file", shown)
+            raise InputError(f"exists and is not a regular file; {what} is a file", shown)
         if not os.access(p, os.W_OK):
             raise InputError("exists and is read-only: not replacing it", shown)
         for i in inputs:
@@ -123,20 +146,31 @@ def check_file(path, option: str | None = None, suffixes=None, inputs=()) -> str
                 if os.path.samefile(p, i):
                     raise InputError(f"is also an input of this command; {option or 'the output'} would replace it",
                                      shown)
-    if suffixes:
-        ext = os.path.splitext(p)[1].lower()
-        if ext not in suffixes:
-            raise InputError(f"{option or 'this output'} must end in {', '.join(suffixes)}"
-                             + (f", not {ext}" if ext else ""), shown)
+    if suffixes is None:
+        suffixes = OPTION_SUFFIXES.get(option)
+    ext = _suffix(shown)
+    if suffixes and ext not in suffixes:
+        raise InputError(f"{what} must end in {', '.join(suffixes)}" + (f", not {ext}" if ext else ""), shown)
+    if raw and ext in FILE_SUFFIXES:
+        raise InputError(f"{what} writes raw bytes, not a {ext} file: use another suffix (such as .bin)", shown)
     _check_parent(p, shown)
     return p
 
 
-def check_folder(path, manifest: str, option: str | None = None, inputs=()) -> str:
+def check_folder(path, manifest: str, option: str | None = None, inputs=(), files=()) -> str:
     """The absolute path of an output folder, when it may be written: absent, empty, or holding
-    ``manifest`` (an earlier output of the same kind); see the module's rule."""
+    ``manifest`` (an earlier output of the same kind); see the module's rule. Its name does not
+    end in the suffix of a file format (``files``: the suffixes for which the option writes a
+    file instead, named in the error)."""
     shown = os.fspath(path)
     p = os.path.abspath(shown)
+    ext = _suffix(shown)
+    if ext in FILE_SUFFIXES:
+        what = option or "this output"
+        if files:
+            raise InputError(f"{what} must end in {', '.join(files)} (a file) or in no file suffix (a folder), "
+                             f"not {ext}", shown)
+        raise InputError(f"{what} is a folder, and a folder's name does not end in a file suffix such as {ext}", shown)
     if os.path.islink(p) and os.path.isdir(p):
         p = os.path.realpath(p)
     if os.path.lexists(p):
@@ -271,17 +305,19 @@ class Outputs:
         self._targets[p] = (kind, option, manifest)
         self._given[os.fspath(given)] = p
 
-    def file(self, path, option: str, suffixes=None) -> None:
-        """Declare an output file (nothing when ``path`` is None); check it now."""
+    def file(self, path, option: str, suffixes=None, raw: bool = False) -> None:
+        """Declare an output file (nothing when ``path`` is None); check it now (``suffixes``,
+        ``raw``: see ``check_file``)."""
         if path is None:
             return
-        self._add(path, check_file(path, option, suffixes, self.inputs), "file", option)
+        self._add(path, check_file(path, option, suffixes, self.inputs, raw), "file", option)
 
-    def folder(self, path, option: str, manifest: str) -> None:
-        """Declare an output folder replaced whole (nothing when ``path`` is None); check it now."""
+    def folder(self, path, option: str, manifest: str, files=()) -> None:
+        """Declare an output folder replaced whole (nothing when ``path`` is None); check it now
+        (``files``: see ``check_folder``)."""
         if path is None:
             return
-        self._add(path, check_folder(path, manifest, option, self.inputs), "folder", option, manifest)
+        self._add(path, check_folder(path, manifest, option, self.inputs, files), "folder", option, manifest)
 
     def path(self, path) -> str:
         """Where to write the declared output ``path`` now: a temporary file or (empty) folder

@@ -135,9 +135,12 @@ def test_bad_output_paths(tmp_path, inputs, capsys):
 
 
 def test_same_output_twice(tmp_path, inputs, capsys):
-    j = tmp_path / "r.json"
+    h = tmp_path / "h.png"
+    assert main(argv("trace", inputs, tmp_path, **{"--heatmap": h, "--render": h})) == 2
+    assert "given to both --heatmap and --render" in capsys.readouterr().err
+    j = tmp_path / "r.json"  # (--json and --csv cannot share a path: each has its suffix)
     assert main(argv("eval", inputs, tmp_path, **{"--csv": j, "--json": j})) == 2
-    assert "given to both --json and --csv" in capsys.readouterr().err
+    assert f"{j}: --csv must end in .csv, not .json" in capsys.readouterr().err
     assert main(argv("eval", inputs, tmp_path, **{"--json": tmp_path / "show" / "r.json"})) == 2
     assert "inside the output folder of --show" in capsys.readouterr().err
     assert listing(tmp_path) == []

@@ -72,7 +72,8 @@ def _add_map_parsers(sub) -> None:
                                     "write the block.")
     en.add_argument("texture")
     en.add_argument("--codec", required=True, help="sqN, vq2, vq4, vq4x64, vq4-synth or wavelet3")
-    en.add_argument("-o", "--output", required=True, metavar="FILE", help="block bytes (replaced if it exists)")
+    en.add_argument("-o", "--output", required=True, metavar="FILE",
+                    help="block bytes (replaced if it exists; any name but one of another format, such as .png)")
     add_state_options(en, "levels")
     add_codec_options(en, "the codec")
     en.set_defaults(func=cmd_encode)
@@ -177,7 +178,7 @@ def cmd_bake(a) -> int:
     if scheme.kind not in ("micromap", "square") or (scheme.codec is not None and scheme.codec.compressed):
         raise InputError(f"bake makes sqN or triL maps, not {scheme.name}")
     outputs = Outputs(inputs=[a.texture, a.uvs])
-    outputs.file(a.output, "-o")
+    outputs.file(a.output, "-o", (".npy",))
     test = config.test(load_alpha(a.texture, config.channel))
     grid = test.grid()
     if a.uvs:
@@ -197,7 +198,7 @@ def cmd_encode(a) -> int:
     codec = get_codec(a.codec)
     config = eval_config(a)
     outputs = Outputs(inputs=[a.texture])
-    outputs.file(a.output, "-o")
+    outputs.file(a.output, "-o", raw=True)
     grid = config.grid(load_alpha(a.texture, config.channel))
     original = bake_square(grid, codec.map_size)
     block = codec.encode(original, a.encoder, a.effort)  # checked: only O->C and T->C

@@ -136,7 +136,7 @@ def cmd_omm(a) -> int:
             raise InputError("a .glb / .gltf output needs a glTF input (a texture and UVs have no scene)", a.output)
         outputs.file(a.output, "-o")
     else:
-        outputs.folder(a.output, "-o", omm_format.SUMMARY_FILE)  # before the work, not after
+        outputs.folder(a.output, "-o", omm_format.SUMMARY_FILE, (".glb", ".gltf"))  # before the work, not after
     settings = _settings(a)
     t0 = time.perf_counter()
     view, view_info = None, None
