@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import atexit
+import difflib
 import os
 import sys
 import threading
@@ -15,11 +16,39 @@ from ..errors import InputError
 from .common import show_warning
 
 
+class Parser(argparse.ArgumentParser):
+    """argparse's parser, and its errors: an unknown option is reported by the (sub)command that
+    got it, with that command's usage and the closest of its options (``--sheme``: did you mean
+    --schemes?); an unknown command or choice with the closest choice. Exit 2."""
+
+    def parse_known_args(self, args=None, namespace=None):
+        ns, extras = super().parse_known_args(args, namespace)
+        if extras:  # (argparse would hand them back up to ``omaps``, and its usage)
+            self.error(f"unrecognized arguments: {' '.join(extras)}" + self._suggest(extras))
+        return ns, extras
+
+    def _suggest(self, extras) -> str:
+        options = [o for o in self._option_string_actions if o.startswith("--")]
+        for word in extras:
+            if word.startswith("-") and word != "--":
+                close = difflib.get_close_matches(word.split("=", 1)[0], options, n=1, cutoff=0.6)
+                if close:
+                    return f" (did you mean {close[0]}?)"
+        return ""
+
+    def _check_value(self, action, value):
+        if action.choices is not None and value not in action.choices:
+            choices = [str(c) for c in action.choices]
+            close = difflib.get_close_matches(str(value), choices, n=1, cutoff=0.6)
+            hint = f"; did you mean {close[0]}?" if close else ""
+            raise argparse.ArgumentError(action, f"invalid choice: {value!r} (choose from {', '.join(choices)}){hint}")
+
+
 def parser(command: str | None = None) -> argparse.ArgumentParser:
     """The command line's parser; with ``command="omm"`` only that command's (a command line
     that names it needs no other, and ``omaps omm`` then imports no other command's modules)."""
-    p = argparse.ArgumentParser(prog="omaps", description="Bake, compress and evaluate opacity maps "
-                                "for ray tracing alpha-tested geometry.")
+    p = Parser(prog="omaps", description="Bake, compress and evaluate opacity maps "
+               "for ray tracing alpha-tested geometry.")
     p.add_argument("--version", action="version", version=f"omaps {__version__}")
     sub = p.add_subparsers(dest="command", required=True)
     if command == "omm":
