@@ -99,6 +99,12 @@ def material_rules(a):
     return MaterialRules(a.cutoff, a.filter, a.wrap, a.blend, a.blend_cutoff)
 
 
+def plural(n: int, noun: str, plural_noun: str | None = None) -> str:
+    """``n`` and the noun in the number it takes: ``plural(1, "file")`` is "1 file", ``plural(3,
+    "file")`` "3 files", ``plural(2, "family", "families")`` "2 families"."""
+    return f"{n} {noun if n == 1 else plural_noun or noun + 's'}"
+
+
 def show_progress(quiet: bool = False) -> bool:
     """Progress bars (on stderr): off with --quiet; else on when stderr is a terminal, or as the
     environment variable OMAPS_PROGRESS says (1 on, 0 off), so logs and pipes stay clean."""

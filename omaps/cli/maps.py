@@ -18,7 +18,7 @@ from ..errors import InputError
 from ..omm.inputs import load_uvs
 from ..schemes import DEFAULT_SCHEMES, EVAL_KINDS, get_scheme, parse_schemes
 from ..texture import find_images, load_alpha
-from .common import add_codec_options, add_state_options, eval_config, print_table, show_progress
+from .common import add_codec_options, add_state_options, eval_config, plural, print_table, show_progress
 
 
 def add_parsers(sub) -> None:
@@ -117,12 +117,12 @@ def cmd_eval(a) -> int:
     if a.paths:
         items, skipped_other = find_images(a.paths)
         if skipped_other:
-            print(f"omaps: skipping {len(skipped_other)} files without an image extension "
+            print(f"omaps: skipping {plural(len(skipped_other), 'file')} without an image extension "
                   f"(e.g. {skipped_other[0]})", file=sys.stderr)
         if not items:
             raise InputError("no image files found", ", ".join(a.paths))
         named = {p for p in a.paths if not os.path.isdir(p)}
-        source = f"{len(items)} files"
+        source = plural(len(items), "file")
     else:
         items = default_corpus()
         source = "the embedded procedural corpus"
@@ -136,18 +136,18 @@ def cmd_eval(a) -> int:
         if path in named:  # a file named on the command line is bad input
             raise InputError(problem, path)
     if small:
-        print(f"omaps: skipped {len(small)} textures smaller than {a.min_size} px", file=sys.stderr)
+        print(f"omaps: skipped {plural(len(small), 'texture')} smaller than {a.min_size} px", file=sys.stderr)
     if not results:
         if unreadable:
             _print_unreadable(unreadable)
             raise InputError("no texture could be read", ", ".join(a.paths))
         raise InputError(f"no texture is at least {a.min_size} px")
-    print(f"omaps eval: {len(results)} textures from {source}, mode {config.rule.mode}, "
+    print(f"omaps eval: {plural(len(results), 'texture')} from {source}, mode {config.rule.mode}, "
           f"filter {config.filter}, wrap {config.wrap}, {dt:.2f} s")
     per_texture = a.per_texture or (not a.quiet and len(results) <= PER_TEXTURE_ROWS)
     _print_table(results, names, per_texture)
     if not per_texture and not a.quiet:
-        print(f"({len(results)} per-texture rows not shown: --per-texture prints them)")
+        print(f"({plural(len(results), 'per-texture row')} not shown: --per-texture prints them)")
     settings = {"source": source, **config.settings(), "min_size": a.min_size,
                 "schemes": {s.name: s.settings() for s in schemes}}
     # everything is computed; now write: all outputs are renamed into place together at the end
@@ -167,7 +167,7 @@ def cmd_eval(a) -> int:
 
 
 def _print_unreadable(unreadable) -> None:
-    print(f"omaps: {len(unreadable)} files could not be read (skipped):", file=sys.stderr)
+    print(f"omaps: {plural(len(unreadable), 'file')} could not be read (skipped):", file=sys.stderr)
     for path, problem in unreadable:
         print(f"  {path}: {problem}", file=sys.stderr)
 
@@ -205,7 +205,7 @@ def cmd_encode(a) -> int:
     decoded = codec.decode(block)
     with outputs.writing(), open(outputs.path(a.output), "wb") as f:
         f.write(block)
-    print(f"{a.output}: {codec.name} block, {len(block)} bytes; savings {known_fraction(decoded):.3f} "
+    print(f"{a.output}: {codec.name} block, {plural(len(block), 'byte')}; savings {known_fraction(decoded):.3f} "
           f"(uncompressed sq{codec.map_size}: {known_fraction(original):.3f})")
     return 0
 
