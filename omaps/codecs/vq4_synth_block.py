@@ -25,6 +25,7 @@ two-value vector keeps more cells than uniform C and the entries that served tho
 from __future__ import annotations
 
 from dataclasses import dataclass
+from itertools import permutations
 from math import factorial
 
 import numpy as np
@@ -96,21 +97,40 @@ def _unrank(sorted_codes, rank: int) -> np.ndarray:
     return np.array(out, dtype=np.int64)
 
 
+def _arrangement(codes: np.ndarray, rank: int) -> np.ndarray | None:
+    """Positions into ``codes`` (a permutation) whose codes, in that order, have Lehmer rank
+    ``rank`` (ties count as not smaller, as the decoder ranks them); the first such in the order
+    of ``itertools.permutations`` of the ascending order, None when no order has that rank (equal
+    codes make some ranks unreachable). Distinct codes: the one arrangement of that rank."""
+    asc = np.argsort(codes, kind="stable")
+    if rank == 0:
+        return asc
+    if len(set(codes.tolist())) == len(codes):
+        target = _unrank(codes[asc], rank)
+        return np.array([int(asc[list(codes[asc]).index(c)]) for c in target])
+    for p in permutations(asc.tolist()):
+        if lehmer_rank(codes[list(p)]) == rank:
+            return np.array(p)
+    return None
+
+
 def arrange(block: VQ4Block, extra: int) -> VQ4Block:
     """The same VQ4 block (same map) with its entries reordered to carry ``extra`` (NO_EXTRA: general
-    entries ascending). ValueError when ``extra`` needs distinct codes the block does not have."""
+    entries ascending). ValueError when ``extra`` needs an order the block's codes do not have:
+    distinct general codes, and two-value codes of which some order has rank ``extra % 6`` (any
+    order does when they are distinct; a block the decoder read always has one)."""
     ent = block.entries.copy()
     perm = np.arange(N_ENTRIES)  # perm[new position] = old entry
-    for slots, rank in ((GENERAL_SLOTS, 0 if extra == NO_EXTRA else extra // 6 + 1),
-                        (TWO_VALUE_SLOTS, 0 if extra == NO_EXTRA else extra % 6)):
+    for slots, rank, what in ((GENERAL_SLOTS, 0 if extra == NO_EXTRA else extra // 6 + 1, "general"),
+                              (TWO_VALUE_SLOTS, 0 if extra == NO_EXTRA else extra % 6, "two-value")):
         codes = ent[slots]
-        if extra != NO_EXTRA and len(set(codes.tolist())) != len(codes):
-            raise ValueError("a synthesised vector needs distinct general and two-value codes")
-        order = np.argsort(codes, kind="stable")
-        target = _unrank(codes[order], rank) if extra != NO_EXTRA else codes[order]
-        old = slots[order] if extra == NO_EXTRA else \
-            np.array([slots[order][list(codes[order]).index(c)] for c in target])
-        perm[slots] = old
+        if extra != NO_EXTRA and what == "general" and len(set(codes.tolist())) != len(codes):
+            raise ValueError("a synthesised vector needs distinct general codes")
+        order = _arrangement(codes, rank)
+        if order is None:
+            raise ValueError(f"no order of the two-value codes {codes.tolist()} has rank {rank}: "
+                             f"they cannot carry synthesised code {extra}")
+        perm[slots] = slots[order]
     new_of_old = np.empty(N_ENTRIES, dtype=np.int64)
     new_of_old[perm] = np.arange(N_ENTRIES)
     idx = block.indices.astype(np.int64)
