@@ -1,0 +1,85 @@
+"""Generate the Python API reference pages (``reference/api/*.md``) for mkdocstrings: one page per
+public namespace, one ``:::`` entry per name of its ``__all__``, pointing at the module that
+defines it (the packages export their names lazily, which a static reader cannot follow). Run by
+the mkdocs-gen-files plugin during ``mkdocs build``."""
+
+from __future__ import annotations
+
+import importlib
+import inspect
+
+# page name, package, what it is
+PACKAGES = [
+    ("omaps", "omaps", "The top-level namespace: textures, the alpha test, the bakers, codecs, schemes, "
+     "the corpus evaluation and scenes. `import omaps` is cheap: each name is imported on first use."),
+    ("bake", "omaps.bake", "The bakers: pair-square maps and per-triangle micromaps (bird-curve order)."),
+    ("codecs", "omaps.codecs", "Stored square maps: raw `sqN`, VQ2, VQ4, VQ4x64, VQ4-synth and wavelet3, "
+     "through one interface."),
+    ("corpus", "omaps.corpus", "The corpus evaluation behind `omaps eval`."),
+    ("omm", "omaps.omm", "Standard opacity micromaps (VK_EXT_opacity_micromap, DXR 1.2) behind `omaps omm`."),
+    ("scene", "omaps.scene", "glTF 2.0 scenes: the model, the reader, alpha-tested triangles and their pairs."),
+    ("trace", "omaps.trace", "The Embree ray tracer behind `omaps trace`."),
+]
+
+
+def _target(pkg, name: str) -> str | None:
+    """Dotted path of the object ``pkg.name`` where it is defined."""
+    obj = getattr(pkg, name)
+    obj = getattr(obj, "py_func", obj)  # a numba kernel: its Python function
+    if inspect.ismodule(obj):
+        return obj.__name__
+    mod = getattr(obj, "__module__", None)
+    if (inspect.isclass(obj) or inspect.isfunction(obj)) and mod and mod.startswith("omaps"):
+        qual = getattr(obj, "__qualname__", name)
+        if "<" not in qual:
+            return f"{mod}.{qual}"
+    return None  # a constant: listed by name only
+
+
+def render(page: str, package: str, intro: str, done: dict[str, str]) -> str:
+    """The page of ``package``; ``done`` maps the targets documented on earlier pages to their
+    public names there (an object is documented once, and linked from the other pages)."""
+    pkg = importlib.import_module(package)
+    lines = [f"# `{package}`", "", intro, "",
+             "Generated from the docstrings (`docs/gen_api.py`, mkdocstrings).", ""]
+    consts, elsewhere = [], []
+    for name in pkg.__all__:
+        target = _target(pkg, name)
+        if target is None:
+            consts.append(name)
+            continue
+        if target in done:
+            elsewhere.append(f"- `{package}.{name}`: see [`{done[target]}`][{target}]")
+            continue
+        done[target] = f"{package}.{name}"
+        lines += [f"::: {target}", "    options:", f"      heading: \"{package}.{name}\"", ""]
+    if elsewhere:
+        lines += ["## Also exported here", ""] + elsewhere + [""]
+    if consts:
+        lines += ["## Constants", ""]
+        for name in consts:
+            lines.append(f"- `{package}.{name}` = `{getattr(pkg, name)!r}`"[:300])
+        lines.append("")
+    return "\n".join(lines)
+
+
+def pages():
+    done: dict[str, str] = {}
+    for page, package, intro in PACKAGES:
+        yield f"reference/api/{page}.md", render(page, package, intro, done)
+
+
+try:
+    import mkdocs_gen_files
+except ImportError:
+    mkdocs_gen_files = None
+
+if mkdocs_gen_files is not None and __name__ != "__main__":
+    for path, text in pages():
+        with mkdocs_gen_files.open(path, "w") as f:
+            f.write(text)
+        mkdocs_gen_files.set_edit_path(path, "gen_api.py")
+
+if __name__ == "__main__":
+    for path, text in pages():
+        print(f"--- {path}\n{text}")
