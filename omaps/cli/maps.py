@@ -242,11 +242,9 @@ def cmd_decode(a) -> int:
         for row in m:
             print("".join(NAMES[s] for s in row))
     if a.show:
-        from PIL import Image
-
-        from ..drawing import square_image
+        from ..drawing import map_picture
         with outputs.writing():
-            Image.fromarray(square_image(m, 16 * m.shape[0])).save(outputs.path(a.show), format="PNG")
+            map_picture(outputs.path(a.show), m, a.block, codec.name)
     return 0
 
 

@@ -61,48 +61,66 @@ FAMILY_LABELS = {"sq": "square map per pair (sqN, 2 bits/cell)",
                  "wavelet3": "wavelet3: 64x64 in 512 bits, three levels"}
 
 
+MARKER_PX = 7.0  # a chart marker's diameter, points
+
+
 def plot_savings(path, results, scheme_names, title="Shader invocation savings") -> None:
-    """Mean savings against bits per pair, a line per family, like the deck's charts."""
+    """Mean savings against bits per pair, a line per family, like the deck's charts: every
+    scheme named at its point (labels set apart, with a leader line when away from it), points
+    of equal bits that would cover each other set side by side, the families' key below."""
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
     means = mean_results(results, scheme_names)
-    fig, ax = plt.subplots(figsize=(7.5, 4.8), dpi=120)
+    dpi = 120
+    fig, ax = plt.subplots(figsize=(8.0, 6.4), dpi=dpi)
     families: dict[str, list[tuple[float, float, str]]] = {}
     for name, m in means.items():
         if name == "texel":
             continue
         families.setdefault(family_of(name), []).append((m["bits"], m["savings"], name))
-    placed: dict[float, list[float]] = {}  # heights of the lone labels at each x
-    for fam, pts in families.items():
+    markers = "osD^vP*Xph<>"
+    drawn = []  # (line, its points)
+    for k, (fam, pts) in enumerate(families.items()):
         pts.sort()
-        xs, ys, labels = zip(*pts)
-        ax.plot(xs, ys, marker="o", label=FAMILY_LABELS.get(fam, fam))
-        for x, y, lab in pts:
-            if len(pts) == 1:  # a lone point: label left of it, lower than the lone labels above
-                y_text = min([y] + [u - 0.03 for u in placed.get(x, []) if u - 0.03 < y + 0.03])
-                placed.setdefault(x, []).append(y_text)
-                ax.annotate(lab, (x, y), xytext=(x / 1.06, y_text - 0.008), ha="right", fontsize=7)
-            else:  # below the line; a family's other encoders above (they sit close)
-                above = fam not in ("sq", "tri") and not fam.endswith("-paper")
-                ax.annotate(lab, (x, y), textcoords="offset points", xytext=(-14, 7) if above else (4, -11),
-                            fontsize=7)
+        xs, ys, _ = zip(*pts)
+        line, = ax.plot(xs, ys, marker=markers[k % len(markers)], ms=MARKER_PX, label=FAMILY_LABELS.get(fam, fam))
+        drawn.append((line, pts))
     if "texel" in means:
         ax.axhline(means["texel"]["savings"], color="grey", ls="--", lw=1,
                    label=f"texel limit ({means['texel']['savings']:.1%})")
     ax.set_xscale("log", base=2)
-    ax.set_xlabel("bits per triangle pair")
+    bits = [p[0] for _, pts in drawn for p in pts]
+    if bits:
+        ax.set_xlim(min(bits) / 2 ** 0.6, max(bits) * 2 ** 0.6)
+    ax.set_xlabel("bits per triangle pair (points of equal bits set side by side)")
     ax.set_ylabel("mean fraction of hits without any-hit call")
     ax.set_ylim(0, 1)
     ax.grid(True, which="both", alpha=0.3)
     ax.set_title(f"{title} ({len(results)} textures)")
-    ax.legend(loc="lower right", fontsize=7)
+    ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.11), ncol=2, fontsize=7, frameon=False)
     fig.tight_layout()
+    _label_points(ax, drawn, MARKER_PX * dpi / 72)
     fmt = os.path.splitext(os.fspath(path))[1][1:].lower() or "png"
     with atomic.atomic_path(path, suffix="." + fmt) as tmp:
-        fig.savefig(tmp, format=fmt)
+        fig.savefig(tmp, format=fmt, dpi=dpi)
     plt.close(fig)
+
+
+def _label_points(ax, drawn, marker_px: float) -> None:
+    """Set the markers of every (line, [(x, y, label)]) apart, then name each at its point."""
+    xs = [p[0] for _, pts in drawn for p in pts]
+    ys = [p[1] for _, pts in drawn for p in pts]
+    labels = [p[2] for _, pts in drawn for p in pts]
+    if not xs:
+        return
+    new_x = drawing.dodge(ax, xs, ys, marker_px + 2)
+    i = 0
+    for line, pts in drawn:
+        line.set_xdata(new_x[i:i + len(pts)])
+        i += len(pts)
+    drawing.place_labels(ax, new_x, ys, labels, fontsize=7, marker_px=marker_px)
 
 
 def plot_suffixes() -> tuple[str, ...]:
@@ -132,7 +150,7 @@ def show_texture(path, result: TextureResult, panel: int = 192) -> None:
     import matplotlib.pyplot as plt
 
     names = list(result.maps)
-    gap, top, title = 14, 26, 22  # pixels: between panels, the figure's title row, a panel's title
+    gap, top, title = 14, 40, 22  # pixels: between panels, the figure's title rows, a panel's title
     cols = len(names) + 1
     width, height = cols * (panel + gap) + gap, top + title + panel + gap
     canvas = np.full((height, width, 3), 255, dtype=np.uint8)
@@ -140,9 +158,11 @@ def show_texture(path, result: TextureResult, panel: int = 192) -> None:
     grey = np.round(255 * (alpha - alpha.min()) / max(float(np.ptp(alpha)), 1e-12)).astype(np.uint8)  # as imshow scales
     panels = [np.repeat(_fit(grey, panel)[..., None], 3, axis=2)]
     panels += [drawing.scheme_image(get_scheme(n).kind, result.maps[n], panel) for n in names]
-    titles = [f"alpha {result.width}x{result.height}"] + [f"{n}: {result.savings[n]:.1%}" for n in names]
+    # the number is the scheme's savings: the share of the pair's area (of the hits) in T or O
+    titles = [f"alpha {result.width}x{result.height}"] + [f"{n}: known {result.savings[n]:.1%}" for n in names]
     dpi = 100
     fig = plt.figure(figsize=(width / dpi, height / dpi), dpi=dpi)
+    renderer = fig.canvas.get_renderer()
     y0 = top + title
     for i, img in enumerate(panels):
         x0 = gap + i * (panel + gap)
@@ -150,8 +170,14 @@ def show_texture(path, result: TextureResult, panel: int = 192) -> None:
         oy, ox = y0 + (panel - h) // 2, x0 + (panel - w) // 2
         canvas[oy - 1:oy + h + 1, ox - 1:ox + w + 1] = 0  # a frame, as the axes' spines drew
         canvas[oy:oy + h, ox:ox + w] = img
-        fig.text((x0 + panel / 2) / width, 1 - (y0 - 6) / height, titles[i], ha="center", va="bottom", fontsize=8)
-    fig.text(0.5, 1 - 6 / height, f"{result.name}   T cyan, O magenta, C green", ha="center", va="top", fontsize=9)
+        t = fig.text((x0 + panel / 2) / width, 1 - (y0 - 6) / height, titles[i], ha="center", va="bottom", fontsize=8)
+        while t.get_window_extent(renderer).width > panel + gap - 4 and t.get_fontsize() > 4:
+            t.set_fontsize(t.get_fontsize() - 0.5)  # narrow panels: a smaller title, not one over the next
+    key = "T cyan, O magenta, C green; known = share of the pair's area in T or O (hits without any-hit call)"
+    head = fig.text(0.5, 1 - 4 / height, f"{result.name}\n{key}", ha="center", va="top", fontsize=9,
+                    linespacing=1.3)
+    while head.get_window_extent(renderer).width > width - 8 and head.get_fontsize() > 4:
+        head.set_fontsize(head.get_fontsize() - 0.5)
     fig.canvas.draw()  # the text alone, black on white; the panels go in where it left white
     text = np.asarray(fig.canvas.buffer_rgba())[:height, :width, :3]
     plt.close(fig)

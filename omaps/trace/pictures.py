@@ -19,29 +19,44 @@ def _tests_image(run, shadows: bool) -> np.ndarray:
     return img
 
 
-def heatmap(path: str, runs: dict, names: list[str], shadows: bool) -> None:
-    """Alpha tests per pixel, 'none' first then each scheme, one colour scale and a colour bar."""
+def heatmap(path: str, runs: dict, names: list[str], shadows: bool, scene: str | None = None) -> None:
+    """Alpha tests per pixel, 'none' first then each scheme, on one colour scale with its colour
+    bar: a pixel's primary ray, plus with ``shadows`` its shadow ray (traced without deferring
+    the C candidates). Each panel gives its mean per pixel (primary + shadow with ``shadows``:
+    the primary share is the table's alpha tests per primary ray)."""
+    import os
+
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
+    shadows = bool(shadows) and all(runs[n].shadow is not None for n in names if n in runs)
     shown = ["none"] + [n for n in names if n != "none"]
     imgs = [_tests_image(runs[n], shadows) for n in shown]
     vmax = max(1.0, float(np.percentile(imgs[0], 99.5)))
     cols = min(len(shown), 4)
     rows = math.ceil(len(shown) / cols)
     h, w = imgs[0].shape
-    fig, axes = plt.subplots(rows, cols, figsize=(3.2 * cols * w / h + 1.0, 3.4 * rows), squeeze=False,
+    fig, axes = plt.subplots(rows, cols, figsize=(3.2 * cols * w / h + 1.2, 3.4 * rows + 0.5), squeeze=False,
                              constrained_layout=True)
-    what = "primary + shadow" if shadows else "primary"
+    what = "primary + shadow rays" if shadows else "primary rays"
     for ax, n, img in zip(axes.flat, shown, imgs):
         im = ax.imshow(img, cmap="inferno", vmin=0, vmax=vmax, interpolation="nearest")
-        ax.set_title(f"{n}: {img.mean():.2f} tests/pixel", fontsize=9)
+        prim = float(runs[n].primary.tests.mean())
+        if shadows:
+            shad = float(runs[n].shadow.tests.mean())
+            ax.set_title(f"{n}: {prim + shad:.2f} per pixel\n= {prim:.2f} primary + {shad:.2f} shadow", fontsize=9)
+        else:
+            ax.set_title(f"{n}: {prim:.2f} per pixel (primary)", fontsize=9)
         ax.set_xticks([])
         ax.set_yticks([])
     for ax in list(axes.flat)[len(shown):]:
         ax.axis("off")
-    fig.colorbar(im, ax=axes, shrink=0.8, label=f"alpha tests per pixel ({what} rays)")
+    where = f" on {os.path.basename(scene)}" if scene else ""
+    rays = ("a primary ray and, where it hits, a shadow ray per pixel" if shadows else "a primary ray per pixel")
+    fig.suptitle(f"Alpha tests per pixel{where}, {w}x{h}: {rays}", fontsize=11)
+    fig.colorbar(im, ax=axes, shrink=0.8, extend="max",
+                 label=f"alpha tests per pixel ({what}); top colour: {vmax:.0f} or more")
     with atomic_path(path, suffix=".png") as tmp:
         fig.savefig(tmp, dpi=110, format="png")
     plt.close(fig)
@@ -122,39 +137,86 @@ def _plot_family(name: str, settings: dict) -> str:
     return name
 
 
+MARKER_PT = 7.0  # a chart marker's diameter
+
+
+def _bytes_axis(ax, xs: list[float]) -> float:
+    """Fit the x axis to the map sizes (in KiB or MiB, returned as the divisor): a log axis when
+    they span more than 16x, else a linear one padded around them (one size: centred on it)."""
+    from matplotlib.ticker import FuncFormatter, LogLocator, MaxNLocator
+
+    unit, name = (1024.0 ** 2, "MiB") if max(xs) >= 16 * 1024 ** 2 else (1024.0, "KiB")
+    lo, hi = min(xs) / unit, max(xs) / unit
+    if lo > 0 and hi / lo > 16:
+        ax.set_xscale("log", base=2)
+        ax.set_xlim(lo / 2 ** 0.5, hi * 2 ** 0.5)
+        ax.xaxis.set_major_locator(LogLocator(base=2))
+        ax.xaxis.set_major_formatter(FuncFormatter(lambda v, _: f"{v:g}"))
+    else:
+        pad = max(0.15 * (hi - lo), 0.05 * hi, 1 / unit)
+        ax.set_xlim(max(0.0, lo - pad) if lo - pad > 0 or lo == 0 else 0.0, hi + pad)
+        if lo == 0:
+            ax.set_xlim(-pad, hi + pad)
+        ax.xaxis.set_major_locator(MaxNLocator(6))
+    ax.set_xlabel(f"map bytes, {name} (every prototype pair or triangle)")
+    return unit
+
+
 def budget_plot(path: str, report: dict) -> None:
     """Alpha tests per primary ray against map bytes of every traced scheme (``omaps trace``'s
-    report), a line per family: uniform sqN, triL, the codecs, the budgets; 'none' as a level."""
+    report), a line per family: uniform sqN, triL, the codecs, the budgets; 'none' as a level.
+    The x axis is fitted to the sizes traced; every scheme is named at its point (labels set
+    apart, a leader line when away from it); points that would cover each other are set side by
+    side."""
+    import os
+
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, ax = plt.subplots(figsize=(7.5, 4.8), dpi=120)
+    from ..drawing import dodge, place_labels
+
+    dpi = 110
+    fig, ax = plt.subplots(figsize=(7.5, 5.2), dpi=dpi)
     families: dict[str, list] = {}
     for n, r in report["schemes"].items():
         if n == "none" or not r.get("map_bytes"):
             continue
         fam = _plot_family(n, report["settings"]["schemes"].get(n, {}))
         families.setdefault(fam, []).append((r["map_bytes"], r["alpha_tests_per_primary_ray"], n))
-    for fam, pts in families.items():
+    pts_all = [p for pts in families.values() for p in pts]
+    unit = _bytes_axis(ax, [p[0] for p in pts_all]) if pts_all else 1024.0
+    markers = "osD^vP*X"
+    drawn = []
+    for k, (fam, pts) in enumerate(families.items()):
         pts.sort()
-        xs, ys, labels = zip(*pts)
-        ax.plot(xs, ys, marker="o", label=fam, ls="-" if len(pts) > 1 else "none")
-        for x, y, lab in pts:
-            ax.annotate(lab, (x, y), textcoords="offset points", xytext=(4, 5), fontsize=7)
+        xs, ys, _ = zip(*pts)
+        line, = ax.plot([x / unit for x in xs], ys, marker=markers[k % len(markers)], ms=MARKER_PT, label=fam,
+                        ls="-" if len(pts) > 1 else "none")
+        drawn.append((line, pts))
     none = report["schemes"].get("none")
+    top = max([p[1] for p in pts_all] + [none["alpha_tests_per_primary_ray"] if none else 0.0] + [1e-9])
     if none is not None:
         ax.axhline(none["alpha_tests_per_primary_ray"], color="grey", ls="--", lw=1,
-                   label=f"none ({none['alpha_tests_per_primary_ray']:.2f})")
-    ax.set_xscale("log", base=2)
-    ax.set_xlabel("map bytes (every prototype pair or triangle)")
+                   label=f"none, no maps ({none['alpha_tests_per_primary_ray']:.2f})")
     ax.set_ylabel("alpha tests per primary ray")
-    ax.set_ylim(bottom=0)
+    ax.set_ylim(0, top * 1.15)
     ax.grid(True, which="both", alpha=0.3)
     cam = report["camera"]
-    ax.set_title(f"{report['scene']['file']} at {cam['width']}x{cam['height']}", fontsize=9)
-    ax.legend(loc="upper right", fontsize=8)
+    ax.set_title(f"Alpha tests per primary ray against map bytes\n{os.path.basename(report['scene']['file'])}, "
+                 f"{cam['width']}x{cam['height']}", fontsize=10)
+    ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.13), ncol=3, fontsize=8, frameon=False)
     fig.tight_layout()
+    if pts_all:
+        xs = [p[0] / unit for _, pts in drawn for p in pts]
+        ys = [p[1] for _, pts in drawn for p in pts]
+        marker_px = MARKER_PT * dpi / 72
+        new_x = dodge(ax, xs, ys, marker_px + 2)
+        i = 0
+        for line, pts in drawn:
+            line.set_xdata(new_x[i:i + len(pts)])
+            i += len(pts)
+        place_labels(ax, new_x, ys, [p[2] for _, pts in drawn for p in pts], fontsize=7.5, marker_px=marker_px)
     with atomic_path(path, suffix=".png") as tmp:
-        fig.savefig(tmp, dpi=110, format="png")
+        fig.savefig(tmp, dpi=dpi, format="png")
     plt.close(fig)
