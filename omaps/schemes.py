@@ -33,7 +33,8 @@ from .codecs.options import EFFORTS
 from .codecs.registry import Codec, check_choice, codec_names, get_codec
 from .errors import InputError
 
-__all__ = ["Scheme", "get_scheme", "parse_schemes", "DEFAULT_SCHEMES", "KINDS", "EVAL_KINDS", "TRACE_KINDS", "VARIANTS"]
+__all__ = ["Scheme", "get_scheme", "parse_schemes", "square_scheme_choices", "DEFAULT_SCHEMES", "KINDS", "EVAL_KINDS",
+           "TRACE_KINDS", "VARIANTS"]
 
 KINDS = ("none", "texel", "micromap", "square", "stored", "budget")
 EVAL_KINDS = ("texel", "micromap", "square")  # omaps eval
@@ -94,6 +95,23 @@ class Scheme:
         return out
 
 
+def codec_variants(codec_name: str) -> tuple[str, ...]:
+    """The variants a codec accepts after its name (``vq4-paper``, ``vq4-fast``): ``paper`` where
+    the codec has the deck's encoder, then its efforts; from the codec registry."""
+    codec = get_codec(codec_name)
+    return tuple(v for v in VARIANTS if (v == "paper" and v in codec.encoders) or v in codec.efforts)
+
+
+def square_scheme_choices() -> str:
+    """The square schemes ``get_scheme`` accepts, for a message: every raw size and every codec of
+    the registry with its variants (``vq2[-paper|-fast|...]``)."""
+    from .bake.square import MAX_SQUARE
+
+    sizes = [str(1 << k) for k in range(MAX_SQUARE.bit_length())]
+    codecs = [c + "[" + "|".join("-" + v for v in codec_variants(c)) + "]" for c in codec_names()]
+    return f"sqN, N = {', '.join(sizes[:-1])} or {sizes[-1]}; " + ", ".join(codecs)
+
+
 def get_scheme(name: str, encoder: str | None = None, effort: str | None = None) -> Scheme:
     """A scheme by name; ``encoder`` / ``effort`` apply to a codec named without a variant."""
     check_choice("encoder", encoder, ("paper", "best"))
@@ -128,12 +146,13 @@ def get_scheme(name: str, encoder: str | None = None, effort: str | None = None)
             encoder = "paper"
         elif variant:
             if variant not in EFFORTS:
-                raise InputError(f"unknown variant {variant!r} of {base} (choose from {', '.join(VARIANTS)})")
+                raise InputError(f"unknown variant {variant!r} of {base} (choose from "
+                                 f"{', '.join(codec_variants(base))})")
             encoder, effort = "best", variant
         enc, eff = codec.options(encoder, effort)
         return Scheme(key, "square", codec=codec, encoder=enc, effort=eff)
-    raise InputError(f"unknown scheme {name!r} (known: none, texel, triL, sqN, omm, file:CODEC, budget:BYTES, "
-                     f"{', '.join(c + '[-' + '|'.join(VARIANTS) + ']' for c in codec_names())})")
+    raise InputError(f"unknown scheme {name!r} (known: none, texel, triL, omm, file:CODEC, budget:BYTES, "
+                     f"{square_scheme_choices()})")
 
 
 def parse_schemes(text, kinds=KINDS, encoder: str | None = None, effort: str | None = None,

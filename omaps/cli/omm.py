@@ -9,9 +9,8 @@ import time
 from ..atomic import Outputs
 from ..errors import InputError
 from ..names import BUDGET_WEIGHTS, OMM_FORMATS, PROMOTIONS
-from .common import add_codec_options, add_material_options, check_jobs, material_rules, parse_size, show_progress
-
-GLTF_EXTENSIONS = (".gltf", ".glb")
+from .common import (add_codec_options, add_material_options, check_jobs, material_rules, parse_size, plural,
+                     show_progress)
 
 
 def add_parser(sub) -> None:
@@ -76,16 +75,17 @@ def add_parser(sub) -> None:
 
 def _spec(a) -> dict:
     from ..omm import inputs
+    from ..scene.files import SCENE_RULE, is_scene_file  # the scene loader's rule (omaps trace's too)
 
-    if len(a.inputs) == 1 and a.inputs[0].lower().endswith(GLTF_EXTENSIONS):
+    if len(a.inputs) == 1 and is_scene_file(a.inputs[0]):
         if a.channel:
             raise InputError("--channel applies to a texture input, not to glTF")
         return inputs.gltf_spec(a.inputs[0], material_rules(a))
     if len(a.inputs) == 2:
         return inputs.texture_spec(a.inputs[0], a.inputs[1], a.cutoff, a.filter, a.wrap, a.channel)
     if len(a.inputs) == 1:
-        raise InputError("a texture needs a .npy array of UV triangles (T, 3, 2) after it; "
-                         "a scene must end in .gltf or .glb", a.inputs[0])
+        raise InputError(f"a texture needs a .npy array of UV triangles (T, 3, 2) after it; {SCENE_RULE}",
+                         a.inputs[0])
     raise InputError("give SCENE.gltf|.glb, or TEXTURE UVS.npy (and -o DIR), or --verify DIR")
 
 
@@ -151,10 +151,11 @@ def cmd_omm(a) -> int:
         view, view_info = (weights, hits), {"weights": "view", "size": [w, h], "camera": cam, "hits": int(len(hits))}
     geoms, skipped, warned = inputs.load_geometries(spec, view)
     if show_progress(a.quiet):
-        from tqdm import tqdm  # only for the bar (its import costs 25 ms of the start)
-
-        with tqdm(total=len(geoms), desc="omm", unit="geometry", leave=False) as bar:
-            result = build(_counted(geoms, bar), settings)
+        bar = _Bar()
+        try:
+            result = build(geoms, settings, bar)
+        finally:
+            bar.close()
     else:
         result = build(geoms, settings)
     dt = time.perf_counter() - t0
@@ -168,27 +169,50 @@ def cmd_omm(a) -> int:
         else:
             files.write_into(outputs.path(a.output), result, extra)
     st = result.summary["statistics"]
-    print(f"{a.output}: {st['triangles']} triangles, {st['micro_triangles']} micro-triangles "
-          f"({st['transparent']} T, {st['opaque']} O, {st['unknown']} unknown; known area "
-          f"{st['known_area_fraction']:.1%}); {st['micromaps']} micromaps after reuse "
-          f"(of {st['micromaps_without_reuse']}), {st['data_bytes']} data bytes; {dt:.2f} s")
+    print(f"{a.output}: {plural(st['triangles'], 'triangle')}, {plural(st['micro_triangles'], 'micro-triangle')} "
+          f"({_held_states(st, settings)}); {plural(st['micromaps'], 'micromap')} after reuse "
+          f"(of {st['micromaps_without_reuse']}), {plural(st['data_bytes'], 'data byte')}; {dt:.2f} s")
     for s in skipped:
         print(f"omaps: skipped mesh {s['mesh']} primitive {s['primitive']} ({s['name']}): {s['reason']}",
               file=sys.stderr)
     return 0
 
 
-class _counted(list):
-    """A list whose iteration advances a progress bar (``build`` walks its geometries once)."""
+class _Bar:
+    """``omm.pipeline.Progress`` as a progress bar on stderr: one bar a stage (--budget's pricing,
+    in micro-triangles; the baking, in geometries), its total known when it starts."""
 
-    def __init__(self, items, bar):
-        super().__init__(items)
-        self.bar = bar
+    FORMAT = "{desc}: {percentage:3.0f}%|{bar}| {n_fmt}/{total_fmt} {unit} [{elapsed}<{remaining}]"
 
-    def __iter__(self):
-        for g in super().__iter__():
-            yield g
-            self.bar.update()
+    def __init__(self):
+        self.bar = None
+
+    def stage(self, name: str, total: int, unit: str) -> None:
+        from tqdm import tqdm  # only for the bar (its import costs 25 ms of the start)
+
+        self.close()
+        self.bar = tqdm(total=total, desc=f"omm {name}", unit=unit, unit_scale=unit == "micro-triangles",
+                        bar_format=self.FORMAT, leave=False)
+
+    def advance(self, n: int = 1) -> None:
+        self.bar.update(n)
+
+    def close(self) -> None:
+        if self.bar is not None:
+            self.bar.close()
+            self.bar = None
+
+
+def _held_states(st: dict, settings) -> str:
+    """The micro-triangle states the output holds. The statistics count the bake's T, O and
+    unknown (C); 4-state output keeps every unknown one (as unknown-transparent or
+    unknown-opaque), 2-state output has none: each became T or O by the --promote rule."""
+    known_area = f"known area {st['known_area_fraction']:.1%}"
+    if settings.format != "2state":
+        return f"{st['transparent']} T, {st['opaque']} O, {st['unknown']} unknown; {known_area}"
+    to_t, to_o = st["unknown_resolved"]["transparent"], st["unknown_resolved"]["opaque"]
+    return (f"{st['transparent'] + to_t} T, {st['opaque'] + to_o} O, 0 unknown: {st['unknown']} unknown resolved "
+            f"to 2 states by {settings.promotion}, {to_t} to T and {to_o} to O; {known_area} before resolving")
 
 
 def _cmd_verify(folder) -> int:
@@ -202,7 +226,8 @@ def _cmd_verify(folder) -> int:
         for p in problems:
             print(f"omaps: {folder}: {p}", file=sys.stderr)
         return 1
-    print(f"{folder}: OK ({st['triangles']} triangles, {st['micromaps']} micromaps, {st['data_bytes']} data bytes)")
+    print(f"{folder}: OK ({plural(st['triangles'], 'triangle')}, {plural(st['micromaps'], 'micromap')}, "
+          f"{plural(st['data_bytes'], 'data byte')})")
     return 0
 
 
@@ -224,6 +249,7 @@ def _cmd_expand(a) -> int:
         for w in gltf_io.write_gltf_result(a.inputs[0], outputs.path(a.output), a.output, out, None):
             print(f"omaps: warning: {w}", file=sys.stderr)
     st = out.summary["statistics"]
-    print(f"{a.output}: {st['triangles']} triangles from {res.summary['pair_blocks']['blocks']} "
-          f"{res.summary['pair_blocks']['codec']} pair blocks; {st['micromaps']} micromaps, {st['data_bytes']} data bytes")
+    blocks = res.summary["pair_blocks"]
+    print(f"{a.output}: {plural(st['triangles'], 'triangle')} from "
+          f"{plural(blocks['blocks'], blocks['codec'] + ' pair block')}; {plural(st['micromaps'], 'micromap')}, {plural(st['data_bytes'], 'data byte')}")
     return 0

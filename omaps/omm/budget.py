@@ -40,6 +40,7 @@ FINEST_TEXELS = 0.25
 
 MERGE_MAX_LEVEL = 5  # merged (shared) micromaps are offered up to this level (1024 micro-triangles)
 MERGE_SHARES = (2, 4, 8, 16)  # a level's distinct contents merged into 1/2, 1/4, ... as many micromaps
+PROGRESS_CHUNK = 1 << 22  # the pricing bakes a level's items in pieces of this many micro-triangles
 MERGE_MAX_WORK = 5e8  # contents^2 x micro-triangles: above it a level offers no merged variants
 VARIANTS = 1 + len(MERGE_SHARES)
 
@@ -122,21 +123,59 @@ def _labels(k: int, merges: np.ndarray, clusters: int) -> np.ndarray:
     return np.unique(parent, return_inverse=True)[1].ravel()
 
 
-def _options(g, settings, budget: int):
-    """Per triangle its item (its distinct UV triangle); per item and option column (level L
-    exact, then L's merged variants, ``VARIANTS`` columns a level) the bytes, the value, the
-    content id of the stored micromap (-1 for none; ids are per level) and the level; the total
-    weight; per column the merge, None or (cluster per item (-1: exact), meets, stored rows)."""
-    max_level, special = settings.max_level, settings.special
+def _items(g, settings) -> tuple:
+    """A geometry's triangles, their unknown flags and weights, its items (distinct UV triangles:
+    representatives ``reps``, item of each triangle ``inv``) and the finest level each item is
+    offered (``cap``)."""
     tris = check_uv_triangles(g.tris_uv) if len(g.tris_uv) else np.zeros((0, 3, 2))
     n = len(tris)
     weight = g.areas(tris) if g.weight is None else np.asarray(g.weight, np.float64)
     unknown = np.zeros(n, bool) if g.unknown is None else np.asarray(g.unknown, bool)
     reps, inv = distinct_rows(tris, unknown)
+    cap = dynamic_levels(tris[reps], g.test.width, g.test.height, FINEST_TEXELS, settings.max_level)
+    cap[unknown[reps]] = 0  # all unknown: nothing to gain at any level
+    return tris, unknown, weight, reps, inv, cap
+
+
+def _priced_levels(budget: int, max_level: int) -> list[int]:
+    """The levels whose micromaps are offered: those of which one fits the budget."""
+    record = omm_format.TRIANGLE_RECORD.itemsize
+    return [lvl for lvl in range(max_level + 1)
+            if omm_format.micromap_bytes(lvl, omm_format.FORMAT_2_STATE) + record <= budget]
+
+
+def _pricing_work(items, settings, budget: int) -> int:
+    """Micro-triangles ``_options`` bakes for a geometry's items (the pricing's progress)."""
+    cap = items[5]
+    return sum(int(np.count_nonzero(cap >= lvl)) << (2 * lvl) for lvl in _priced_levels(budget, settings.max_level))
+
+
+def _bake_counted(grid, tris, lvl, sat, progress):
+    """``bake_micromaps`` at one level, in pieces of at most ``PROGRESS_CHUNK`` micro-triangles,
+    each advancing ``progress`` by its micro-triangles (the same states as one call)."""
+    step = max(PROGRESS_CHUNK >> (2 * lvl), 1)
+    if progress is None or len(tris) <= step:
+        out = bake_micromaps(grid, tris, lvl, GROW_TEXEL, sat)
+        if progress is not None:
+            progress.advance(len(tris) << (2 * lvl))
+        return out
+    parts = []
+    for a in range(0, len(tris), step):
+        parts.append(bake_micromaps(grid, tris[a:a + step], lvl, GROW_TEXEL, sat)[0])
+        progress.advance(len(tris[a:a + step]) << (2 * lvl))
+    return np.concatenate(parts), np.arange(len(tris) + 1, dtype=np.int64) << (2 * lvl)
+
+
+def _options(g, items, settings, budget: int, progress=None):
+    """Per triangle its item (its distinct UV triangle); per item and option column (level L
+    exact, then L's merged variants, ``VARIANTS`` columns a level) the bytes, the value, the
+    content id of the stored micromap (-1 for none; ids are per level) and the level; the total
+    weight; per column the merge, None or (cluster per item (-1: exact), meets, stored rows)."""
+    max_level, special = settings.max_level, settings.special
+    tris, unknown, weight, reps, inv, cap = items
+    n = len(tris)
     ni = len(reps)
     wsum = np.bincount(inv, weights=np.nan_to_num(weight), minlength=ni)
-    cap = dynamic_levels(tris[reps], g.test.width, g.test.height, FINEST_TEXELS, max_level)
-    cap[unknown[reps]] = 0  # all unknown: nothing to gain at any level
     record = omm_format.TRIANGLE_RECORD.itemsize
     cols = (max_level + 1) * VARIANTS
     nbytes = np.zeros((ni, cols), np.int64)
@@ -169,7 +208,7 @@ def _options(g, settings, budget: int):
             sel = sel[:0]  # no micromap of this level fits the budget
         if len(sel):
             nc = 4 ** lvl
-            s3, starts = bake_micromaps(grid, tris[reps[sel]], lvl, GROW_TEXEL, sat)
+            s3, starts = _bake_counted(grid, tris[reps[sel]], lvl, sat, progress)
             if g.unknown is not None:
                 s3.reshape(len(sel), -1)[unknown[reps[sel]]] = states.C
             rows3 = s3.reshape(len(sel), nc)
@@ -316,13 +355,18 @@ def _adopt(value, gid, gbytes, budget: int, start=None) -> tuple[np.ndarray, int
         level[moved] = np.argmax(movers[moved], axis=1)  # its one option in the group
 
 
-def budget_levels(geometries, settings, budget: int) -> tuple[list[tuple[np.ndarray, dict]], dict]:
+def budget_levels(geometries, settings, budget: int, progress=None) -> tuple[list[tuple[np.ndarray, dict]], dict]:
     """Per geometry the level of each triangle and the merged micromaps it stores ({triangle:
-    (T/O/C meet, stored row)}), and a report (bytes stored, expected savings).
+    (T/O/C meet, stored row)}), and a report (bytes stored, expected savings). ``progress``
+    (``pipeline.Progress``): its stage "pricing" counts the micro-triangles baked to price the
+    options, its total known before the first.
 
     Items that store the same micromap at a level share its bytes, so the choice is made per
     group of such items (``_adopt``); the bytes counted are exactly those the packer stores."""
-    parts = [_options(g, settings, budget) for g in geometries]
+    items = [_items(g, settings) for g in geometries]
+    if progress is not None:
+        progress.stage("pricing", sum(_pricing_work(it, settings, budget) for it in items), "micro-triangles")
+    parts = [_options(g, it, settings, budget, progress) for g, it in zip(geometries, items)]
     if not parts:
         return [], {"budget_bytes": int(budget), "stored_bytes": 0, "items": 0}
     nbytes = np.concatenate([p[1] for p in parts])

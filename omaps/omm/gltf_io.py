@@ -17,12 +17,13 @@ import warnings
 import numpy as np
 
 from ..errors import InputError
+from ..scene.files import SCENE_SUFFIXES
 from . import format as omm_format
 from .pipeline import OmmResult
 
 __all__ = ["GLTF_SUFFIXES", "is_gltf", "write_gltf_result", "read_gltf", "OMAPS_KEY"]
 
-GLTF_SUFFIXES = (".gltf", ".glb")
+GLTF_SUFFIXES = SCENE_SUFFIXES
 OMAPS_KEY = "omaps"
 
 

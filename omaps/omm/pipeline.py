@@ -24,6 +24,7 @@ Example::
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Protocol
 
 import numpy as np
 
@@ -41,7 +42,7 @@ from . import resolve
 # expansion) are imported where they are used, so that baking from the texture loads none of
 # their modules and kernels: start-up is part of every omm run's time.
 
-__all__ = ["Geometry", "OmmSettings", "OmmResult", "build"]
+__all__ = ["Geometry", "OmmSettings", "OmmResult", "Progress", "build"]
 
 CHUNK_MICRO_TRIANGLES = 1 << 24  # bake this many micro-triangles at a time (bounded memory)
 
@@ -95,7 +96,7 @@ class OmmSettings:
     promotion: str = "nearest"
     special: bool = True
     dedup: bool = True
-    source: str = "texture"  # texture, or a square scheme: sqN, vq2, vq4, vq4x64 (and their variants)
+    source: str = "texture"  # texture, or a square scheme (``schemes.square_scheme_choices``)
     encoder: str | None = None  # codec encoder and effort (None: the codec's defaults)
     effort: str | None = None
     seed: int = 0  # of the hashed promotion
@@ -118,7 +119,10 @@ class OmmSettings:
         if self.source != "texture":
             s = self.scheme
             if s.kind != "square":
-                raise InputError(f"--from takes texture or a square scheme (sqN, vq2, vq4, vq4x64), not {self.source!r}")
+                from ..schemes import square_scheme_choices
+
+                raise InputError(f"--from takes texture or a square scheme ({square_scheme_choices()}), "
+                                 f"not {self.source!r}")
 
     @property
     def scheme(self):
@@ -316,8 +320,20 @@ def _triangle_levels(test: AlphaTest, tris: np.ndarray, settings: OmmSettings, n
     return np.full(len(tris), settings.level, dtype=np.int64)
 
 
-def build(geometries: list[Geometry], settings: OmmSettings = OmmSettings()) -> OmmResult:
-    """Bake every geometry's micromaps and pack them into the standard buffers."""
+class Progress(Protocol):
+    """What ``build`` reports as it goes (a progress bar): a stage begins with its total known
+    (``stage``: "pricing", micro-triangles, with --budget; then "baking", geometries), and
+    advances until its steps add up to that total."""
+
+    def stage(self, name: str, total: int, unit: str) -> None: ...
+
+    def advance(self, n: int = 1) -> None: ...
+
+
+def build(geometries: list[Geometry], settings: OmmSettings = OmmSettings(),
+          progress: Progress | None = None) -> OmmResult:
+    """Bake every geometry's micromaps and pack them into the standard buffers; ``progress``:
+    told of each stage and step (``Progress``)."""
     scheme = settings.scheme
     n_map = scheme.codec.map_size if scheme is not None else None
     fmt = settings.format_code
@@ -335,7 +351,9 @@ def build(geometries: list[Geometry], settings: OmmSettings = OmmSettings()) -> 
     if settings.budget is not None:
         from .budget import budget_levels
 
-        plan, budget_report = budget_levels(geometries, settings, settings.budget)
+        plan, budget_report = budget_levels(geometries, settings, settings.budget, progress)
+    if progress is not None:
+        progress.stage("baking", len(geometries), "geometries")
     for gi, g in enumerate(geometries):
         tris = check_uv_triangles(g.tris_uv) if len(g.tris_uv) else np.zeros((0, 3, 2))
         n_tris = len(tris)
@@ -422,6 +440,8 @@ def build(geometries: list[Geometry], settings: OmmSettings = OmmSettings()) -> 
         geo_info.append(info)
         n_blocks_total += n_blocks
         first += n_tris
+        if progress is not None:
+            progress.advance(1)
     index = np.concatenate(index_parts) if index_parts else np.zeros(0, dtype=np.int32)
     triangles = packer.record_array()
     data = np.frombuffer(b"".join(packer.chunks), dtype=np.uint8).copy()

@@ -3,8 +3,8 @@
 One reader, one policy per case, for ``omaps trace``, ``omaps omm`` and all later work
 (docs/FORMAT.md "Reading glTF" states the same):
 
-* a file that is not glTF, an accessor, buffer view or index out of range, a node cycle: an
-  ``InputError`` naming the file (exit 2);
+* a file not named .gltf or .glb (``files.SCENE_RULE``), a file that is not glTF, an accessor,
+  buffer view or index out of range, a node cycle: an ``InputError`` naming the file (exit 2);
 * ``extensionsRequired`` naming an extension omaps cannot honour (Draco or meshopt compression,
   KTX2 textures, GPU instancing, ...): an ``InputError`` naming the extension;
 * a buffer file that is missing: an ``InputError`` naming it (the geometry is not there to trace
@@ -41,6 +41,7 @@ from urllib.parse import unquote
 import numpy as np
 
 from ..errors import InputError
+from .files import check_scene_file
 from .model import ALPHA_MODES, Material, Mesh, Primitive, Scene, SceneCamera, SceneWarning, Texture
 
 __all__ = ["load_scene", "SUPPORTED_EXTENSIONS", "node_matrix", "texture_transform_matrix"]
@@ -86,6 +87,7 @@ def load_scene(path) -> Scene:
     import pygltflib
 
     path = os.fspath(path)
+    check_scene_file(path)
     if not os.path.exists(path):
         raise InputError("no such file", path)
     if os.path.isdir(path):
