@@ -274,3 +274,25 @@ def test_budget_progress_bar_reads_well(tex_and_uvs, tmp_path, capsys, monkeypat
     assert pairs, err
     for n, total in pairs:
         assert number(n) <= number(total), err
+
+
+# ---- counts take the noun's number --------------------------------------------------------------
+
+def test_counts_in_omm_and_trace_lines_take_the_nouns_number(tmp_path, capsys, rng):
+    a = np.full((8, 8), 255, np.uint8)
+    a[:, :3] = 0
+    Image.fromarray(a).save(tmp_path / "m.png")
+    np.save(tmp_path / "one.npy", np.array([[[0.1, 0.1], [0.9, 0.1], [0.1, 0.9]]]))
+    assert main(["omm", str(tmp_path / "m.png"), str(tmp_path / "one.npy"), "-o", str(tmp_path / "o"),
+                 "--level", "0", "--no-special", "--quiet"]) == 0
+    line = capsys.readouterr().out
+    assert ": 1 triangle, 1 micro-triangle (" in line and "; 1 micromap after reuse" in line, line
+    assert main(["omm", "--verify", str(tmp_path / "o")]) == 0
+    assert "OK (1 triangle, 1 micromap, 1 data byte)" in capsys.readouterr().out
+    f = write_quad_gltf(tmp_path / "q.gltf", (rng.random((8, 8)) < 0.5).astype(np.uint8) * 255)
+    assert main(["trace", str(f), "--schemes", "none", "--size", "8", "--quiet",
+                 "--camera", "0.5,0.5,2:0.5,0.5,0:40"]) == 0
+    out = capsys.readouterr().out
+    assert ": 1 instance of 1 mesh, 2 triangles (2 alpha-tested); 1 prototype pair," in out, out
+    assert main(["trace", str(f), "--camera", "0.5,0.5,2:0.5,0.5,0:x", "--quiet"]) == 2
+    assert "--camera fov: expected a number, got 'x'" in capsys.readouterr().err
