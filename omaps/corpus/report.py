@@ -115,7 +115,7 @@ def _label_points(ax, drawn, marker_px: float) -> None:
     labels = [p[2] for _, pts in drawn for p in pts]
     if not xs:
         return
-    new_x = drawing.dodge(ax, xs, ys, marker_px + 2)
+    new_x = drawing.dodge(ax, xs, ys, marker_px + 5)
     i = 0
     for line, pts in drawn:
         line.set_xdata(new_x[i:i + len(pts)])

@@ -211,7 +211,7 @@ def budget_plot(path: str, report: dict) -> None:
         xs = [p[0] / unit for _, pts in drawn for p in pts]
         ys = [p[1] for _, pts in drawn for p in pts]
         marker_px = MARKER_PT * dpi / 72
-        new_x = dodge(ax, xs, ys, marker_px + 2)
+        new_x = dodge(ax, xs, ys, marker_px + 5)
         i = 0
         for line, pts in drawn:
             line.set_xdata(new_x[i:i + len(pts)])
