@@ -7,8 +7,11 @@ are those of ``omaps CMD INPUT -o/--json PATH`` byte for byte (a ``trace`` JSON 
 its timings). Around it:
 
 * inputs: files, folders (searched recursively: images for ``eval``, ``.gltf`` / ``.glb`` for
-  ``omm`` and ``trace``) and globs; output names are paths relative to the folder given
-  (extension dropped; kept where two inputs would share a name);
+  ``omm`` and ``trace``) and globs; output names are paths relative to the folder given (a file
+  or a glob's match: its file name, but a ``scene.gltf`` / ``scene.glb`` takes its folder's name:
+  ``smallpine/scene.gltf`` is ``smallpine``), extension dropped; the extension kept (``NAME_EXT``) where
+  two inputs would share a name; two inputs still sharing one (or an omm folder inside another's)
+  are an error naming both, before any work;
 * robust: a bad input is a recorded error (its message, exit code 2 of the single command), never
   a failed batch; outputs are written by the command's own atomic ``Outputs``;
 * resume: after an input's outputs are in place, a completion marker
@@ -30,6 +33,7 @@ import glob
 import io
 import json
 import os
+import sys
 import time
 import traceback
 import warnings
@@ -45,9 +49,16 @@ GLTF_EXTENSIONS = (".gltf", ".glb")
 INPUT_DEST = {"omm": "inputs", "eval": "paths", "trace": "scene"}
 OUTPUT_DEST = {"omm": "output", "eval": "json", "trace": "json"}
 # options of the single command a batch sets itself (per input), or refuses
-REFUSED = {"eval": ("csv", "plot", "show"), "omm": ("verify", "expand"), "trace": ("heatmap", "render")}
+# (hidden from the batch's help: ``--json`` of eval and trace too, the output being under OUTDIR)
+REFUSED = {"eval": ("csv", "plot", "show", "per_texture"), "omm": ("verify", "expand"),
+           "trace": ("heatmap", "render", "plot_budget")}
 # namespace attributes that belong to the batch, not to the command run per input
 BATCH_ONLY = ("func", "batch_command", "batch_output", "scheduler", "window", "command")
+
+
+def count(n: int, noun: str, plural: str | None = None) -> str:
+    """``1 input``, ``2 inputs``, ``0 inputs``."""
+    return f"{n} {noun if n == 1 else plural or noun + 's'}"
 
 
 def single_function(command: str):
@@ -112,19 +123,35 @@ def find_inputs(command: str, given, outdir: str) -> list[tuple[str, str]]:
     return found
 
 
-def output_names(command: str, found) -> list[str]:
-    """The output name of each input: its relative name without the extension, or with it (as
-    ``NAME_EXT``) where two inputs would share one; two inputs still sharing a name are an error."""
+GENERIC_SCENE = "scene"  # what many exporters call every scene: such a file is named by its folder
+
+
+def _base_name(command: str, path: str, rel: str) -> str:
+    """An input's output name before collisions: ``rel`` (its path relative to the folder given,
+    or its file name) without the extension; a glTF scene called scene.gltf / scene.glb named by
+    its file name alone takes its folder's name instead (found in a folder given, its relative
+    path already names its folder: ``smallpine/scene``)."""
+    stem = os.path.splitext(rel)[0]
+    if command != "eval" and path.lower().endswith(GLTF_EXTENSIONS) and stem.lower() == GENERIC_SCENE:
+        return os.path.basename(os.path.dirname(os.path.abspath(path))) or stem
+    return stem
+
+
+def output_names(command: str, found, folders: bool | None = None) -> list[str]:
+    """The output name of each input (``_base_name``), with its extension (``NAME_EXT``) where two
+    inputs would share one; two inputs still sharing a name, or (``folders``: omm folders) one
+    input's output folder inside another's, are an error naming both."""
+    if folders is None:
+        folders = command == "omm"
     reserved = {SUMMARY, MARKERS}
-    stems = [os.path.splitext(n)[0] for _, n in found]
+    stems = [_base_name(command, path, n) for path, n in found]
     counts: dict[str, int] = {}
     for s in stems:
         counts[s.lower()] = counts.get(s.lower(), 0) + 1
     names = []
-    for (path, n), s in zip(found, stems):
+    for (path, _), s in zip(found, stems):
         if counts[s.lower()] > 1 or s.lower() in reserved:
-            root, ext = os.path.splitext(n)
-            s = root + "_" + ext.lstrip(".")
+            s = s + "_" + os.path.splitext(path)[1].lstrip(".")
         names.append(s)
     taken: dict[str, str] = {}
     for (path, _), s in zip(found, names):
@@ -132,6 +159,14 @@ def output_names(command: str, found) -> list[str]:
             raise InputError(f"has the same output name ({s}) as {taken[s.lower()]}; run them in separate batches",
                              path)
         taken[s.lower()] = path
+    if folders:  # an output folder inside another input's, which replaces its folder whole
+        for (path, _), s in zip(found, names):
+            parts = s.lower().split(os.sep)
+            for k in range(1, len(parts)):
+                outer = os.sep.join(parts[:k])
+                if outer in taken:
+                    raise InputError(f"its output folder ({s}) would lie inside the output folder of "
+                                     f"{taken[outer]}; run them in separate batches", path)
     return names
 
 
@@ -263,28 +298,138 @@ def run_one(command: str, options: dict, path: str, name: str, outdir: str, fp: 
 # ---------------------------------------------------------------------------------------------
 # scheduling
 
+DEFAULT_PORT = 8786  # a Dask scheduler's port when the address names none
+CONNECT_SECONDS = 3  # an unreachable scheduler: the error within this (a refused connection: at once)
+
+
+def check_scheduler(address: str) -> None:
+    """A ``tcp://`` / ``tls://`` scheduler address that takes a TCP connection, checked in
+    ``CONNECT_SECONDS`` at most before any work (Dask's client would retry for its whole timeout)."""
+    import socket
+    from urllib.parse import urlsplit
+
+    if not address.startswith(("tcp://", "tls://")):
+        return
+    try:
+        u = urlsplit(address)
+        host, port = u.hostname, u.port or DEFAULT_PORT
+    except ValueError as exc:
+        raise InputError(f"not a scheduler address tcp://HOST:PORT ({exc})", address) from None
+    if not host:
+        raise InputError("not a scheduler address tcp://HOST:PORT (no host)", address)
+    try:
+        with socket.create_connection((host, port), timeout=CONNECT_SECONDS):
+            pass
+    except socket.timeout:
+        raise InputError(f"cannot connect to the Dask scheduler (no answer in {CONNECT_SECONDS} s)",
+                         address) from None
+    except OSError as exc:
+        raise InputError(f"cannot connect to the Dask scheduler ({exc.strerror or exc})", address) from None
+
+
+def _children() -> set:
+    import psutil
+
+    with contextlib.suppress(psutil.Error):
+        return {c.pid for c in psutil.Process().children(recursive=True)}
+    return set()
+
+
+def _stop_quietly(stack: contextlib.ExitStack, before: set, clusters: set) -> None:
+    """Tear the Dask client and cluster down after Ctrl-C (or any early stop), whatever state
+    their start-up is in, printing nothing: their processes (this batch's own: those started since
+    ``before``) are killed, then the client, the cluster (``clusters``: those begun since, even
+    half started) and the event loop are closed with this process's stderr on /dev/null, and Dask's,
+    asyncio's and tornado's logs are turned off (for good: the batch is over, and their tasks may
+    still log as they are collected). A second Ctrl-C meanwhile is ignored."""
+    import gc
+    import logging
+
+    import psutil
+
+    from .workers import sigint_ignored
+
+    with sigint_ignored():
+        for name in ("distributed", "asyncio", "tornado", "dask"):  # for good: their tasks may log later
+            logging.getLogger(name).setLevel(logging.CRITICAL + 1)
+        sys.stderr.flush()
+        saved = os.dup(2)
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, 2)
+        try:
+            procs = []
+            for pid in _children() - before:
+                with contextlib.suppress(psutil.Error):
+                    p = psutil.Process(pid)
+                    p.kill()
+                    procs.append(p)
+            psutil.wait_procs(procs, timeout=5)
+            for c in clusters:
+                with contextlib.suppress(BaseException):
+                    c.close(timeout=2)
+                type(c)._instances.discard(c)  # (else Dask's exit handler closes it again, for 10 s)
+            with contextlib.suppress(BaseException):
+                stack.close()
+            gc.collect()
+        finally:
+            sys.stderr.flush()
+            os.dup2(saved, 2)
+            os.close(saved)
+            os.close(devnull)
+
+
 @contextlib.contextmanager
 def dask_client(scheduler: str):
     """A distributed Client: ``local`` starts a LocalCluster (one single-threaded worker process
-    per core; workers may start the command's own worker processes), else connects to the address."""
+    per core; workers may start the command's own worker processes), else connects to the address.
+
+    Dask's event loop thread is started with SIGINT blocked, so the cluster's processes (spawned
+    from it) never see Ctrl-C; this thread does, at any moment (start-up included), and the
+    client and cluster are then stopped without a word (``_stop_quietly``)."""
     import logging
+    from multiprocessing import resource_tracker
 
     import dask
     from distributed import Client, LocalCluster
+    from distributed.deploy.spec import SpecCluster
+    from distributed.utils import LoopRunner
 
-    if scheduler == "local":
-        n = max(1, os.cpu_count() or 1)
-        with dask.config.set({"distributed.worker.daemon": False}):
-            with LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=None,
-                              silence_logs=logging.CRITICAL) as cluster, Client(cluster) as client:
-                yield client
+    from .workers import sigint_blocked
+
+    resource_tracker.ensure_running()  # (before the list of processes that are not the batch's own)
+    before, known = _children(), set(SpecCluster._instances)
+    stack = contextlib.ExitStack()
+    try:
+        with sigint_blocked():
+            runner = LoopRunner()
+            runner.start()
+        stack.callback(runner.stop)
+        if scheduler == "local":
+            n = max(1, os.cpu_count() or 1)
+            with dask.config.set({"distributed.worker.daemon": False}):
+                cluster = stack.enter_context(LocalCluster(
+                    n_workers=n, threads_per_worker=1, processes=True, dashboard_address=None,
+                    silence_logs=logging.CRITICAL, loop=runner.loop))
+            client = stack.enter_context(Client(cluster, loop=runner.loop))
+        else:
+            try:
+                client = Client(scheduler, timeout="5s", loop=runner.loop)
+            except (OSError, TimeoutError) as exc:
+                raise InputError(f"cannot connect to the Dask scheduler ({exc})", scheduler) from None
+            stack.enter_context(client)
+    except BaseException:  # Ctrl-C during the start-up, or no connection
+        _stop_quietly(stack, before, set(SpecCluster._instances) - known)
+        raise
+    try:
+        yield client
+    except BaseException as exc:
+        if isinstance(exc, Exception):
+            stack.close()
+        else:  # Ctrl-C (or the batch's loop stopped early): the workers may be mid-task
+            _stop_quietly(stack, before, set(SpecCluster._instances) - known)
+        raise
     else:
-        try:
-            client = Client(scheduler, timeout="20s")
-        except (OSError, TimeoutError) as exc:
-            raise InputError(f"cannot connect to the Dask scheduler ({exc})", scheduler) from None
-        with client:
-            yield client
+        stack.close()
 
 
 def run_all(command, jobs, scheduler: str, window: int | None, progress: bool):
@@ -366,8 +511,8 @@ def _flat(f: dict) -> dict:
 def summary_csv(records: list[dict], tot: dict) -> str:
     rows = [{"input": r["input"], "output": r.get("output") or "", "status": r["status"],
              "error": r.get("error") or r.get("reason") or "", **_flat(r.get("figures"))} for r in records]
-    total = {"input": "(total)", "output": "", "status": f"{tot['ok']} ok, {tot['problems']} problems, "
-             f"{tot['skipped']} skipped, {tot['error']} errors", "error": ""}
+    total = {"input": "(total)", "output": "", "status": f"{tot['ok']} ok, {count(tot['problems'], 'problem')}, "
+             f"{tot['skipped']} skipped, {count(tot['error'], 'error')}", "error": ""}
     kept = {("savings" if k == "mean_savings" else k): v for k, v in tot.items()
             if k in ("mean_savings", "triangles", "micro_triangles", "micromaps", "data_bytes", "passed")}
     total.update(_flat(kept))  # the eval row's savings columns hold the means

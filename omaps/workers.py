@@ -31,6 +31,41 @@ def _noop() -> None:
 
 
 @contextlib.contextmanager
+def sigint_blocked():
+    """SIGINT blocked in this thread while the block runs (the main thread only; elsewhere it
+    does nothing). A thread started meanwhile keeps the mask for good, and so does every process
+    spawned from it, at once or later: such processes never print a Ctrl-C traceback. A Ctrl-C
+    meanwhile arrives in this thread when the block ends."""
+    block = _MASKS and threading.current_thread() is threading.main_thread()
+    if block:
+        # multiprocessing's resource tracker, started by the first spawn, unblocks SIGINT in the
+        # spawning thread after starting it: started now, before the mask, it leaves the mask alone
+        from multiprocessing import resource_tracker
+
+        resource_tracker.ensure_running()
+        signal.pthread_sigmask(signal.SIG_BLOCK, _SIGINT)
+    try:
+        yield
+    finally:
+        if block:
+            signal.pthread_sigmask(signal.SIG_UNBLOCK, _SIGINT)
+
+
+@contextlib.contextmanager
+def sigint_ignored():
+    """Ctrl-C ignored while the block runs (the main thread only): a tear-down that must not be
+    cut short by a second Ctrl-C."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
+
+
+@contextlib.contextmanager
 def process_pool(jobs: int):
     """A ``ProcessPoolExecutor`` of ``jobs`` spawned workers that ignore SIGINT. The workers
     start here with SIGINT blocked (a child inherits the signal mask, so a Ctrl-C while it is
@@ -40,14 +75,8 @@ def process_pool(jobs: int):
     pool = ProcessPoolExecutor(max_workers=jobs, mp_context=multiprocessing.get_context("spawn"),
                                initializer=_worker_start)
     try:
-        block = _MASKS and threading.current_thread() is threading.main_thread()
-        if block:
-            signal.pthread_sigmask(signal.SIG_BLOCK, _SIGINT)
-        try:
+        with sigint_blocked():  # a pending Ctrl-C arrives at its end
             pool.submit(_noop)  # launches every worker (spawn starts them all at the first submit)
-        finally:
-            if block:
-                signal.pthread_sigmask(signal.SIG_UNBLOCK, _SIGINT)  # a pending Ctrl-C arrives here
         yield pool
     except BaseException:
         processes = list((getattr(pool, "_processes", None) or {}).values())

@@ -1,0 +1,224 @@
+"""``omaps batch``: output names (a glTF called scene.gltf is named by its folder; two inputs
+sharing a name are an error naming both), the help (only what batch accepts), an unreachable
+scheduler (a quick exit 2), Ctrl-C during the Dask start-up (one line, exit 130) and the counts
+in its messages (singular and plural)."""
+
+from __future__ import annotations
+
+import os
+import re
+import signal
+import socket
+import subprocess
+import sys
+import time
+
+import numpy as np
+import pytest
+
+from gltf_files import write_quad_gltf
+from omaps import batch as engine
+from omaps.cli.main import main
+from omaps.errors import InputError
+from test_batch import _summary, _textures
+
+
+def _alpha(seed=0):
+    a = (np.random.default_rng(seed).random((4, 4)) > 0.5).astype(np.uint8) * 255
+    return np.kron(a, np.ones((8, 8), np.uint8))
+
+
+def _scene(folder, name="scene.gltf", seed=0):
+    os.makedirs(folder, exist_ok=True)
+    write_quad_gltf(os.path.join(folder, name), _alpha(seed))
+    return os.path.join(folder, name)
+
+
+# --- output names ------------------------------------------------------------------------------
+
+def _names(command, given, outdir="/nonexistent-out"):
+    return engine.output_names(command, engine.find_inputs(command, given, outdir))
+
+
+def test_scene_gltf_is_named_by_its_folder(tmp_path):
+    pine = _scene(tmp_path / "pine")
+    oak = _scene(tmp_path / "oak", "scene.glb")  # (not a valid .glb: only names are made here)
+    assert _names("omm", [pine]) == ["pine"]
+    assert _names("omm", [pine, oak]) == ["pine", "oak"]
+    assert _names("omm", [str(tmp_path / "*" / "scene.gl*")]) == ["oak", "pine"]
+    # found in a folder given: the path relative to it (which names the scene's folder)
+    assert _names("omm", [str(tmp_path)]) == ["oak/scene", "pine/scene"]
+    assert _names("omm", [str(tmp_path / "pine")]) == ["pine"]
+    other = _scene(tmp_path / "pine", "bark.gltf")
+    assert _names("omm", [str(tmp_path)]) == ["oak/scene", "pine/bark", "pine/scene"]
+    assert _names("trace", [other, pine]) == ["bark", "pine"]
+
+
+def test_two_inputs_with_one_name_are_an_error_naming_both(tmp_path, capsys):
+    a = _scene(tmp_path / "a" / "pine")
+    b = _scene(tmp_path / "b" / "pine")
+    with pytest.raises(InputError) as e:
+        _names("omm", [a, b])
+    assert a in str(e.value) and b in str(e.value)
+    out = tmp_path / "out"
+    assert main(["batch", "omm", a, b, "-o", str(out), "--scheduler", "none", "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert a in err and b in err and "pine" in err
+    assert not out.exists()
+    # an omm folder inside another input's omm folder: also one output in the other's way
+    c = _scene(tmp_path / "c" / "pine" / "cone")
+    for given in ([a, str(tmp_path / "c")], [str(tmp_path / "c"), a]):
+        with pytest.raises(InputError) as e:
+            _names("omm", given)
+        assert a in str(e.value) and c in str(e.value)
+    assert _names("trace", [a, str(tmp_path / "c")]) == ["pine", "pine/cone/scene"]
+    assert _names("omm", [str(tmp_path / "c")]) == ["pine/cone/scene"]
+    assert _names("omm", [c]) == ["cone"]
+
+
+def test_two_scene_gltf_run_side_by_side(tmp_path, capsys):
+    pine, oak = _scene(tmp_path / "pine", seed=1), _scene(tmp_path / "oak", seed=2)
+    out = tmp_path / "out"
+    assert main(["batch", "omm", pine, oak, "-o", str(out), "--scheduler", "none", "--quiet", "--level", "2"]) == 0
+    assert (out / "pine" / "omm.json").is_file() and (out / "oak" / "omm.json").is_file()
+    s, _ = _summary(out)
+    assert [r["output"] for r in s["inputs"]] == ["pine", "oak"]
+
+
+def test_help_states_the_naming():
+    r = subprocess.run([sys.executable, "-m", "omaps", "batch", "--help"], capture_output=True, text=True)
+    assert r.returncode == 0 and "scene.gltf" in r.stdout and "same output name" in " ".join(r.stdout.split())
+
+
+# --- help ---------------------------------------------------------------------------------------
+
+def _help(*argv):
+    r = subprocess.run([sys.executable, "-m", "omaps", *argv, "--help"], capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    return r.stdout
+
+
+def _options(text):
+    return set(re.findall(r"(?<![\w-])(--[a-z][a-z0-9-]*)", text))
+
+
+@pytest.mark.parametrize("command, single", [("eval", "eval"), ("omm", "omm"), ("trace", "trace")])
+def test_batch_help_lists_only_what_batch_accepts(command, single):
+    batch, alone = _help("batch", command), _help(single)
+    refused = {"eval": {"--json", "--csv", "--plot", "--show", "--per-texture"},
+               "omm": {"--verify", "--expand"},
+               "trace": {"--json", "--heatmap", "--render", "--plot-budget"}}[command]
+    assert not _options(batch) & refused, _options(batch) & refused
+    # every other option of the single command is there, with the same help (one definition)
+    shared = _options(alone) - refused - {"--help", "--output", "--quiet"}
+    assert shared <= _options(batch), shared - _options(batch)
+    assert {"--scheduler", "--window", "--output"} <= _options(batch)
+    assert "With no PATH" not in batch and "embedded" not in batch
+    # the same definitions: each shared option has the single command's help, word for word
+    from omaps.cli.main import parser
+
+    sub = next(a for a in parser()._actions if a.dest == "command").choices
+    batch_sub = next(a for a in sub["batch"]._actions if a.dest == "batch_command").choices[command]
+    by_option = {o: a for a in batch_sub._actions for o in a.option_strings}
+    for a in sub[single]._actions:
+        opts = set(a.option_strings)
+        if opts & (shared | {"--quiet"}):
+            b = by_option[a.option_strings[-1]]
+            assert b.help == a.help or a.dest == "quiet", a.option_strings
+            assert (b.default, b.choices, b.type) == (a.default, a.choices, a.type), a.option_strings
+    # the refused options are still refused with a clear message, not as unknown words
+    for opt in sorted(refused):
+        value = [] if opt in ("--per-texture", "--expand") else ["x.png" if opt != "--verify" else "d"]
+        r = subprocess.run([sys.executable, "-m", "omaps", "batch", command, "in.png", "-o", "/tmp/never-made",
+                            opt, *value], capture_output=True, text=True)
+        assert r.returncode == 2 and opt in r.stderr and ("not available" in r.stderr or "drop" in r.stderr), \
+            r.stderr
+
+
+# --- an unreachable scheduler ------------------------------------------------------------------
+
+def _free_port():
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def test_unreachable_scheduler_fails_quickly_naming_it(tmp_path, capsys):
+    src = tmp_path / "tex"
+    _textures(src, n=2)
+    address = f"tcp://127.0.0.1:{_free_port()}"
+    t0 = time.monotonic()
+    rc = main(["batch", "eval", str(src), "-o", str(tmp_path / "out"), "--scheduler", address, "--quiet"])
+    dt = time.monotonic() - t0
+    assert rc == 2 and dt < 5, dt
+    err = capsys.readouterr().err
+    assert address in err and "scheduler" in err and len(err.strip().splitlines()) == 1, err
+    assert not (tmp_path / "out").exists()
+
+
+# --- Ctrl-C during the Dask start-up -----------------------------------------------------------
+
+def _children(pid):
+    import psutil
+
+    try:
+        return psutil.Process(pid).children(recursive=True)
+    except psutil.NoSuchProcess:
+        return []
+
+
+@pytest.mark.parametrize("group, after", [(True, 0.0), (True, 1.0), (False, 0.5)])
+def test_ctrl_c_during_cluster_start_up(tmp_path, group, after):
+    """SIGINT once the LocalCluster's first process exists (``after`` s later): to the whole
+    process group as a terminal's Ctrl-C, or to omaps alone. One line, exit 130, no output."""
+    src = tmp_path / "tex"
+    _textures(src, n=4)
+    out = tmp_path / "out"
+    env = dict(os.environ, PYTHONUNBUFFERED="1", OMAPS_PROGRESS="0")
+    p = subprocess.Popen([sys.executable, "-m", "omaps", "batch", "eval", str(src), "-o", str(out),
+                          "--scheduler", "local", "--schemes", "sq16"], env=env, stdout=subprocess.DEVNULL,
+                         stderr=subprocess.PIPE, start_new_session=group)
+    try:
+        deadline = time.monotonic() + 120
+        while not _children(p.pid) and p.poll() is None and time.monotonic() < deadline:
+            time.sleep(0.01)
+        assert p.poll() is None, "the batch ended before its cluster started"
+        time.sleep(after)
+        if group:
+            os.killpg(p.pid, signal.SIGINT)
+        else:
+            p.send_signal(signal.SIGINT)
+        err = p.communicate(timeout=60)[1].decode(errors="replace")
+    finally:
+        if p.poll() is None:
+            p.kill()
+    assert p.returncode == 130, err
+    assert err == "omaps: interrupted\n", err
+    assert not os.path.exists(out / "summary.json")
+    time.sleep(0.5)
+    assert not _children(p.pid)
+
+
+# --- counts in messages -------------------------------------------------------------------------
+
+def test_counts_are_singular_for_one(tmp_path, capsys):
+    src = tmp_path / "tex"
+    _textures(src, n=1)
+    (src / "broken.png").write_bytes(b"not a png")
+    out = tmp_path / "out"
+    assert main(["batch", "eval", str(src / "t00.png"), "-o", str(out), "--scheduler", "none", "--quiet",
+                 "--schemes", "sq16"]) == 0
+    text = capsys.readouterr()
+    text = text.out + text.err
+    assert "1 input," in text and "1 inputs" not in text, text
+    assert main(["batch", "eval", str(src), "-o", str(out), "--scheduler", "none", "--quiet",
+                 "--schemes", "sq16"]) == 1
+    text = capsys.readouterr()
+    text = text.out + text.err
+    assert "2 inputs" in text and "1 error" in text and "1 errors" not in text, text
+    assert "1 done before" in text
+    _, rows = _summary(out)
+    assert "1 error" in rows[-1]["status"] and "1 errors" not in rows[-1]["status"]
+    assert "0 problems" in rows[-1]["status"] or "problem" not in rows[-1]["status"]
+    assert engine.count(1, "error") == "1 error" and engine.count(2, "error") == "2 errors"
+    assert engine.count(0, "input") == "0 inputs"
