@@ -137,6 +137,77 @@ def announce(args) -> None:
               f"{_seconds(missing)} s on one core)", file=sys.stderr, flush=True)
 
 
+PROGRESS_EVERY = 5.0  # seconds between the lines while a command waits for the compile ahead
+
+
+def _cores() -> int:
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except (AttributeError, OSError):
+        return max(1, os.cpu_count() or 1)
+
+
+def _ahead_seconds(groups) -> int:
+    """About how long the compile ahead takes: its slowest process's families, slowed down while
+    more processes (the ahead ones and the command's own) than cores share the machine."""
+    return round(max(_seconds(g) for g in groups) * max(1.0, (len(groups) + 1) / _cores()))
+
+
+def _command(group) -> list[str]:
+    """The command line of one compile-ahead process (it prints each family's name when done)."""
+    return [sys.executable, "-m", "omaps.cli.precompile", *group]
+
+
+class _Ahead:
+    """The compile-ahead processes of ``start_ahead``: per process its families, the process, and
+    the files its stdout (the families done, one a line) and stderr go to."""
+
+    def __init__(self, groups, estimate: int):
+        import subprocess  # here, not at the top: a command that starts nothing ahead skips its import
+        import tempfile
+
+        self.t0 = time.perf_counter()
+        self.estimate = estimate
+        self.procs = []
+        for g in groups:
+            out, err = tempfile.TemporaryFile(), tempfile.TemporaryFile()
+            self.procs.append((g, subprocess.Popen(_command(g), stdin=subprocess.DEVNULL, stdout=out, stderr=err),
+                               out, err))
+
+    def done(self) -> list[str]:
+        """The families compiled so far."""
+        names = []
+        for g, _, out, _ in self.procs:
+            out.seek(0)
+            names += [f for f in out.read().decode(errors="replace").split() if f in g]
+        return names
+
+    def status(self) -> str:
+        done = set(self.done())
+        compiling, waiting = [], []
+        for g, p, _, _ in self.procs:
+            left = [f for f in g if f not in done]
+            if p.poll() is None and left:
+                compiling.append(left[0])
+                waiting += left[1:]
+        parts = [f"done {', '.join(f for g, *_ in self.procs for f in g if f in done)}"] if done else []
+        parts.append(f"compiling {', '.join(compiling)}")
+        if waiting:
+            parts.append(f"then {', '.join(waiting)}")
+        elapsed = time.perf_counter() - self.t0
+        when = (f"about {self.estimate} s in all" if elapsed <= self.estimate
+                else f"longer than the estimate of about {self.estimate} s")
+        return f"omaps: waiting for the kernels compiled ahead: {'; '.join(parts)} ({elapsed:.0f} s so far, {when})"
+
+    def stop(self) -> None:
+        for _, p, out, err in self.procs:
+            if p.poll() is None:
+                p.kill()
+                p.wait()
+            out.close()
+            err.close()
+
+
 def start_ahead(args):
     """For ``omaps eval`` on the embedded corpus (the README's first command): compile the other
     commands' uncached kernels in background processes while it evaluates. Returns what
@@ -148,42 +219,42 @@ def start_ahead(args):
     if not groups:
         return None
     names = [f for g in groups for f in g]
+    estimate = _ahead_seconds(groups)
     print(f"omaps: compiling the numba kernels of {', '.join(names)} ahead of first use, beside this "
-          f"evaluation (once; about {max(_seconds(g) for g in groups)} s)", file=sys.stderr, flush=True)
-    import subprocess  # here, not at the top: a command that starts nothing ahead skips its import
-
-    procs = [(g, subprocess.Popen([sys.executable, "-m", "omaps.cli.precompile", *g], stdin=subprocess.DEVNULL,
-                                  stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)) for g in groups]
-    return procs, time.perf_counter()
+          f"evaluation (once; about {estimate} s on {_cores()} cores; OMAPS_PRECOMPILE=0 skips it)",
+          file=sys.stderr, flush=True)
+    return _Ahead(groups, estimate)
 
 
 def finish_ahead(started) -> None:
-    """Wait for ``start_ahead``'s processes; a failure is reported (those kernels compile on first
-    use instead) and changes no exit code."""
+    """Wait for ``start_ahead``'s processes, with a line on stderr at least every
+    ``PROGRESS_EVERY`` seconds (the families done and still compiling, the time so far); a
+    failure is reported (those kernels compile on first use instead) and changes no exit code."""
     if not started:
         return
-    procs, t0 = started
     try:
-        for g, p in procs:
-            _, err = p.communicate()
+        last = None
+        while any(p.poll() is None for _, p, _, _ in started.procs):
+            now = time.perf_counter()
+            if last is None or now - last >= PROGRESS_EVERY:
+                print(started.status(), file=sys.stderr, flush=True)
+                last = now
+            time.sleep(min(0.1, max(0.0, PROGRESS_EVERY - (time.perf_counter() - last))))
+        for g, p, _, err in started.procs:
             if p.returncode:
-                last = (err or b"").decode(errors="replace").strip().splitlines()[-1:] or ["?"]
-                print(f"omaps: compiling {', '.join(g)} ahead failed ({last[0]}); they compile on first use",
-                      file=sys.stderr)
+                err.seek(0)
+                text = err.read().decode(errors="replace").strip().splitlines()
+                print(f"omaps: compiling {', '.join(g)} ahead failed ({(text or ['?'])[-1]}); they compile on "
+                      "first use", file=sys.stderr)
     finally:
-        for _, p in procs:
-            if p.poll() is None:
-                p.kill()
-                p.wait()
-    print(f"omaps: kernels compiled ahead in {time.perf_counter() - t0:.0f} s", file=sys.stderr)
+        started.stop()
+    print(f"omaps: kernels compiled ahead in {time.perf_counter() - started.t0:.0f} s", file=sys.stderr, flush=True)
 
 
 def stop_ahead(started) -> None:
     """Stop ``start_ahead``'s processes (the command failed or was interrupted)."""
-    for _, p in (started or ((), None))[0]:
-        if p.poll() is None:
-            p.kill()
-            p.wait()
+    if started:
+        started.stop()
 
 
 def _quad_scene(folder: str) -> str:
@@ -228,8 +299,9 @@ def _quad_scene(folder: str) -> str:
     return path
 
 
-def warm(families) -> None:
-    """Compile the families' kernels by running the commands that use them on tiny inputs."""
+def warm(families, report=None) -> None:
+    """Compile the families' kernels by running the commands that use them on tiny inputs;
+    ``report``: a stream that gets each family's name when its kernels are compiled."""
     import tempfile
 
     import numpy as np
@@ -280,6 +352,9 @@ def warm(families) -> None:
                 if rc not in (0, 1):
                     failed.append(f"{f}: omaps {argv[0]} exited {rc}: {err.getvalue().strip()[-200:]}")
                     break
+            else:
+                if report is not None:
+                    print(f, file=report, flush=True)
         if failed:
             raise RuntimeError("; ".join(failed))
 
@@ -288,4 +363,4 @@ if __name__ == "__main__":
     unknown = [f for f in sys.argv[1:] if f not in FAMILIES]
     if unknown:
         sys.exit(f"unknown families: {', '.join(unknown)} (known: {', '.join(FAMILIES)})")
-    warm(sys.argv[1:] or list(FAMILIES))
+    warm(sys.argv[1:] or list(FAMILIES), report=sys.stdout)
