@@ -26,7 +26,6 @@ palette images, the render losslessly recompressed.
 from __future__ import annotations
 
 import argparse
-import functools
 import os
 import sys
 import time
@@ -83,20 +82,13 @@ def savings(out: Path, jobs: int | None) -> None:
 
 def forest(out: Path, jobs: int | None) -> None:
     from omaps.cli import main
-    from omaps.trace import pictures
 
     args = ["trace", str(FOREST), "--shadows", "--quiet", "--heatmap", str(out / "forest_heatmap.png"),
             "--render", str(out / "forest_render.png"), "--json", str(out / "forest_trace.json")]
     if jobs:
         args += ["--jobs", str(jobs)]
-    # the heat map's title names the scene (``omaps trace`` itself does not pass it yet)
-    heatmap = pictures.heatmap
-    pictures.heatmap = functools.partial(heatmap, scene=str(FOREST))
-    try:
-        if main(args) != 0:
-            raise SystemExit("omaps trace failed")
-    finally:
-        pictures.heatmap = heatmap
+    if main(args) != 0:
+        raise SystemExit("omaps trace failed")
     os.remove(out / "forest_trace.json")
     _compact(out / "forest_heatmap.png", palette=True)
     _compact(out / "forest_render.png", palette=False)

@@ -277,7 +277,7 @@ def cmd_trace(a) -> int:
         if a.json:
             write_text(outputs.path(a.json), json.dumps(report, indent=1))
         if a.heatmap:
-            heatmap(outputs.path(a.heatmap), runs, names, a.shadows)
+            heatmap(outputs.path(a.heatmap), runs, names, a.shadows, scene=a.scene)
         if a.render:
             render(outputs.path(a.render), prep, runs["none"], cam, light)
         if a.plot_budget:
