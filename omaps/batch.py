@@ -39,6 +39,7 @@ import traceback
 import warnings
 
 from . import atomic
+from .cli.common import plural as count  # "1 input", "2 inputs": the commands' one helper
 from .errors import InputError
 
 COMMANDS = ("omm", "eval", "trace")
@@ -54,11 +55,6 @@ REFUSED = {"eval": ("csv", "plot", "show", "per_texture"), "omm": ("verify", "ex
            "trace": ("heatmap", "render", "plot_budget")}
 # namespace attributes that belong to the batch, not to the command run per input
 BATCH_ONLY = ("func", "batch_command", "batch_output", "scheduler", "window", "command")
-
-
-def count(n: int, noun: str, plural: str | None = None) -> str:
-    """``1 input``, ``2 inputs``, ``0 inputs``."""
-    return f"{n} {noun if n == 1 else plural or noun + 's'}"
 
 
 def single_function(command: str):
