@@ -224,6 +224,15 @@ def test_waiting_for_the_compile_ahead_shows_progress(monkeypatch):
     assert "compiled ahead" in err.lines[-1][1]
 
 
+def test_compile_ahead_estimate_is_the_measured_one(monkeypatch):
+    """On the 2-core reference machine the first command's compile ahead took 110-220 s when
+    idle, 853 s at a load of 7-9: the estimate says so, and grows with the load of other work."""
+    monkeypatch.setattr(precompile, "_cores", lambda: 2)
+    assert precompile._ahead_seconds(precompile.AHEAD) == (110, 220)
+    low, high = precompile._ahead_seconds(precompile.AHEAD, load=7.0)
+    assert low >= 350 and high >= 700
+
+
 def test_compile_ahead_off(monkeypatch):
     monkeypatch.setenv("OMAPS_PRECOMPILE", "0")
     args = type("A", (), {"command": "eval", "paths": []})()

@@ -147,10 +147,28 @@ def _cores() -> int:
         return max(1, os.cpu_count() or 1)
 
 
-def _ahead_seconds(groups) -> int:
-    """About how long the compile ahead takes: its slowest process's families, slowed down while
-    more processes (the ahead ones and the command's own) than cores share the machine."""
-    return round(max(_seconds(g) for g in groups) * max(1.0, (len(groups) + 1) / _cores()))
+# The compile ahead of the README's first command, measured on the 2-core reference machine: on
+# an idle machine it took 110-220 s in all (its two processes and the evaluation beside them, each
+# process also compiling kernels the others do: 142 CPU-s for vq4, synth, wavelet, 183 CPU-s for
+# trace, vq2, omm, budget, 65 CPU-s for the evaluation), and 853 s at a load of 7-9 from other work.
+# Relative to FAMILIES' figures (numba's compile events only) that is this factor:
+AHEAD_FACTOR = 1.2
+
+
+def _load() -> float:
+    """The load of other work on the machine (the 1-minute load average, less this process)."""
+    try:
+        return max(0.0, os.getloadavg()[0] - 1.0)
+    except (AttributeError, OSError):
+        return 0.0
+
+
+def _ahead_seconds(groups, load: float = 0.0) -> tuple[int, int]:
+    """About how long the compile ahead takes, as a range: its slowest process's families,
+    slowed down while more processes (the ahead ones, the command's own, other work) than cores
+    share the machine; the measured runs spread over a factor of 2."""
+    low = max(_seconds(g) for g in groups) * AHEAD_FACTOR * max(1.0, (len(groups) + 1 + load) / _cores())
+    return int(round(low, -1)), int(round(2 * low, -1))
 
 
 def _command(group) -> list[str]:
@@ -162,7 +180,7 @@ class _Ahead:
     """The compile-ahead processes of ``start_ahead``: per process its families, the process, and
     the files its stdout (the families done, one a line) and stderr go to."""
 
-    def __init__(self, groups, estimate: int):
+    def __init__(self, groups, estimate: tuple[int, int]):
         import subprocess  # here, not at the top: a command that starts nothing ahead skips its import
         import tempfile
 
@@ -195,8 +213,9 @@ class _Ahead:
         if waiting:
             parts.append(f"then {', '.join(waiting)}")
         elapsed = time.perf_counter() - self.t0
-        when = (f"about {self.estimate} s in all" if elapsed <= self.estimate
-                else f"longer than the estimate of about {self.estimate} s")
+        low, high = self.estimate
+        when = (f"about {low}-{high} s in all" if elapsed <= high
+                else f"longer than the estimate of {low}-{high} s")
         return f"omaps: waiting for the kernels compiled ahead: {'; '.join(parts)} ({elapsed:.0f} s so far, {when})"
 
     def stop(self) -> None:
@@ -219,11 +238,13 @@ def start_ahead(args):
     if not groups:
         return None
     names = [f for g in groups for f in g]
-    estimate = _ahead_seconds(groups)
+    load = _load()
+    low, high = _ahead_seconds(groups, load)
+    busy = f", the machine busy with other work (load {load + 1:.1f})" if load >= 0.5 else ""
     print(f"omaps: compiling the numba kernels of {', '.join(names)} ahead of first use, beside this "
-          f"evaluation (once; about {estimate} s on {_cores()} cores; OMAPS_PRECOMPILE=0 skips it)",
+          f"evaluation (once; about {low}-{high} s on {_cores()} cores{busy}; OMAPS_PRECOMPILE=0 skips it)",
           file=sys.stderr, flush=True)
-    return _Ahead(groups, estimate)
+    return _Ahead(groups, (low, high))
 
 
 def finish_ahead(started) -> None:
