@@ -2,6 +2,7 @@
 code is ``main``'s, its output reaches a file or a pipe whole, and exit handlers still run."""
 
 import os
+import re
 import subprocess
 import sys
 
@@ -32,7 +33,7 @@ def test_run_flushes_output_and_runs_exit_handlers(tmp_path):
                             str(tmp_path / "uvs.npy"), "-o", str(tmp_path / "omm"), "--quiet"], stdout=f,
                            stderr=subprocess.PIPE, text=True, cwd=tmp_path, env=ENV)
     assert r.returncode == 0, r.stderr
-    assert "1 triangles, 256 micro-triangles" in out.read_text()
+    assert re.search(r"1 triangles?, 256 micro-triangles", out.read_text())
     assert (tmp_path / "mark").read_text() == "ran"
     assert (tmp_path / "omm" / "omm.json").is_file()
 
