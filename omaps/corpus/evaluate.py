@@ -93,7 +93,8 @@ def evaluate_texture(texture, schemes, config: EvalConfig = EvalConfig(),
     ----------
     texture : AlphaTexture, numpy array or path
         What ``omaps.texture.as_texture`` takes: (H, W) or (H, W, C) uint8 / uint16 / bool /
-        float arrays (greyscale, LA, RGBA; RGB with ``config.channel``), or an image file.
+        float arrays (greyscale, LA, RGBA; RGB with ``config.channel``), or an image file
+        (read through ``config.channel``).
     schemes : str or list
         Scheme names (``"sq16,vq2,tri3"`` or a list) or ``Scheme`` objects.
     config : EvalConfig
@@ -116,10 +117,7 @@ def evaluate_texture(texture, schemes, config: EvalConfig = EvalConfig(),
     >>> r.savings, r.bits
     ({'sq16': 0.890625, 'tri3': 0.734375}, {'sq16': 512, 'tri3': 256})
     """
-    if isinstance(texture, AlphaTexture):
-        if config.channel is not None:
-            raise InputError("config.channel applies to arrays and files, not to an AlphaTexture", texture.name)
-    else:
+    if not isinstance(texture, AlphaTexture):  # (an AlphaTexture was read with its channel already)
         texture = as_texture(texture, channel=config.channel)
     if isinstance(schemes, str) or any(isinstance(s, str) for s in schemes):
         names = schemes if isinstance(schemes, str) else [s if isinstance(s, str) else s.name for s in schemes]
