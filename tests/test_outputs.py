@@ -343,7 +343,7 @@ def test_ctrl_c_omm(tmp_path, inputs):
     (out / "omm").mkdir()  # an earlier output stays as it was
     (out / "omm" / "omm.json").write_text("{}")
     rc, err = _interrupt(["omm", inputs / "leaf.png", tmp_path / "many.npy", "--level", "9", "-o", out / "omm"],
-                         tmp_path, b"omm:")
+                         tmp_path, b"omm baking:")
     assert rc == 130, err
     assert err.rstrip().endswith("omaps: interrupted") and "Traceback" not in err, err
     assert listing(out) == ["omm", os.path.join("omm", "omm.json")]
