@@ -280,12 +280,12 @@ class Outputs:
     >>> import os, tempfile
     >>> d = tempfile.mkdtemp()
     >>> out = Outputs()
-    >>> out.file(os.path.join(d, "a.txt"), "--json")
+    >>> out.file(os.path.join(d, "a.json"), "--json")
     >>> with out.writing():
-    ...     with open(out.path(os.path.join(d, "a.txt")), "w") as f:
+    ...     with open(out.path(os.path.join(d, "a.json")), "w") as f:
     ...         _ = f.write("hi")
     >>> sorted(os.listdir(d))
-    ['a.txt']
+    ['a.json']
     """
 
     def __init__(self, inputs=()):
