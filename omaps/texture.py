@@ -86,19 +86,8 @@ class AlphaTexture:
             bands = None if bands is None else tuple(bands)
             if bands is None:
                 raise InputError(f"an (H, W, C) texture needs 1 to 4 channels, got shape {a.shape}", name)
-            if channel is None:
-                if "A" in bands:
-                    idx = bands.index("A")
-                elif len(bands) == 1:
-                    idx = 0
-                else:
-                    raise InputError(f"an {''.join(bands)} array has no alpha channel; pick one with channel=", name)
-            else:
-                try:
-                    idx = _channel_index(channel, bands)
-                except KeyError:
-                    raise InputError(f"no channel {channel!r} in an {''.join(bands)} array", name) from None
-            a = a[:, :, idx]
+            what = f"an {''.join(bands)} array"
+            a = a[:, :, _coverage_band(bands, channel, what, f"{what} has no alpha channel; pick one with channel=", name)]
         elif channel is not None and a.ndim == 2:
             try:
                 _channel_index(channel, ("L",))
@@ -164,6 +153,22 @@ def _channel_index(channel, bands) -> int:
     if not 0 <= idx < len(bands):
         raise KeyError(channel)
     return idx
+
+
+def _coverage_band(bands, channel, what: str, no_alpha: str, name: str) -> int:
+    """The band coverage is read from, of an image or array with ``bands`` (e.g. ("R", "G", "B",
+    "A")): ``channel`` if given, else the alpha band, else the one band of a mask; an RGB source
+    has no coverage of its own (the error ``no_alpha``). ``what`` names the source in errors."""
+    if channel is not None:
+        try:
+            return _channel_index(channel, bands)
+        except KeyError:
+            raise InputError(f"no channel {channel!r} in {what}", name) from None
+    if "A" in bands:
+        return bands.index("A")
+    if len(bands) == 1:
+        return 0  # a single-channel mask
+    raise InputError(no_alpha, name)
 
 
 def _mode_maxval(im: Image.Image) -> int:
@@ -244,18 +249,8 @@ def _alpha_from_image(im: Image.Image, name: str, path: str, channel) -> AlphaTe
 
     maxval = _mode_maxval(im)
     bands = im.getbands()
-    if channel is None:
-        if "A" in bands:
-            idx = bands.index("A")
-        elif len(bands) == 1:
-            idx = 0  # a single-channel mask
-        else:
-            raise InputError(f"image has no alpha channel (mode {im.mode}); pick one with --channel", path)
-    else:
-        try:
-            idx = _channel_index(channel, bands)
-        except KeyError:
-            raise InputError(f"no channel {channel!r} in a {im.mode} image (bands {''.join(bands)})", path) from None
+    idx = _coverage_band(bands, channel, f"a {im.mode} image (bands {''.join(bands)})",
+                         f"image has no alpha channel (mode {im.mode}); pick one with --channel", path)
     if len(bands) == 1:
         arr = np.asarray(im)
     else:

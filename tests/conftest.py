@@ -63,6 +63,21 @@ def rng():
     return np.random.default_rng(1234)
 
 
+@pytest.fixture
+def tex_and_uvs(tmp_path, rng):
+    """A 32x24 8-bit mask (a transparent band, an opaque band, noise) as mask.png and 9 UV
+    triangles as uvs.npy: (png path, npy path, alpha, triangles)."""
+    from PIL import Image
+
+    a = rng.integers(0, 256, size=(24, 32)).astype(np.uint8)
+    a[:, :10] = 0
+    a[:8] = 255
+    Image.fromarray(a).save(tmp_path / "mask.png")
+    tris = rng.uniform(0.1, 0.9, size=(9, 1, 2)) + rng.uniform(-0.1, 0.1, size=(9, 3, 2))
+    np.save(tmp_path / "uvs.npy", tris)
+    return tmp_path / "mask.png", tmp_path / "uvs.npy", a, tris
+
+
 def pytest_sessionstart(session):
     """With an empty numba cache, compile every command's kernels first, in two processes
     (``omaps.cli.precompile``), so that the test workers load them instead of each compiling the

@@ -24,17 +24,6 @@ SCENES = SHARED / "data" / "scenes"
 needs_scenes = pytest.mark.skipif(not SCENES.is_dir(), reason=f"scenes not found at {SCENES} (../shared is absent)")
 
 
-@pytest.fixture
-def tex_and_uvs(tmp_path, rng):
-    a = rng.integers(0, 256, size=(24, 32)).astype(np.uint8)
-    a[:, :10] = 0
-    a[:8] = 255
-    Image.fromarray(a).save(tmp_path / "mask.png")
-    tris = rng.uniform(0.1, 0.9, size=(9, 1, 2)) + rng.uniform(-0.1, 0.1, size=(9, 3, 2))
-    np.save(tmp_path / "uvs.npy", tris)
-    return tmp_path / "mask.png", tmp_path / "uvs.npy", a, tris
-
-
 def test_texture_input_writes_and_verifies(tex_and_uvs, tmp_path, capsys):
     png, uvs, a, tris = tex_and_uvs
     out = tmp_path / "omm"

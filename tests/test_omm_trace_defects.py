@@ -16,17 +16,6 @@ from omaps.cli import main
 from omaps.errors import InputError
 
 
-@pytest.fixture
-def tex_and_uvs(tmp_path, rng):
-    a = rng.integers(0, 256, size=(24, 32)).astype(np.uint8)
-    a[:, :10] = 0
-    a[:8] = 255
-    Image.fromarray(a).save(tmp_path / "mask.png")
-    tris = rng.uniform(0.1, 0.9, size=(9, 1, 2)) + rng.uniform(-0.1, 0.1, size=(9, 3, 2))
-    np.save(tmp_path / "uvs.npy", tris)
-    return tmp_path / "mask.png", tmp_path / "uvs.npy", a, tris
-
-
 # ---- a scene must be .gltf or .glb: one rule, in the scene loader ---------------------------
 
 SCENE_RULE = "a scene must end in .gltf or .glb"
