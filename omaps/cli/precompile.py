@@ -209,7 +209,10 @@ class _Ahead:
                 compiling.append(left[0])
                 waiting += left[1:]
         parts = [f"done {', '.join(f for g, *_ in self.procs for f in g if f in done)}"] if done else []
-        parts.append(f"compiling {', '.join(compiling)}")
+        if compiling:
+            parts.append(f"compiling {', '.join(compiling)}")
+        elif not waiting:
+            parts.append("writing the cache")  # every family reported, the processes not yet ended
         if waiting:
             parts.append(f"then {', '.join(waiting)}")
         elapsed = time.perf_counter() - self.t0
