@@ -383,16 +383,15 @@ def dask_client(scheduler: str):
     from it) never see Ctrl-C; this thread does, at any moment (start-up included), and the
     client and cluster are then stopped without a word (``_stop_quietly``)."""
     import logging
-    from multiprocessing import resource_tracker
 
     import dask
     from distributed import Client, LocalCluster
     from distributed.deploy.spec import SpecCluster
     from distributed.utils import LoopRunner
 
-    from .workers import sigint_blocked
+    from .workers import sigint_blocked, start_resource_tracker
 
-    resource_tracker.ensure_running()  # (before the list of processes that are not the batch's own)
+    start_resource_tracker()  # (before the list of processes that are not the batch's own)
     before, known = _children(), set(SpecCluster._instances)
     stack = contextlib.ExitStack()
     try:

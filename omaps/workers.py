@@ -30,6 +30,35 @@ def _noop() -> None:
     return None
 
 
+def start_resource_tracker() -> None:
+    """Start multiprocessing's resource tracker now (if it is not running yet), its stderr on
+    the null device. It cleans up after worker processes that a Ctrl-C or a failure stopped
+    early (named semaphores of a pool or a Dask cluster); its notes about them ("leaked
+    semaphore objects to clean up", "No such file or directory" for one a stopped process had
+    already unlinked) are for multiprocessing's developers, and an interrupted run must print
+    ``omaps: interrupted`` alone."""
+    import os
+    import sys
+    from multiprocessing import resource_tracker
+
+    if getattr(resource_tracker._resource_tracker, "_pid", None) is not None:
+        return
+    try:
+        sys.stderr.flush()
+        saved = os.dup(2)
+    except (OSError, ValueError, AttributeError):  # no real stderr: nothing to keep apart
+        resource_tracker.ensure_running()
+        return
+    null = os.open(os.devnull, os.O_WRONLY)
+    try:
+        os.dup2(null, 2)  # the tracker inherits fd 2 when it starts
+        resource_tracker.ensure_running()
+    finally:
+        os.dup2(saved, 2)
+        os.close(saved)
+        os.close(null)
+
+
 @contextlib.contextmanager
 def sigint_blocked():
     """SIGINT blocked in this thread while the block runs (the main thread only; elsewhere it
@@ -40,9 +69,7 @@ def sigint_blocked():
     if block:
         # multiprocessing's resource tracker, started by the first spawn, unblocks SIGINT in the
         # spawning thread after starting it: started now, before the mask, it leaves the mask alone
-        from multiprocessing import resource_tracker
-
-        resource_tracker.ensure_running()
+        start_resource_tracker()
         signal.pthread_sigmask(signal.SIG_BLOCK, _SIGINT)
     try:
         yield
