@@ -403,7 +403,7 @@ def dask_client(scheduler: str):
             n = max(1, os.cpu_count() or 1)
             with dask.config.set({"distributed.worker.daemon": False}):
                 cluster = stack.enter_context(LocalCluster(
-                    n_workers=n, threads_per_worker=1, processes=True, dashboard_address=None,
+                    n_workers=n, threads_per_worker=1, processes=True, dashboard_address=":0",
                     silence_logs=logging.CRITICAL, loop=runner.loop))
             client = stack.enter_context(Client(cluster, loop=runner.loop))
         else:

@@ -199,6 +199,27 @@ def test_ctrl_c_during_cluster_start_up(tmp_path, group, after):
     assert not _children(p.pid)
 
 
+def test_a_busy_dashboard_port_is_not_a_warning(tmp_path):
+    """Two local clusters at once (two batches, or two test workers) must not print Dask's "Port
+    8787 is already in use" warning: the cluster's HTTP server takes a free port."""
+    src = tmp_path / "tex"
+    _textures(src, n=1)
+    held = socket.socket()
+    try:
+        held.bind(("", 8787))  # (if the port is busy already, the case is there anyway)
+        held.listen(1)
+    except OSError:
+        pass
+    try:
+        r = subprocess.run([sys.executable, "-m", "omaps", "batch", "eval", str(src), "-o", str(tmp_path / "out"),
+                            "--scheduler", "local", "--schemes", "sq16", "--quiet"], capture_output=True, text=True,
+                           timeout=300)
+    finally:
+        held.close()
+    assert r.returncode == 0, r.stderr
+    assert "8787" not in r.stderr and "already in use" not in r.stderr, r.stderr
+
+
 # --- counts in messages -------------------------------------------------------------------------
 
 def test_counts_are_singular_for_one(tmp_path, capsys):
