@@ -103,3 +103,20 @@ def test_resource_tracker_notes_stay_off_the_terminal(start):
         assert "leaked semaphore" in r.stderr, r.stderr
     else:
         assert r.stderr == "", r.stderr
+
+
+def test_a_command_starts_the_quiet_tracker_first(tmp_path):
+    """A command starts the quiet tracker before anything else can start a loud one (a progress
+    bar's multiprocessing lock did, before the worker pool: an interrupted ``omaps eval`` then
+    printed 'leaked semaphore objects' after ``omaps: interrupted``)."""
+    Image.fromarray(np.full((8, 8), 255, np.uint8)).save(tmp_path / "t.png")
+    code = f"""
+from omaps.cli.main import main
+from multiprocessing import resource_tracker
+assert main(["eval", {str(tmp_path / "t.png")!r}, "--schemes", "sq4", "--jobs", "1"]) == 0
+resource_tracker.register("/omaps-test-leak", "semaphore")  # as a worker stopped by Ctrl-C leaves one
+"""
+    env = dict(os.environ, OMAPS_PROGRESS="1", OMAPS_PRECOMPILE="0")
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120, env=env)
+    assert r.returncode == 0, r.stderr
+    assert "leaked semaphore" not in r.stderr and "resource_tracker" not in r.stderr, r.stderr

@@ -81,6 +81,9 @@ def main(argv=None) -> int:
             from .trace import bind_camera_value
 
             args = parser().parse_args(bind_camera_value(argv))
+        from ..workers import start_resource_tracker
+
+        start_resource_tracker()  # before a progress bar's lock or a worker pool starts one that prints
         precompile.announce(args)
         ahead = precompile.start_ahead(args)
         with warnings.catch_warnings():
