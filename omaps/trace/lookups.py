@@ -14,12 +14,12 @@ import numpy as np
 from numba import carray, njit
 
 from .. import birdcurve, pair, states
-from ..budget import HIT_LEVEL, PAIR_OPTIONS
+from ..budget import HIT_LEVEL
 from ..codecs import vq2_block, vq4_block, vq4_synth_block, wavelet3_block
 from ..codecs.raw import read_state
 from ..sampling import sample_texture
 from .embree import f64_ptr, i8_ptr, i32_ptr, i64_ptr, u8_ptr, u16_ptr
-from .tables import (T_COUNT, T_MAP_CODEC, T_MAP_DATA, T_MAP_FORMAT, T_MAP_LEVEL, T_MAP_OFFSET, T_MAP_PARAM, T_MAP_ROW, T_MAP_ROW_BYTES, T_MAT_FILTER, T_MAT_H, T_MAT_INCL,
+from .tables import (MAP_FORMATS, codec_format, T_COUNT, T_MAP_CODEC, T_MAP_DATA, T_MAP_FORMAT, T_MAP_LEVEL, T_MAP_OFFSET, T_MAP_PARAM, T_MAP_ROW, T_MAP_ROW_BYTES, T_MAT_FILTER, T_MAT_H, T_MAT_INCL,
                      T_MAT_TEX_START, T_MAT_THR, T_MAT_W, T_MAT_WRAP_U, T_MAT_WRAP_V, T_TEX, T_TRI_CORNER,
                      T_TRI_MAT, T_TRI_UV, T_TRI_VALPHA)
 
@@ -101,11 +101,6 @@ def counting_state(table, tri, b1, b2):
     return states.C
 
 
-# The tracer's format codes of a pair's stored square map: the budget's options first (their
-# index in ``budget.PAIR_OPTIONS``: 0 none, 1..7 raw sq1..sq64, 8 vq2, 9 vq4, 10 vq4x64), then the
-# codecs a budget does not choose among. Every codec is read by one module-level kernel
-# (``pair_map_state``), whose filters numba compiles once and caches.
-MAP_FORMATS = PAIR_OPTIONS + ("vq4-synth", "wavelet3", "sq128")
 _F_SYNTH, _F_WAVELET, _F_SQ128 = (MAP_FORMATS.index(n) for n in ("vq4-synth", "wavelet3", "sq128"))
 
 
@@ -150,14 +145,6 @@ def pair_map_state(table, tri, b1, b2):
     word: the pair's row of ``T_MAP_ROW_BYTES`` bytes read with the codec's lookup."""
     row = np.int64(i32_ptr(table[T_MAP_ROW])[tri])
     return _pair_block_state(table, tri, b1, b2, table[T_MAP_CODEC], row * table[T_MAP_ROW_BYTES])
-
-
-def codec_format(codec) -> int:
-    """The codec's format code (its index in ``MAP_FORMATS``), read by ``pair_map_state``."""
-    name = getattr(codec, "name", None)
-    if name not in MAP_FORMATS or name == "none":
-        raise ValueError(f"the tracer has no format code for codec {name!r} (known: {', '.join(MAP_FORMATS[1:])})")
-    return MAP_FORMATS.index(name)
 
 
 def state_function(sm):

@@ -11,6 +11,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..budget import PAIR_OPTIONS
 from .embree import CONTEXT_BYTES
 
 __all__ = ["TraceTables", "base_tables", "scheme_tables"]
@@ -111,7 +112,20 @@ def scheme_tables(base: dict, sm) -> TraceTables:
     table[T_MAP_ROW_BYTES] = sm.row_bytes
     table[T_MAP_PARAM] = sm.param
     if sm.codec is not None:
-        from .lookups import codec_format
-
         table[T_MAP_CODEC] = codec_format(sm.codec)
     return TraceTables(arrays, table)
+
+
+# The tracer's format codes of a pair's stored square map: the budget's options first (their
+# index in ``budget.PAIR_OPTIONS``: 0 none, 1..7 raw sq1..sq64, 8 vq2, 9 vq4, 10 vq4x64), then the
+# codecs a budget does not choose among. Every codec is read by one module-level kernel
+# (``pair_map_state``), whose filters numba compiles once and caches.
+MAP_FORMATS = PAIR_OPTIONS + ("vq4-synth", "wavelet3", "sq128")
+
+
+def codec_format(codec) -> int:
+    """The codec's format code (its index in ``MAP_FORMATS``), read by ``pair_map_state``."""
+    name = getattr(codec, "name", None)
+    if name not in MAP_FORMATS or name == "none":
+        raise ValueError(f"the tracer has no format code for codec {name!r} (known: {', '.join(MAP_FORMATS[1:])})")
+    return MAP_FORMATS.index(name)
