@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import hashlib
 import os
-from dataclasses import dataclass, field
 
 import numpy as np
 from tqdm import tqdm
@@ -26,30 +25,9 @@ from ..codecs.raw import pack_states
 from ..rows import unique_rows
 from ..scene.alpha import AlphaTriangles, distinct_rows, pair_corner_uvs
 from ..workers import encode_maps as parallel_encode
+from .tables import SchemeMaps
 
 __all__ = ["SchemeMaps", "build_scheme_maps", "encode_cached", "default_jobs", "dedupe_maps"]
-
-
-@dataclass
-class SchemeMaps:
-    """One scheme's maps as the tracer reads them: alpha triangle t uses row ``rows[t]`` of
-    ``data`` (``row_bytes`` each). kind: "none" (no maps), "micromap" (raw 2-bit micromap per
-    triangle, param L), "square" (a pair's stored square map through ``codec``, param N), "mixed"
-    (a budget: per row a format code and byte offset, ``trace.budget``)."""
-
-    name: str
-    kind: str
-    param: int
-    rows: np.ndarray  # int32 (T,)
-    data: np.ndarray  # uint8 (R * row_bytes,)
-    row_bytes: int
-    map_bytes: int  # storage of every prototype pair's (or triangle's) map, as a BLAS holds them
-    distinct_maps: int
-    known_fraction: float  # mean over pairs (triangles for micromaps) of the fraction of known regions
-    codec: object = None
-    scheme: object = None
-    extra: dict = field(default_factory=dict)  # table word -> array the scheme sets itself (trace.tables)
-    info: dict = field(default_factory=dict)  # what the scheme reports besides (a budget's choices)
 
 
 def default_jobs(jobs: int | None) -> int:

@@ -20,8 +20,7 @@ import numpy as np
 from .. import states
 from ..codecs.raw import pack_states, row_bytes, unpack_states
 from ..errors import InputError
-from .maps import SchemeMaps
-from .tables import T_MAP_LEVEL, T_MAP_OFFSET, T_TRI_CORNER
+from .tables import T_MAP_LEVEL, T_MAP_OFFSET, T_TRI_CORNER, SchemeMaps
 
 __all__ = ["stored_maps"]
 

@@ -129,3 +129,25 @@ def codec_format(codec) -> int:
     if name not in MAP_FORMATS or name == "none":
         raise ValueError(f"the tracer has no format code for codec {name!r} (known: {', '.join(MAP_FORMATS[1:])})")
     return MAP_FORMATS.index(name)
+
+
+@dataclass
+class SchemeMaps:
+    """One scheme's maps as the tracer reads them: alpha triangle t uses row ``rows[t]`` of
+    ``data`` (``row_bytes`` each). kind: "none" (no maps), "micromap" (raw 2-bit micromap per
+    triangle, param L), "square" (a pair's stored square map through ``codec``, param N), "mixed"
+    (a budget: per row a format code and byte offset, ``trace.budget``)."""
+
+    name: str
+    kind: str
+    param: int
+    rows: np.ndarray  # int32 (T,)
+    data: np.ndarray  # uint8 (R * row_bytes,)
+    row_bytes: int
+    map_bytes: int  # storage of every prototype pair's (or triangle's) map, as a BLAS holds them
+    distinct_maps: int
+    known_fraction: float  # mean over pairs (triangles for micromaps) of the fraction of known regions
+    codec: object = None
+    scheme: object = None
+    extra: dict = field(default_factory=dict)  # table word -> array the scheme sets itself (trace.tables)
+    info: dict = field(default_factory=dict)  # what the scheme reports besides (a budget's choices)
