@@ -523,7 +523,7 @@ def summary_csv(records: list[dict], tot: dict) -> str:
 
 def precheck(command: str, a) -> None:
     """The command's own option checks, once before any work (else every input would fail alike)."""
-    from .cli import common, omm, trace
+    from .cli import common, omm
     from .schemes import EVAL_KINDS, TRACE_KINDS, parse_schemes
 
     if command == "eval":
@@ -533,14 +533,17 @@ def precheck(command: str, a) -> None:
             raise InputError(f"--min-size must be >= 0, got {a.min_size}")
         common.check_jobs(a.jobs)
     elif command == "trace":
+        from .trace import parse_camera, parse_light
+        from .trace.two_state import parse_modes
+
         parse_schemes(a.schemes, TRACE_KINDS, a.encoder, a.effort, "omaps trace")
-        trace.parse_size(a.size)
-        trace.parse_two_state(a.two_state)
+        common.parse_size(a.size)
+        parse_modes(a.two_state)
         common.check_jobs(a.jobs)
         if a.shadows:
-            trace.parse_light(a.light)
+            parse_light(a.light)
         if a.camera:
-            trace.parse_camera(a.camera)
+            parse_camera(a.camera)
     else:
         omm._settings(a)
         if a.threads is not None and a.threads < 1:

@@ -8,6 +8,7 @@ import os
 import sys
 
 from ..errors import InputError
+from ..text import format_table, plural  # noqa: F401 - plural: the commands' one helper
 from ..names import BLEND_RULES, EFFORTS, ENCODERS, FILTERS, MODES, WRAP_MODES  # numba-free: parsing loads no kernel
 
 
@@ -99,12 +100,6 @@ def material_rules(a):
     return MaterialRules(a.cutoff, a.filter, a.wrap, a.blend, a.blend_cutoff)
 
 
-def plural(n: int, noun: str, plural_noun: str | None = None) -> str:
-    """``n`` and the noun in the number it takes: ``plural(1, "file")`` is "1 file", ``plural(3,
-    "file")`` "3 files", ``plural(2, "family", "families")`` "2 families"."""
-    return f"{n} {noun if n == 1 else plural_noun or noun + 's'}"
-
-
 def show_progress(quiet: bool = False) -> bool:
     """Progress bars (on stderr): off with --quiet; else on when stderr is a terminal, or as the
     environment variable OMAPS_PROGRESS says (1 on, 0 off), so logs and pipes stay clean."""
@@ -133,15 +128,8 @@ def check_jobs(jobs) -> None:
         raise InputError(f"--jobs must be >= 1, got {jobs}")
 
 
-def fmt_row(cells, widths) -> str:
-    return "  ".join(str(c).rjust(w) if i else str(c).ljust(w) for i, (c, w) in enumerate(zip(cells, widths)))
-
-
 def print_table(header: list, rows: list) -> None:
-    widths = [max(len(str(r[i])) for r in rows + [header]) for i in range(len(header))]
-    print(fmt_row(header, widths))
-    for r in rows:
-        print(fmt_row(r, widths))
+    print(format_table(header, rows))
 
 
 def show_warning(message, category, filename, lineno, file=None, line=None) -> None:

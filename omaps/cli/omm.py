@@ -144,7 +144,7 @@ def cmd_omm(a) -> int:
         if settings.budget is None or spec["kind"] != "gltf":
             raise InputError("--weights view needs --budget and a glTF scene")
         from ..scene import load_scene
-        from ..view import scene_view_samples
+        from ..trace.view import scene_view_samples
 
         w, h = parse_size(a.size)
         weights, hits, cam = scene_view_samples(load_scene(spec["path"]), material_rules(a), w, h)

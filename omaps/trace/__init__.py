@@ -3,6 +3,9 @@ Embree's any-hit path (``filter``), split as a codec is: address tables (``table
 state lookups and the shader (``lookups``), the filter, the ray loops (``rays``), the scene's
 maps (``maps``), preparation (``prepare``), metrics, the 2-state mode and the pictures.
 
+One call does a whole experiment (``omaps trace``): ``trace_scene`` returns a ``TraceResult``
+with the report, the runs and the pictures. The stages it composes are public too.
+
 Example::
 
     >>> from omaps.scene import load_scene                                        # doctest: +SKIP
@@ -17,10 +20,12 @@ Example::
 """
 
 from .camera import (DEFAULT_LIGHT, SHADOW_TNEAR, Camera, choose_default_camera, default_camera, gltf_camera,
-                     light_direction)
+                     light_direction, parse_camera, parse_light)
+from .experiment import DEFAULT_SCHEMES, TraceResult, format_report, trace_scene
 from .metrics import coverage_error, differing_pixels, summary
 from .prepare import Prepared, SchemeRun, prepare, trace_scheme
 
-__all__ = ["Camera", "default_camera", "choose_default_camera", "gltf_camera", "light_direction", "DEFAULT_LIGHT",
+__all__ = ["trace_scene", "TraceResult", "format_report", "DEFAULT_SCHEMES", "Camera", "default_camera",
+           "choose_default_camera", "gltf_camera", "light_direction", "parse_camera", "parse_light", "DEFAULT_LIGHT",
            "SHADOW_TNEAR", "prepare", "Prepared", "trace_scheme", "SchemeRun", "summary", "differing_pixels",
            "coverage_error"]

@@ -7,8 +7,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..errors import InputError
+
 __all__ = ["Camera", "default_camera", "choose_default_camera", "gltf_camera", "framed", "DEFAULT_LIGHT",
-           "SHADOW_TNEAR", "light_direction"]
+           "SHADOW_TNEAR", "light_direction", "parse_camera", "parse_light"]
 
 DEFAULT_LIGHT = (0.45, 0.8, 0.4)  # towards the sun: high enough to light the ground, low enough to cross crowns
 SHADOW_TNEAR = 1e-5  # shadow ray start, as a fraction of the scene's diagonal
@@ -186,3 +188,62 @@ def choose_default_camera(prep, width: int, height: int) -> tuple[Camera, dict]:
             if f > frac:
                 best, frac, label = cam, f, name
     return best, {"chosen": label, "alpha_fraction": frac, "default_alpha_fraction": first}
+
+
+def _numbers(n: int, kind: str = "") -> str:
+    return f"a {kind}number" if n == 1 else f"{n} {kind}comma-separated numbers"
+
+
+def _floats(text: str, n: int, what: str) -> np.ndarray:
+    try:
+        v = np.array([float(x) for x in text.split(",")], dtype=np.float64)
+    except ValueError:
+        raise InputError(f"{what}: expected {_numbers(n)}, got {text!r}") from None
+    if v.shape != (n,) or not np.all(np.isfinite(v)):
+        raise InputError(f"{what}: expected {_numbers(n, 'finite ')}, got {text!r}")
+    return v
+
+
+def parse_camera(text: str) -> Camera | int:
+    """A camera as ``omaps trace --camera`` writes it: ``X,Y,Z:TX,TY,TZ:FOV[:UX,UY,UZ]`` (eye,
+    target, vertical field of view in degrees, optional up) gives a ``Camera``; ``gltf[:N]`` gives
+    the index N of the file's camera (0 by default), resolved by ``gltf_camera`` once the scene is
+    read. An ``InputError`` names what is wrong.
+
+    Example::
+
+        >>> from omaps.trace import parse_camera
+        >>> parse_camera("0,1,5:0,1,0:60").fov, parse_camera("gltf:2")
+        (60.0, 2)
+    """
+    parts = text.split(":")
+    if parts[0].strip().lower() == "gltf":
+        if len(parts) == 1:
+            return 0
+        if len(parts) == 2 and parts[1].strip().isdigit():
+            return int(parts[1])
+        raise InputError(f"--camera gltf[:N] takes a camera index N >= 0, got {text!r}")
+    if len(parts) not in (3, 4):
+        raise InputError(f"--camera must be X,Y,Z:TX,TY,TZ:FOV[:UX,UY,UZ] or gltf[:N], got {text!r}")
+    eye = _floats(parts[0], 3, "--camera eye")
+    target = _floats(parts[1], 3, "--camera target")
+    fov = _floats(parts[2], 1, "--camera fov")[0]
+    up = _floats(parts[3], 3, "--camera up") if len(parts) == 4 else None
+    if not 0 < fov < 180:
+        raise InputError(f"--camera field of view must be in (0, 180) degrees, got {fov}")
+    if np.allclose(eye, target):
+        raise InputError("--camera eye and target must differ")
+    cam = Camera(eye, target, float(fov), up)
+    try:
+        cam.basis(1, 1)
+    except ValueError:
+        raise InputError("--camera up must not be zero or parallel to the view direction") from None
+    return cam
+
+
+def parse_light(text: str | None) -> np.ndarray:
+    """The unit direction towards the light from ``X,Y,Z`` text (None: ``DEFAULT_LIGHT``)."""
+    try:
+        return light_direction(None if text is None else _floats(text, 3, "--light"))
+    except ValueError:
+        raise InputError("--light must not be the zero vector") from None

@@ -17,6 +17,7 @@ from .. import birdcurve, pair, states
 from ..budget import HIT_LEVEL
 from ..codecs import vq2_block, vq4_block, vq4_synth_block, wavelet3_block
 from ..codecs.raw import read_state
+from ..alpha_test import passes
 from ..sampling import sample_texture
 from .embree import f64_ptr, i8_ptr, i32_ptr, i64_ptr, u8_ptr, u16_ptr
 from .tables import (MAP_FORMATS, codec_format, T_COUNT, T_MAP_CODEC, T_MAP_DATA, T_MAP_FORMAT, T_MAP_LEVEL, T_MAP_OFFSET, T_MAP_PARAM, T_MAP_ROW, T_MAP_ROW_BYTES, T_MAT_FILTER, T_MAT_H, T_MAT_INCL,
@@ -60,7 +61,7 @@ def shader_alpha_test(table, tri, b1, b2):
     if c != 1.0:
         a = a * c
     thr = f64_ptr(table[T_MAT_THR])[m]
-    return a >= thr if i64_ptr(table[T_MAT_INCL])[m] else a > thr
+    return passes(a, thr, i64_ptr(table[T_MAT_INCL])[m] != 0)
 
 
 @njit(cache=True)
@@ -88,7 +89,7 @@ def stored_micromap_state(table, tri, b1, b2):
 @njit(cache=True)
 def counting_state(table, tri, b1, b2):
     """No map (every candidate C), counting each triangle's candidate hits and recording where
-    they fall: the view weights (``omaps.view``). The int64 words: triangles n, record capacity,
+    they fall: the view weights (``trace.view``). The int64 words: triangles n, record capacity,
     hits recorded, n counts, then per hit ``tri << 2 * HIT_LEVEL | micro-triangle at HIT_LEVEL``.
     Run on one thread: plain increments."""
     c = i64_ptr(table[T_COUNT])

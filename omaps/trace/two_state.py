@@ -20,9 +20,28 @@ from ..promotion import PROMOTIONS, resolve_regions
 from ..scene.alpha import distinct_rows, pair_corner_uvs
 from .maps import SchemeMaps, dedupe_maps
 
-__all__ = ["MODES", "two_state_maps", "decoded_pair_maps"]
+from ..errors import InputError
+
+__all__ = ["MODES", "two_state_maps", "decoded_pair_maps", "parse_modes"]
 
 MODES = PROMOTIONS  # nearest (majority), opaque, transparent, hashed
+
+
+def parse_modes(text) -> list[str]:
+    """The 2-state rules of ``--two-state`` text (comma-separated ``MODES`` or ``all``; empty or
+    None: none), or a list of them, checked and without repeats."""
+    if not text:
+        return []
+    if isinstance(text, str):
+        modes = (list(MODES) if text.strip().lower() == "all"
+                 else [m.strip().lower() for m in text.split(",") if m.strip()])
+    else:
+        modes = [str(m).strip().lower() for m in text]
+    bad = [m for m in modes if m not in MODES]
+    if bad or not modes:
+        raise InputError(f"--two-state: unknown rule {bad[0] if bad else text!r} (choose from {', '.join(MODES)} "
+                         "or all)")
+    return list(dict.fromkeys(modes))
 
 
 def decoded_pair_maps(sm: SchemeMaps, at) -> np.ndarray:

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .budget import HIT_LEVEL, triangle_weights
+from ..budget import HIT_LEVEL, triangle_weights
 
 __all__ = ["view_samples", "view_prior", "view_weights", "scene_view_samples", "VIEW_PRIOR", "HITS_PER_RAY"]
 
@@ -27,9 +27,9 @@ def view_samples(prep, cam: np.ndarray, w: int, h: int) -> tuple[np.ndarray, np.
     more than ``HITS_PER_RAY`` per ray."""
     import numba
 
-    from .trace.maps import SchemeMaps
-    from .trace.prepare import trace_scheme
-    from .trace.tables import T_COUNT
+    from .maps import SchemeMaps
+    from .prepare import trace_scheme
+    from .tables import T_COUNT
 
     at = prep.alpha
     n = at.count
@@ -77,9 +77,9 @@ def scene_view_samples(scene, rules, w: int, h: int, camera=None) -> tuple[np.nd
     weight spread by area (``view_prior``; all of the counts when the hits were too many to
     record), the recorded hits (``view_samples``) and the camera's description. ``camera``: a
     ``trace.Camera``; default: the tracer's default camera for a ``w`` x ``h`` image."""
-    from .schemes import parse_schemes
-    from .trace.camera import choose_default_camera
-    from .trace.prepare import prepare
+    from ..schemes import parse_schemes
+    from .camera import choose_default_camera
+    from .prepare import prepare
 
     prep = prepare(scene, parse_schemes("none"), rules)
     if camera is None:

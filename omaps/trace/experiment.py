@@ -1,0 +1,347 @@
+"""One call traces a scene with every scheme: ``trace_scene`` returns a ``TraceResult`` holding
+the report that ``omaps trace`` prints and writes as JSON, with the runs behind it and methods
+that draw its pictures.
+
+The reference scheme ``none`` (every candidate alpha-tested) is always traced; every scheme's
+visible result (and, with shadows, every shadow ray's) is compared with it, and ``passed`` says
+whether all of them matched. Speeds are measured side by side: every scheme and an opaque-only
+traversal traced again for ``TIMING_ROUNDS`` rounds, each the best of its rounds.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..alpha_test import MaterialRules
+from ..errors import InputError
+from ..names import BUDGET_WEIGHTS
+from ..schemes import TRACE_KINDS, parse_schemes
+from ..text import count, format_table, plural
+from .camera import Camera, choose_default_camera, gltf_camera, light_direction, parse_camera, parse_light
+from .timing import TIMING_ROUNDS, time_side_by_side
+from .two_state import parse_modes
+
+__all__ = ["DEFAULT_SCHEMES", "trace_scene", "TraceResult", "format_report"]
+
+DEFAULT_SCHEMES = "none,tri3,sq16,vq2,vq4,vq4x64"
+
+
+def _size(size) -> tuple[int, int]:
+    w, h = (size, size) if np.isscalar(size) else tuple(size)
+    if not (1 <= int(w) <= 8192 and 1 <= int(h) <= 8192) or int(w) != w or int(h) != h:
+        raise InputError(f"the image size must be whole numbers 1..8192, got {size!r}")
+    return int(w), int(h)
+
+
+@dataclass
+class TraceResult:
+    """What ``trace_scene`` measured.
+
+    Attributes
+    ----------
+    report : dict
+        Everything ``omaps trace --json`` writes: scene, settings, camera, per-scheme results
+        (alpha tests per primary and shadow ray, differing pixels, map bytes, speed), the
+        opaque-only traversal, 2-state errors, timings, ``passed``.
+    names : list of str
+        The schemes asked for, in order (``none`` is traced and reported even when not asked for
+        only as the reference: it is in ``runs``).
+    runs : dict
+        Scheme name -> ``SchemeRun`` (per-pixel tests, candidates, hits, shadow results).
+    prep : Prepared
+        The prepared scene: alpha triangles, each scheme's maps, the Embree scene.
+    camera : Camera
+        The camera traced (the default one when none was given).
+    """
+
+    report: dict
+    names: list
+    runs: dict
+    prep: object
+    camera: Camera
+    basis: np.ndarray = field(repr=False, default=None)
+    light: np.ndarray | None = None
+    shadows: bool = False
+
+    @property
+    def passed(self) -> bool:
+        """True when no scheme changed a visible result (pixel or shadow ray)."""
+        return bool(self.report["passed"])
+
+    def table(self) -> str:
+        """The report as ``omaps trace`` prints it."""
+        return format_report(self.report, self.names, self.shadows)
+
+    def write_json(self, path) -> None:
+        """The report as JSON."""
+        from ..atomic import write_text
+
+        write_text(path, json.dumps(self.report, indent=1))
+
+    def heatmap(self, path) -> None:
+        """Alpha tests per pixel, ``none`` beside each scheme (PNG)."""
+        from .pictures import heatmap
+
+        heatmap(path, self.runs, self.names, self.shadows, scene=self.report["scene"]["file"])
+
+    def render(self, path) -> None:
+        """The alpha-tested albedo image (PNG)."""
+        from .pictures import render
+
+        render(path, self.prep, self.runs["none"], self.basis, self.light)
+
+    def plot_budget(self, path) -> None:
+        """Alpha tests per primary ray against map bytes, every traced scheme on one chart."""
+        from .pictures import budget_plot
+
+        budget_plot(path, self.report)
+
+
+def trace_scene(scene, schemes=DEFAULT_SCHEMES, *, size=512, camera=None, shadows: bool = False, light=None,
+                weights: str = "area", two_state=None, rules: MaterialRules | None = None, jobs: int | None = None,
+                encoder: str | None = None, effort: str | None = None, progress: bool = False) -> TraceResult:
+    """Trace primary (and shadow) rays through a scene with each scheme's maps read in the
+    any-hit filter, and compare every scheme's visible result with ``none``'s.
+
+    Parameters
+    ----------
+    scene : str, path or Scene
+        A .gltf / .glb file, or a scene from ``omaps.load_scene``.
+    schemes : str or list of Scheme
+        Comma-separated scheme names (``none``, ``triL``, ``sqN``, a codec, ``omm``, ``file:CODEC``,
+        ``budget:BYTES``) or parsed schemes.
+    size : int or (int, int)
+        Image width and height (an int: a square image).
+    camera : Camera, str, int or None
+        A ``Camera``, ``"X,Y,Z:TX,TY,TZ:FOV[:UX,UY,UZ]"``, ``"gltf[:N]"`` or N (the file's
+        camera N); None: a view that frames the alpha-tested geometry.
+    shadows : bool
+        Also trace shadow rays towards ``light``, normally and with deferred C tests.
+    light : array_like or str, optional
+        Direction towards the light (default ``DEFAULT_LIGHT``).
+    weights : {"area", "view"}
+        The budget schemes' weights.
+    two_state : str or list of str, optional
+        Also trace square and codec schemes with C resolved by these rules.
+    rules : MaterialRules, optional
+        How materials are alpha-tested (default ``MaterialRules()``).
+    jobs : int, optional
+        Processes for baking and encoding (default: all cores).
+    encoder, effort : str, optional
+        Codec choices for codec schemes named without a variant.
+    progress : bool
+        Progress bars on stderr.
+
+    Returns
+    -------
+    TraceResult
+
+    Raises
+    ------
+    InputError
+        For a bad scene, scheme, camera, light or option.
+
+    Examples
+    --------
+    >>> import omaps                                                         # doctest: +SKIP
+    >>> res = omaps.trace_scene("palm.glb", "none,tri3,vq4", size=128)       # doctest: +SKIP
+    >>> res.passed, res.report["schemes"]["vq4"]["alpha_tests_per_primary_ray"]  # doctest: +SKIP
+    (True, 0.253...)
+    """
+    from tqdm import tqdm
+
+    from . import SHADOW_TNEAR, summary, trace_scheme
+    from .maps import default_jobs
+    from .prepare import prepare
+
+    if isinstance(schemes, str):
+        schemes = parse_schemes(schemes, TRACE_KINDS, encoder, effort, "omaps trace")
+    names = [s.name for s in schemes]
+    modes = parse_modes(two_state)
+    w, h = _size(size)
+    if jobs is not None and jobs < 1:
+        raise InputError(f"--jobs must be >= 1, got {jobs}")
+    if weights not in BUDGET_WEIGHTS:
+        raise InputError(f"unknown weights {weights!r} (choose from {', '.join(BUDGET_WEIGHTS)})")
+    rules = MaterialRules() if rules is None else rules
+    light = _light(light) if shadows else None
+    cam_given = parse_camera(camera) if isinstance(camera, str) else camera
+    t_start = time.perf_counter()
+    if not hasattr(scene, "meshes"):
+        from ..scene import load_scene
+
+        scene = load_scene(scene)
+    if not any(len(scene.meshes[mi].merged["triangles"]) for mi, _ in scene.instances):
+        raise InputError("the scene has no triangles", scene.path)
+    if isinstance(cam_given, (int, np.integer)) and not isinstance(cam_given, bool):
+        cam_info = {"chosen": f"gltf:{cam_given}"}
+        cam_given = gltf_camera(scene, int(cam_given))  # before any work: a bad index is an input error
+    else:
+        cam_info = {"chosen": "--camera"} if cam_given is not None else None
+    t_load = time.perf_counter() - t_start
+    if "none" not in names:
+        schemes = parse_schemes("none", TRACE_KINDS) + list(schemes)
+    traced = [s.name for s in schemes]
+    prep = prepare(scene, schemes, rules, default_jobs(jobs), progress)
+    bounds = scene.bounds()
+    if cam_given is None:
+        camera, cam_info = choose_default_camera(prep, w, h)
+    else:
+        camera = cam_given
+    cam = camera.basis(w, h)
+    budgets = [s for s in schemes if s.kind == "budget"]
+    if budgets:
+        _budget_maps(prep, budgets, weights, cam, w, h, default_jobs(jobs), progress)
+    diag = float(np.linalg.norm(bounds[1] - bounds[0]))
+    tnear = SHADOW_TNEAR * diag
+    trace_scheme(prep, None, cam, 2, 2, light, tnear, deferred=shadows)  # compile the ray loops
+    runs = {}
+    for n in tqdm(traced, desc="trace", unit="scheme", disable=not progress, leave=False):
+        runs[n] = trace_scheme(prep, n, cam, w, h, light, tnear, deferred=shadows)
+    opaque = trace_scheme(prep, None, cam, w, h, light, tnear)
+    # the speeds: every scheme and the opaque traversal timed again, side by side, each its best round
+    timed = {**runs, None: opaque}
+    with tqdm(total=(TIMING_ROUNDS - 1) * len(timed), desc="timing", unit="run", disable=not progress,
+              leave=False) as bar:
+        def trace_once(n):
+            bar.update()
+            return trace_scheme(prep, n, cam, w, h, light, tnear)
+
+        samples = time_side_by_side(timed, trace_once, TIMING_ROUNDS)
+    ref = runs["none"]
+    two = _trace_two_state(prep, names, modes, cam, w, h, ref) if modes else {}
+    report = {
+        "scene": {"file": scene.path, **scene.counts(rules), "paired_fraction": prep.alpha.paired_fraction,
+                  "pairs": int(len(prep.alpha.pair_first)), "bounds": bounds.tolist(),
+                  "warnings": list(scene.warnings), "skipped_primitives": scene.skipped},
+        "settings": {"materials": rules.settings(), "schemes": {s.name: s.settings() for s in schemes},
+                     "two_state": modes, "shadows": bool(shadows), "encoder": encoder, "effort": effort,
+                     "jobs": jobs, "weights": weights if budgets else None},
+        "camera": {**camera.to_json(), "width": w, "height": h, "view": cam_info},
+        "light": None if light is None else light.tolist(),
+        "embree": prep.device.version_text,
+        "schemes": {n: summary(runs[n], ref, prep.maps[n], w, h) for n in names},
+        "opaque_only": {**summary(opaque, ref, None, w, h), "timing": _timing(opaque, samples[None])},
+        "two_state": two,
+        "timings": {"load_s": t_load, **prep.timings, "total_s": time.perf_counter() - t_start},
+    }
+    none_tests = summary(ref, ref, prep.maps["none"], w, h)["alpha_tests_per_primary_ray"]
+    for n, r in report["schemes"].items():
+        r["timing"] = _timing(runs[n], samples[n])
+        t = r["alpha_tests_per_primary_ray"]
+        r["none_over_scheme_alpha_tests"] = none_tests / t if t else None
+        r["rays_per_second_over_opaque"] = (r["rays_per_second"] / report["opaque_only"]["rays_per_second"]
+                                            if r["rays_per_second"] else None)
+    bad = {n: r["differing_pixels"] + r.get("differing_shadow_rays", 0) + r.get("deferred_differing_shadow_rays", 0)
+           for n, r in report["schemes"].items()}
+    report["passed"] = not any(bad.values())
+    report["changed_visible_result"] = {n: v for n, v in bad.items() if v}
+    return TraceResult(report, names, runs, prep, camera, cam, light, bool(shadows))
+
+
+def _light(light) -> np.ndarray:
+    if light is None or isinstance(light, str):
+        return parse_light(light)
+    try:
+        return light_direction(light)
+    except ValueError:
+        raise InputError("--light must not be the zero vector") from None
+
+
+def _budget_maps(prep, budgets, weights: str, cam, w: int, h: int, jobs: int, progress: bool) -> None:
+    """Each budget scheme's maps (``trace.budget``), weighted by area or by the view."""
+    from ..budget import triangle_weights
+    from .budget import budget_maps
+    from .view import view_weights
+
+    t0 = time.perf_counter()
+    wt = view_weights(prep, cam, w, h) if weights == "view" else triangle_weights(prep.scene, prep.alpha)
+    for s in budgets:
+        prep.maps[s.name] = budget_maps(prep.alpha, prep.tests, s, wt, jobs, progress, cache=prep.cache)
+    prep.cache.clear()  # the uniform schemes' flags and blocks: only the budgets re-use them
+    prep.timings["budget_s"] = time.perf_counter() - t0
+
+
+def _timing(run, seconds: list[float]) -> dict:
+    """How a run's rays per second were measured: the rays of one round (primary and shadow) and
+    every round's seconds; the rate is the rays over the best (least) seconds."""
+    rays = run.primary.tests.size + (run.shadow.rays if run.shadow is not None else 0)
+    return {"rounds": len(seconds), "statistic": "best", "rays": int(rays), "seconds": [float(t) for t in seconds]}
+
+
+def _trace_two_state(prep, names, modes, cam, w, h, ref) -> dict:
+    """Each square / codec scheme traced again with its C cells resolved by each rule."""
+    from . import coverage_error, trace_scheme
+    from .two_state import two_state_maps
+
+    out: dict = {}
+    cache: dict = {}
+    for n in names:
+        sm = prep.maps[n]
+        if sm.kind != "square" or (sm.scheme is not None and sm.scheme.kind == "stored"):
+            continue  # (a file's stored pair blocks are traced as stored)
+        out[n] = {}
+        for mode in modes:
+            sm2 = two_state_maps(prep, sm, mode, cache=cache)
+            prep.maps[sm2.name] = sm2
+            run = trace_scheme(prep, sm2.name, cam, w, h)
+            out[n][mode] = coverage_error(run, ref)
+            del prep.maps[sm2.name]
+    return out
+
+
+def _over_opaque(ratio) -> str:
+    """The x opaque cell; a scheme faster than the opaque traversal (it does more work) is marked:
+    the difference is timing noise."""
+    if ratio is None:
+        return "-"
+    return f"{ratio:.2f}" + ("*" if ratio > 1 else "")
+
+
+def format_report(report: dict, names: list, shadows: bool) -> str:
+    """A trace report (``TraceResult.report``) as ``omaps trace`` prints it: a heading line, one
+    row per scheme, the opaque traversal and timings, and the 2-state errors when traced."""
+    s = report["scene"]
+    c = report["camera"]
+    lines = [f"omaps trace: {s['file']}: {plural(s['instances'], 'instance')} of "
+             f"{plural(s['prototypes'], 'mesh', 'meshes')}, "
+             f"{count(s['triangles'], 'triangle')} ({s['alpha_triangles']:,} alpha-tested); "
+             f"{count(s['pairs'], 'prototype pair')}, "
+             f"{s['paired_fraction']:.1%} of alpha triangles paired; {c['width']}x{c['height']}, "
+             f"Embree {report['embree']}"]
+    cols = ["scheme", "tests/ray", "cand/ray", "none/x", "differ", "Mrays/s", "x opaque", "map KiB"]
+    if shadows:
+        cols[5:5] = ["shadow tests", "deferred", "saved"]
+    rows = []
+    for n in names:
+        r = report["schemes"][n]
+        row = [n, f"{r['alpha_tests_per_primary_ray']:.3f}", f"{r['candidates_per_primary_ray']:.3f}",
+               f"{r['none_over_scheme_alpha_tests']:.2f}" if r["none_over_scheme_alpha_tests"] else "-",
+               str(r["differing_pixels"] + r.get("differing_shadow_rays", 0)),
+               f"{r['rays_per_second'] / 1e6:.2f}", _over_opaque(r['rays_per_second_over_opaque']),
+               f"{r.get('map_bytes', 0) / 1024:.0f}"]
+        if shadows:
+            row[5:5] = [f"{r['alpha_tests_per_shadow_ray']:.3f}", f"{r['deferred_alpha_tests_per_shadow_ray']:.3f}",
+                        f"{r['deferred_tests_saved_fraction']:.1%}"]
+        rows.append(row)
+    lines.append(format_table(cols, rows))
+    if any(r[cols.index("x opaque")].endswith("*") for r in rows):
+        lines.append("* faster than the opaque-only traversal, which does less work: within this machine's timing "
+                     "noise")
+    o = report["opaque_only"]
+    t = report["timings"]
+    lines.append(f"opaque-only traversal: {o['rays_per_second'] / 1e6:.2f} Mrays/s; total {t['total_s']:.1f} s "
+                 f"(load {t['load_s']:.1f}, pair {t['pair_s']:.1f}, bake+encode {t['bake_encode_s']:.1f}, "
+                 f"BVH {t['bvh_s']:.1f})")
+    if report.get("two_state"):
+        lines.append("2-state (C cells resolved, no alpha tests): pixels whose visible hit differs from 'none' "
+                     "(stopped early / passed through)")
+        for n, by_mode in report["two_state"].items():
+            cells = [f"{m} {r['differing_fraction']:.2%} ({r['stopped_early_fraction']:.2%}/"
+                     f"{r['passed_through_fraction']:.2%})" for m, r in by_mode.items()]
+            lines.append(f"  {n:8} " + "   ".join(cells))
+    return "\n".join(lines)
