@@ -40,8 +40,8 @@ from .errors import InputError
 from .sampling import FootprintGrid, filter_code, footprint_grid, sample_texture, wrap_code
 from .texture import as_texture
 
-__all__ = ["AlphaTest", "StateRule", "MaterialRules", "material_test", "sample_passes", "MODES", "BLEND_RULES",
-           "RULES", "CUTOFF_TOLERANCE"]
+__all__ = ["AlphaTest", "StateRule", "MaterialRules", "material_test", "passes", "below", "sample_passes", "MODES",
+           "BLEND_RULES", "RULES", "CUTOFF_TOLERANCE"]
 
 RULES = ("test", "levels", "unknown")
 from .names import BLEND_RULES, MODES  # noqa: E402,F401 corpus rules (``StateRule``), BLEND rules (``MaterialRules``)
@@ -86,11 +86,6 @@ class AlphaTest:
     def height(self) -> int:
         return int(self.value.shape[0])
 
-    def passes(self, values) -> np.ndarray:
-        """The shader's comparison on values (vectorised)."""
-        v = np.asarray(values)
-        return v >= self.threshold if self.inclusive else v > self.threshold
-
     def bounds(self) -> np.ndarray:
         """The rule as bounds on alpha, float64 (o_bound, o_inclusive, t_bound, t_inclusive): an
         alpha (a texel's, or every alpha a region can read) is O iff it is > o_bound (>= when
@@ -110,8 +105,8 @@ class AlphaTest:
         v = np.asarray(self.value)
         ob, oi, tb, ti = self.bounds()
         out = np.full(v.shape, states.C, dtype=np.uint8)
-        out[v <= tb if ti else v < tb] = states.T
-        out[v >= ob if oi else v > ob] = states.O
+        out[passes.py_func(tb, v, bool(ti))] = states.T  # ``below``: tb > v (>=), as arrays
+        out[passes.py_func(v, ob, bool(oi))] = states.O
         return out
 
     def grid(self) -> FootprintGrid:
@@ -143,12 +138,27 @@ class AlphaTest:
         return out
 
 
+@njit(cache=True, inline="always")
+def passes(a, threshold, inclusive):
+    """The shader's comparison: alpha ``a`` passes when it is above ``threshold``, or equal to it
+    when ``inclusive``. Every alpha decision calls it: the shader (``sample_passes``), the
+    sampled opaque fractions, the texel states and the exact bilinear extremes (O bounds).
+    ``passes.py_func`` applies it to numpy arrays element by element."""
+    return a >= threshold if inclusive else a > threshold
+
+
+@njit(cache=True, inline="always")
+def below(a, bound, inclusive):
+    """``passes`` mirrored: ``a`` is below ``bound``, or equal to it when ``inclusive`` (the T
+    bounds of ``AlphaTest.bounds``): ``bound`` passes ``a``."""
+    return passes(bound, a, inclusive)
+
+
 @njit(cache=True)
 def sample_passes(value, threshold, inclusive, filt, mode_u, mode_v, x, y):
     """The any-hit shader's alpha test at texel coordinate (x, y): the texture fetch
-    ``sampling.sample_texture`` compared with the threshold."""
-    a = sample_texture(value, filt, mode_u, mode_v, x, y)
-    return a >= threshold if inclusive else a > threshold
+    ``sampling.sample_texture`` compared with the threshold (``passes``)."""
+    return passes(sample_texture(value, filt, mode_u, mode_v, x, y), threshold, inclusive)
 
 
 # ---- the corpus rules -------------------------------------------------------------------------

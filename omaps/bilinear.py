@@ -45,6 +45,7 @@ import math
 import numpy as np
 from numba import njit
 
+from .alpha_test import below, passes
 from .sampling import cell_index
 
 __all__ = ["cell_flag", "point_flag", "cell_taps", "region_extremes", "POLY_MAX"]
@@ -209,8 +210,8 @@ def _classify(mn, mx, a00, a01, a10, a11, bounds, grow):
         slack = (grow + 1e-14) * (sx + sy) * (1.0 + 2.0 * grow) + 1e-12 * amax
     lo = mn - slack
     hi = mx + slack
-    opaque = lo >= bounds[0] if bounds[1] != 0.0 else lo > bounds[0]
-    transparent = hi <= bounds[2] if bounds[3] != 0.0 else hi < bounds[2]
+    opaque = passes(lo, bounds[0], bounds[1] != 0.0)
+    transparent = below(hi, bounds[2], bounds[3] != 0.0)
     if opaque and not transparent:
         return 2
     if transparent and not opaque:

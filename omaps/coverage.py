@@ -29,7 +29,7 @@ import numpy as np
 from numba import njit, prange
 
 from . import birdcurve
-from .alpha_test import AlphaTest, sample_passes
+from .alpha_test import AlphaTest, passes, sample_passes
 from .pair import pair_weights
 from .sampling import address
 
@@ -173,7 +173,7 @@ def micro_hits_with(value, threshold, inclusive, filt, mode_u, mode_v, corners, 
                 bot = a10 + ax * (a11 - a10)
                 lo = min(min(a00, a01), min(a10, a11))
                 hi = max(max(a00, a01), max(a10, a11))
-                hits += _passes(min(max(top + ay * (bot - top), lo), hi), threshold, inclusive)
+                hits += passes(min(max(top + ay * (bot - top), lo), hi), threshold, inclusive)
             if hits >= need or (need <= n and hits + (first + n - b - step) < need):
                 break
         return hits
@@ -187,11 +187,6 @@ def micro_hits_with(value, threshold, inclusive, filt, mode_u, mode_v, corners, 
         if hits == need or (need <= n and hits + (first + n - 1 - s) < need):
             break
     return hits
-
-
-@njit(cache=True, inline="always")
-def _passes(a, threshold, inclusive):
-    return (a >= threshold) if inclusive else (a > threshold)
 
 
 @njit(cache=True)

@@ -8,7 +8,7 @@ import pytest
 
 from conftest import SCENES, needs_scenes
 from gltf_files import QUAD_UV, write_quad_gltf
-from omaps.alpha_test import MaterialRules
+from omaps.alpha_test import MaterialRules, passes
 from omaps.cli import main
 from omaps.errors import InputError
 from omaps.scene import SceneWarning, load_scene
@@ -87,7 +87,7 @@ def test_missing_image_warns_and_falls_back_to_white(tmp_path):
     assert tex.alpha is None and "gone.png" in tex.problem
     # still alpha-tested, every texel unknown; the shader sees one texel of alpha 1, which passes
     t = s.alpha_test(0)
-    assert t.rule == "unknown" and t.value.shape == (1, 1) and t.passes(t.value).all()
+    assert t.rule == "unknown" and t.value.shape == (1, 1) and passes.py_func(t.value, t.threshold, t.inclusive).all()
     assert np.all(t.texel_states() == 2)
     assert len(s.warnings) == 2
 

@@ -1,5 +1,6 @@
 """Texture input through Pillow: formats, alpha sources, bit depths, channel choice, bad files."""
 
+import math
 import numpy as np
 import pytest
 from PIL import Image
@@ -254,3 +255,24 @@ def test_evaluate_texture_takes_an_array_and_names():
     b = evaluate_texture(rgba, ["sq8", "tri2"])
     assert a.savings == b.savings and set(a.savings) == {"sq8", "tri2"}
     assert a.bits == {"sq8": 128, "tri2": 64}
+
+
+@settings(max_examples=200, deadline=None)
+@given(st.floats(allow_nan=True, width=64), st.floats(allow_nan=True, width=64), st.booleans())
+def test_the_one_comparison_against_exact_rationals(a, thr, inclusive):
+    """``alpha_test.passes`` (the shader's comparison, in numba and on arrays) and its mirror
+    ``below`` against the comparison of exact rationals; NaN neither passes nor is below."""
+    from fractions import Fraction
+
+    from omaps.alpha_test import below, passes
+
+    def exact(x, y):  # x > y (>= when inclusive), exactly
+        if math.isnan(x) or math.isnan(y):
+            return False
+        if math.isinf(x) or math.isinf(y):
+            return x > y or (inclusive and x == y)
+        return Fraction(x) > Fraction(y) or (inclusive and Fraction(x) == Fraction(y))
+
+    assert bool(passes(a, thr, inclusive)) == exact(a, thr)
+    assert bool(below(a, thr, inclusive)) == exact(thr, a)
+    assert bool(passes.py_func(np.array([a]), thr, inclusive)[0]) == exact(a, thr)
