@@ -76,6 +76,13 @@ def cell_taps(values, period_x, period_y, row, col):
 
 
 @njit(cache=True, inline="always")
+def _coefficients(a00, a01, a10, a11):
+    """(b, c, d) of the cell's bilinear f = a00 + b x + c y + d x y: the shader's blend
+    (``sampling.blend``) in the form whose extremes over a polygon are found from its edges."""
+    return a01 - a00, a10 - a00, a00 - a01 - a10 + a11
+
+
+@njit(cache=True, inline="always")
 def _at(a00, b, c, d, x, y):
     """The cell's bilinear f = a00 + b x + c y + d x y at local (x, y)."""
     return a00 + b * x + c * y + d * x * y
@@ -136,9 +143,7 @@ def region_extremes(poly, k, ox, oy, lo, hi, a00, a01, a10, a11, buf_a, buf_b):
         k = _clip_axis(cur, k, other, 1, hi, False)
         cur, other = other, cur
     buf_a = cur
-    b = a01 - a00
-    c = a10 - a00
-    d = a00 - a01 - a10 + a11
+    b, c, d = _coefficients(a00, a01, a10, a11)
     mn = np.inf
     mx = -np.inf
     for i in range(k):
@@ -182,9 +187,7 @@ def cell_flag(values, bounds, period_x, period_y, row, col, poly, k, c, r, grow,
     x1 = min(x1, hi)
     y1 = min(y1, hi)
     if x0 <= x1 and y0 <= y1:
-        b = a01 - a00
-        cc = a10 - a00
-        d = a00 - a01 - a10 + a11
+        b, cc, d = _coefficients(a00, a01, a10, a11)
         v0 = _at(a00, b, cc, d, x0, y0)
         v1 = _at(a00, b, cc, d, x1, y0)
         v2 = _at(a00, b, cc, d, x0, y1)
@@ -233,5 +236,6 @@ def point_flag(flags, mixed, values, bounds, period_x, period_y, x, y, grow):
     if not mixed[row, col]:
         return flags[row, col]
     a00, a01, a10, a11 = cell_taps(values, period_x, period_y, row, col)
-    v = _at(a00, a01 - a00, a10 - a00, a00 - a01 - a10 + a11, x - c, y - r)
+    b, cc, d = _coefficients(a00, a01, a10, a11)
+    v = _at(a00, b, cc, d, x - c, y - r)
     return _classify(v, v, a00, a01, a10, a11, bounds, grow)

@@ -31,7 +31,7 @@ from numba import njit, prange
 from . import birdcurve
 from .alpha_test import AlphaTest, passes, sample_passes
 from .pair import pair_weights
-from .sampling import address
+from .sampling import address, blend
 
 __all__ = ["micro_fractions", "cell_fractions", "micro_vertices", "micro_corners", "micro_corners_of", "micro_hits", "micro_hits_with", "SAMPLES_PER_TEXEL",
            "MAX_SAMPLE_LEVEL", "CELL_SAMPLES"]
@@ -163,17 +163,9 @@ def micro_hits_with(value, threshold, inclusive, filt, mode_u, mode_v, corners, 
                 fy = (w0 * qay + w1 * qby + w2 * qcy) - 0.5
                 i = min(max(int(math.floor(fx)) - bx, 0), nbx - 1)
                 j = min(max(int(math.floor(fy)) - by, 0), nby - 1)
-                a00 = taps[j, i]
-                a01 = taps[j, i + 1]
-                a10 = taps[j + 1, i]
-                a11 = taps[j + 1, i + 1]
-                ax = fx - (i + bx)
-                ay = fy - (j + by)
-                top = a00 + ax * (a01 - a00)
-                bot = a10 + ax * (a11 - a10)
-                lo = min(min(a00, a01), min(a10, a11))
-                hi = max(max(a00, a01), max(a10, a11))
-                hits += passes(min(max(top + ay * (bot - top), lo), hi), threshold, inclusive)
+                a = blend(taps[j, i], taps[j, i + 1], taps[j + 1, i], taps[j + 1, i + 1], fx - (i + bx),
+                          fy - (j + by))
+                hits += passes(a, threshold, inclusive)
             if hits >= need or (need <= n and hits + (first + n - b - step) < need):
                 break
         return hits

@@ -61,16 +61,21 @@ def sample_texture(value, filt, mode_u, mode_v, x, y):
     fy = y - 0.5
     x0 = int(math.floor(fx))
     y0 = int(math.floor(fy))
-    ax = fx - x0
-    ay = fy - y0
     xa = address(x0, w, mode_u)
     xb = address(x0 + 1, w, mode_u)
     ya = address(y0, h, mode_v)
     yb = address(y0 + 1, h, mode_v)
-    a00 = np.float64(value[ya, xa])
-    a01 = np.float64(value[ya, xb])
-    a10 = np.float64(value[yb, xa])
-    a11 = np.float64(value[yb, xb])
+    return blend(np.float64(value[ya, xa]), np.float64(value[ya, xb]), np.float64(value[yb, xa]),
+                 np.float64(value[yb, xb]), fx - x0, fy - y0)
+
+
+@njit(cache=True, inline="always")
+def blend(a00, a01, a10, a11, ax, ay):
+    """The linear filter's blend of taps a00 (row y0, column x0), a01, a10, a11 at fractions
+    (ax, ay) from the first: two lerps along x, one along y, clamped into the taps' range. Every
+    evaluation of the shader's fetch calls it (``sample_texture``, the sampled opaque fractions);
+    the exact bilinear extremes use the same function in its coefficient form
+    (``bilinear``)."""
     top = a00 + ax * (a01 - a00)
     bot = a10 + ax * (a11 - a10)
     a = top + ay * (bot - top)

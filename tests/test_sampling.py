@@ -1,6 +1,8 @@
+import math
+
 import numpy as np
 import pytest
-from hypothesis import given
+from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from omaps import states
@@ -35,3 +37,23 @@ def test_grid_errors():
         footprint_grid(np.zeros((2, 2), np.uint8), "nearest", "repeat")
     with pytest.raises(InputError, match="non-empty"):
         footprint_grid(np.zeros((0, 2), np.uint8))
+
+
+@settings(max_examples=200, deadline=None)
+@given(st.lists(st.lists(st.integers(0, 255), min_size=3, max_size=3), min_size=2, max_size=2),
+       st.integers(-12, 20), st.integers(-12, 20), st.sampled_from(["clamp", "wrap", "mirror"]))
+def test_linear_fetch_matches_the_exact_reference(rows, qx, qy, wrap):
+    """``sampling.sample_texture`` (the shader's fetch, through ``sampling.blend``) against the
+    exact bilinear alpha of the reference at quarter-texel points, where float arithmetic on
+    8-bit taps is exact; nearest reads the texel the point lies in."""
+    from fractions import Fraction
+
+    from omaps.sampling import sample_texture
+
+    values = np.array(rows, dtype=np.uint8)
+    x, y = Fraction(qx, 4), Fraction(qy, 4)
+    mode = wrap_code(wrap)
+    got = sample_texture(values, 1, mode, mode, float(x), float(y))
+    assert got == ref.bilinear_at(values, wrap, wrap, x, y)
+    got = sample_texture(values, 0, mode, mode, float(x), float(y))
+    assert got == values[ref._address(math.floor(y), 2, wrap), ref._address(math.floor(x), 3, wrap)]
