@@ -7,7 +7,9 @@ its facts live. docs/FORMAT.md, section "Standard opacity micromaps (OMM)", stat
 * Formats: 1 = 2-state (1 bit per micro-triangle), 2 = 4-state (2 bits).
 * Data: micro-triangle i of a micromap at bit ``bits*(i mod per_byte)`` of byte ``i div per_byte``
   (per_byte = 8 / bits), little-endian; every micromap starts on a byte.
-* Triangle records (VkMicromapTriangleEXT): u32 data byte offset, u16 level, u16 format.
+* Triangle records (VkMicromapTriangleEXT): u32 data byte offset, u16 level (at most
+  ``MAX_LEVEL``, 12), u16 format (``TRIANGLE_RECORD``; ``record_problem`` checks them).
+* omaps' pair records (``PAIR_RECORD``, ``--from SCHEME``): i32 pair, u8 corner code per vertex, pad.
 * Special indices (index buffer entries that need no micromap): -1 fully transparent, -2 fully
   opaque, -3 fully unknown-transparent, -4 fully unknown-opaque.
 """
@@ -17,7 +19,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from ..birdcurve import MAX_LEVEL  # noqa: F401 (the APIs' largest subdivision level)
+from ..birdcurve import MAX_LEVEL  # the APIs' largest subdivision level
 from ..codecs.raw import pack_states, row_bytes, unpack_states
 from ..names import OMM_FORMATS
 
@@ -50,6 +52,32 @@ PAIR_RECORD = np.dtype([("pair", "<i4"), ("corners", "u1", (3,)), ("pad", "u1")]
 def micromap_bytes(level: int, fmt: int) -> int:
     """Bytes one micromap of this level and format takes (at least one byte)."""
     return row_bytes(4 ** int(level), BITS[int(fmt)])
+
+
+def record_problem(triangles: np.ndarray, data_bytes: int, disjoint: bool = False) -> str | None:
+    """The first broken triangle record (``TRIANGLE_RECORD``) of a micromap array whose data holds
+    ``data_bytes`` bytes, in words ("record 3 has format 7 (1 or 2)"), or None: every format 1 or
+    2, every level at most ``MAX_LEVEL``, every micromap's bytes inside the data; ``disjoint``: no
+    two micromaps' bytes overlap (the glTF extension's rule; the APIs allow shared data)."""
+    tris = np.asarray(triangles)
+    bad = np.flatnonzero(~np.isin(tris["format"], list(BITS)))
+    if len(bad):
+        return f"record {bad[0]} has format {tris['format'][bad[0]]} (1 or 2)"
+    bad = np.flatnonzero(tris["level"] > MAX_LEVEL)
+    if len(bad):
+        return f"record {bad[0]} has subdivision level {tris['level'][bad[0]]} (at most {MAX_LEVEL})"
+    sizes = np.array([micromap_bytes(lv, f) for lv, f in zip(tris["level"], tris["format"])], np.int64)
+    start = tris["data_offset"].astype(np.int64)
+    end = start + sizes
+    bad = np.flatnonzero(end > data_bytes)
+    if len(bad):
+        return f"record {bad[0]} reads bytes up to {end[bad[0]]} of {data_bytes} data bytes"
+    if disjoint:
+        order = np.argsort(start, kind="stable")
+        clash = np.flatnonzero(start[order][1:] < end[order][:-1])
+        if len(clash):
+            return f"the data regions of records {order[clash[0]]} and {order[clash[0] + 1]} overlap"
+    return None
 
 
 def pack(omm_states: np.ndarray, fmt: int) -> np.ndarray:

@@ -7,8 +7,13 @@ One reader, one policy per case, for ``omaps trace``, ``omaps omm`` and all late
   buffer view or index out of range, a node cycle: an ``InputError`` naming the file (exit 2);
 * ``extensionsRequired`` naming an extension omaps cannot honour (Draco or meshopt compression,
   KTX2 textures, GPU instancing, ...): an ``InputError`` naming the extension;
+* every URI (buffers, images) is resolved under one policy (``scene.container``: relative paths
+  and data URIs only, under the asset's folder or ``root``, no network, size caps): a URI it
+  refuses is an ``InputError`` naming the file, the URI, where it leads and the option that would
+  allow it, before anything is read;
 * a buffer file that is missing: an ``InputError`` naming it (the geometry is not there to trace
   or bake); buffers nobody reads are never opened;
+* an image over Pillow's decompression-bomb limit: an ``InputError`` naming it;
 * an image that is missing or cannot be decoded: a ``SceneWarning`` naming it; a material using it
   is still alpha-tested, but every region of its maps is C (unknown: the any-hit shader decides),
   and the tracer's shader sees a white texel (alpha 1). A missing image no material uses as its
@@ -31,16 +36,15 @@ One reader, one policy per case, for ``omaps trace``, ``omaps omm`` and all late
 
 from __future__ import annotations
 
-import base64
 import dataclasses
 import io
 import os
 import warnings
-from urllib.parse import unquote
 
 import numpy as np
 
 from ..errors import InputError
+from .container import AssetPolicy, Container, Location, read_container
 from .files import check_scene_file
 from .model import ALPHA_MODES, Material, Mesh, Primitive, Scene, SceneCamera, SceneWarning, Texture
 
@@ -70,12 +74,31 @@ MAX_ZERO_ACCESSOR = 1 << 24  # elements of an accessor without a bufferView (zer
 MAX_TEXEL_COORDINATE = float(1 << 30)
 
 
-def load_scene(path) -> Scene:
+def load_scene(path, *, root=None, allow_outside: bool = False, max_bytes: int | None = None) -> Scene:
     """Load a .gltf or .glb file into the scene model (``omaps.scene.model``).
 
-    Parameters: ``path`` of the file. Returns a ``Scene``. Raises ``InputError`` naming the file
-    for the cases the module docstring lists; recoverable problems are ``SceneWarning``s (also
-    kept in ``Scene.warnings``).
+    Parameters
+    ----------
+    path : str or path
+        The .gltf or .glb file.
+    root : str or path, optional
+        The folder every file the asset names must lie under (default: the asset's own folder).
+    allow_outside : bool
+        Read files the asset names wherever they are (for an asset you trust). URIs with a
+        scheme (``http:``, ...) are never fetched.
+    max_bytes : int, optional
+        The size cap of the asset file, each buffer, image file and data URI (default: the
+        environment variable ``OMAPS_MAX_ASSET_BYTES``, else 2 GiB).
+
+    Returns
+    -------
+    Scene
+
+    Raises
+    ------
+    InputError
+        Naming the file, for the cases the module docstring lists; recoverable problems are
+        ``SceneWarning``s (also kept in ``Scene.warnings``).
 
     Example::
 
@@ -84,35 +107,44 @@ def load_scene(path) -> Scene:
         >>> scene.counts()["alpha_triangles"]                         # doctest: +SKIP
         3840
     """
-    import pygltflib
-
     path = os.fspath(path)
     check_scene_file(path)
     if not os.path.exists(path):
         raise InputError("no such file", path)
     if os.path.isdir(path):
         raise InputError("is a folder, not a glTF file", path)
+    container = read_container(path, AssetPolicy.of(root, allow_outside, max_bytes))
+    doc = _document(container)
     try:
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")
-            doc = pygltflib.GLTF2().load(path)
-    except Exception as exc:  # pygltflib raises assorted types on bad JSON / GLB headers
-        raise InputError(f"cannot read glTF ({type(exc).__name__}: {exc})", path) from None
-    if doc is None:
-        raise InputError("cannot read glTF", path)
-    try:
-        return _Reader(doc, path).scene()
+        return _Reader(doc, container).scene()
     except InputError:
         raise
     except (IndexError, TypeError, KeyError, ValueError, AttributeError) as exc:  # a case no check names
         raise InputError(f"{UNCHECKED} ({type(exc).__name__}: {exc})", path) from None
 
 
+def _document(container: Container):
+    """The container's JSON as pygltflib's objects (the checks of ``_Reader`` read them)."""
+    import pygltflib
+
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            doc = pygltflib.GLTF2.from_dict(container.doc, infer_missing=True)
+            for mesh in doc.meshes:
+                for primitive in mesh.primitives:
+                    if primitive.attributes:
+                        primitive.attributes = pygltflib.Attributes(**primitive.attributes)
+    except Exception as exc:  # pygltflib's decoding raises assorted types on values of the wrong type
+        raise InputError(f"cannot read glTF ({type(exc).__name__}: {exc})", container.path) from None
+    return doc
+
+
 class _Reader:
-    def __init__(self, doc, path: str):
+    def __init__(self, doc, container: Container):
         self.g = doc
-        self.path = path
-        self.folder = os.path.dirname(os.path.abspath(path))
+        self.container = container
+        self.path = container.path
         self.warnings: list[str] = []
         self._buffers: dict[int, bytes] = {}
 
@@ -177,22 +209,14 @@ class _Reader:
         return value
 
     # -- raw data ---------------------------------------------------------------------------
-    def _uri_bytes(self, uri: str) -> bytes | None:
-        """Bytes of a data URI or a file beside the scene; None when the file is missing."""
-        if uri.startswith("data:"):
-            head, comma, payload = uri.partition(",")
-            if not comma or not head.endswith(";base64"):
-                raise InputError(f"data URI {uri[:40]!r}... is not base64 data", self.path)
-            try:
-                return base64.b64decode(payload)
-            except ValueError as exc:
-                raise InputError(f"bad base64 in a data URI ({exc})", self.path) from None
-        full = os.path.join(self.folder, unquote(uri))
-        try:
-            with open(full, "rb") as f:
-                return f.read()
-        except (OSError, ValueError):  # missing, a folder, unreadable, a NUL in the name
-            return None
+    def check_uris(self) -> None:
+        """Every buffer and image URI resolved under the policy before anything is read: a refused
+        one is an ``InputError`` even where nothing reads it (a baked copy would still name it)."""
+        for key, items in (("buffer", self.g.buffers), ("image", self.g.images)):
+            for i, item in enumerate(self._list(items, f"{key}s", True)):
+                uri = self._uri(item.uri, f"{key} {i}")
+                if uri is not None:
+                    self.container.locate(uri, f"{key} {i}", unread_ok=True)
 
     def buffer(self, i: int) -> bytes:
         i = self._ref(i, self.g.buffers, "buffer")
@@ -201,11 +225,11 @@ class _Reader:
             uri = self._uri(b.uri, f"buffer {i}")
             length = self._int(b.byteLength, f"buffer {i}: byteLength")
             if uri is None:
-                data = self.g.binary_blob()
+                data = self.container.bin
                 if data is None:
                     raise InputError(f"buffer {i} has no URI and the file has no binary chunk", self.path)
             else:
-                data = self._uri_bytes(uri)
+                data = self.container.read(uri, f"buffer {i}", None if uri.startswith("data:") else length)
                 if data is None:
                     raise InputError(f"buffer {i}: file {uri!r} is missing or unreadable", self.path)
             if len(data) < length:
@@ -298,6 +322,8 @@ class _Reader:
 
     # -- textures and materials -------------------------------------------------------------
     def image(self, ii: int) -> Texture:
+        from PIL import Image
+
         from ..texture import open_image
 
         im = self.g.images[ii]
@@ -307,18 +333,29 @@ class _Reader:
         data = problem = None
         if im.bufferView is not None:
             data, _ = self.view_bytes(im.bufferView)
-        elif uri:
+        elif uri and uri.startswith("data:"):
+            self.container.check_data_size(uri, f"image {ii}")
             try:
-                data = self._uri_bytes(uri)
+                data = self.container.data_uri(uri, f"image {ii}")
             except InputError as exc:  # an image (unlike a buffer) that cannot be read is a warning
                 problem = f"image {label!r}: {exc.problem}"
+        elif uri:
+            data = self.container.read(uri, f"image {ii}", unread_ok=True)  # a refused URI: InputError
+            if isinstance(data, Location):  # a URI omaps never reads, let go by allow_outside
+                problem, data = f"{data.problem}; it is not read", None
         if data is None:
             problem = problem or f"image file {label!r} is missing"
         else:
             try:
-                with open_image(io.BytesIO(data), label) as pil:
-                    return _texture(label, pil)
+                with warnings.catch_warnings():
+                    warnings.simplefilter("error", Image.DecompressionBombWarning)
+                    with open_image(io.BytesIO(data), label) as pil:
+                        return _texture(label, pil)
             except InputError as exc:
+                if "DecompressionBomb" in exc.problem:  # a service's limit, not a broken file: an error
+                    raise InputError(f"image {ii} ({label!r}) is over Pillow's decompression-bomb limit of "
+                                     f"{Image.MAX_IMAGE_PIXELS} pixels ({exc.problem}): not decoded",
+                                     self.path) from None
                 problem = f"image {label!r} cannot be decoded ({exc.problem})"
         return Texture(label, None, 255, None, problem)
 
@@ -410,7 +447,10 @@ class _Reader:
             uri = self._uri(im.uri, f"image {ii}")
             if ii in used or not uri or uri.startswith("data:") or uri in used_uris:
                 continue
-            if not os.path.isfile(os.path.join(self.folder, unquote(uri))):
+            loc = self.container.locate(uri, f"image {ii}", unread_ok=True)
+            if loc.kind == "unread":
+                self.warn(f"{loc.problem}; it is not read (not a base colour texture, so not needed)")
+            elif not os.path.isfile(loc.path):
                 self.warn(f"image file {uri!r} is missing (not a base colour texture, so not needed)")
 
     # -- geometry ---------------------------------------------------------------------------
@@ -547,6 +587,7 @@ class _Reader:
         if required:
             raise InputError(f"requires the glTF extension{'s' if len(required) > 1 else ''} "
                              f"{', '.join(required)}, which omaps cannot read", self.path)
+        self.check_uris()
         mats, textures, transforms = self.materials()
         self._textures = textures
         self.check_unused_images({src for m in g.materials or [] for src in [_base_image(g, m)] if src is not None})

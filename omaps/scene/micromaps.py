@@ -6,35 +6,33 @@ Reading (``read_extensions``) runs inside the one scene reader (``scene.gltf``: 
 checked accessor and bufferView readers), so the tracer and ``omaps omm --verify`` see exactly
 what the file stores; every rule of the extension is checked there and a broken one is an
 InputError naming the file. Writing (``write_gltf``) works on the file's JSON and binary chunk
-directly (no glTF library round trip), so every mesh, material, image, node, animation, camera
-and unknown extension or extra of the input is kept as it was: the new data is appended as
-buffer views (and accessors for the per-primitive indices).
+(``scene.container``, the one reader and writer of the glTF container, under the same URI policy
+as the scene reader) directly (no glTF library round trip), so every mesh, material, image,
+node, animation, camera and unknown extension or extra of the input is kept as it was: the new
+data is appended as buffer views (and accessors for the per-primitive indices). The OMM format's
+facts (record layout, level limit, sizes, record checks) are ``omm.format``'s.
 """
 
 from __future__ import annotations
 
 import base64
-import json
 import os
-import struct
 from dataclasses import dataclass, field
-from urllib.parse import quote, unquote
 
 import numpy as np
 
 from ..errors import InputError
+from ..omm.format import MAX_LEVEL, PAIR_RECORD, TRIANGLE_RECORD, record_problem
+from .container import AssetPolicy, read_container, relocated_uri, write_glb, write_json
 
 __all__ = ["EXT_OMM", "EXT_PAIRS", "MicromapArray", "PrimitiveMicromap", "PairMaps", "PrimitivePairs",
            "StoredMicromaps", "read_extensions", "write_gltf", "index_component_type", "encode_indices"]
 
 EXT_OMM = "EXT_mesh_opacity_micromap"
 EXT_PAIRS = "OMAPS_pair_opacity_maps"
-RECORD = np.dtype([("data_offset", "<u4"), ("level", "<u2"), ("format", "<u2")])  # VkMicromapTriangleKHR
-PAIR_RECORD = np.dtype([("pair", "<i4"), ("corners", "u1", (3,)), ("pad", "u1")])
-MAX_LEVEL = 12
+RECORD = TRIANGLE_RECORD  # VkMicromapTriangleKHR (omm.format's)
 _UNSIGNED = {5121: 8, 5123: 16, 5125: 32}
 _SIGNED = {5122: 16, 5124: 32}
-_GLB_MAGIC, _JSON_CHUNK, _BIN_CHUNK = 0x46546C67, 0x4E4F534A, 0x004E4942
 
 
 @dataclass
@@ -82,10 +80,6 @@ class StoredMicromaps:
     primitives: dict  # (glTF mesh, primitive) -> PrimitiveMicromap
     pair_maps: list  # PairMaps
     pair_primitives: dict  # (glTF mesh, primitive) -> PrimitivePairs
-
-
-def micromap_bytes(level: int, fmt: int) -> int:
-    return max(1, (4 ** int(level) * (1 if int(fmt) == 1 else 2) + 7) // 8)
 
 
 # ---- reading (inside scene.gltf's reader) ------------------------------------------------------
@@ -160,22 +154,9 @@ def _read_array(r, i, mm, bad) -> MicromapArray:
     buf = np.frombuffer(raw, np.uint8)
     rows = np.lib.stride_tricks.as_strided(buf, shape=(n, 8), strides=(stride, 1)) if n else np.zeros((0, 8), np.uint8)
     tris = np.ascontiguousarray(rows).view(RECORD).ravel().copy()
-    bad_f = np.flatnonzero(~np.isin(tris["format"], (1, 2)))
-    if len(bad_f):
-        bad(f"{what}: record {bad_f[0]} has format {tris['format'][bad_f[0]]} (1 or 2)")
-    bad_l = np.flatnonzero(tris["level"] > MAX_LEVEL)
-    if len(bad_l):
-        bad(f"{what}: record {bad_l[0]} has subdivision level {tris['level'][bad_l[0]]} (at most {MAX_LEVEL})")
-    sizes = np.array([micromap_bytes(lv, f) for lv, f in zip(tris["level"], tris["format"])], np.int64)
-    start = tris["data_offset"].astype(np.int64)
-    end = start + sizes
-    over = np.flatnonzero(end > len(data))
-    if len(over):
-        bad(f"{what}: record {over[0]} reads data bytes up to {end[over[0]]} of {len(data)}")
-    order = np.argsort(start, kind="stable")
-    clash = np.flatnonzero(start[order][1:] < end[order][:-1])
-    if len(clash):
-        bad(f"{what}: the data regions of records {order[clash[0]]} and {order[clash[0] + 1]} overlap")
+    problem = record_problem(tris, len(data), disjoint=True)
+    if problem:
+        bad(f"{what}: {problem}")
     want: dict = {}
     for lv, f in zip(tris["level"].tolist(), tris["format"].tolist()):
         want[(lv, f)] = want.get((lv, f), 0) + 1
@@ -300,53 +281,6 @@ def encode_indices(index: np.ndarray, ct: int) -> bytes:
     return (np.asarray(index, np.int64) & ((1 << _UNSIGNED[ct]) - 1)).astype(dt).tobytes()
 
 
-def read_container(path) -> tuple[dict, bytes | None]:
-    """The JSON document and the GLB binary chunk (None for .gltf or a GLB without one)."""
-    try:
-        with open(path, "rb") as f:
-            raw = f.read()
-    except OSError as exc:
-        raise InputError(f"cannot read ({exc.strerror})", path) from None
-    try:
-        if raw[:4] == b"glTF":
-            magic, version, length = struct.unpack_from("<III", raw, 0)
-            pos, doc, bin_chunk = 12, None, None
-            while pos + 8 <= min(length, len(raw)):
-                clen, ctype = struct.unpack_from("<II", raw, pos)
-                body = raw[pos + 8:pos + 8 + clen]
-                if ctype == _JSON_CHUNK and doc is None:
-                    doc = json.loads(body.decode("utf-8"))
-                elif ctype == _BIN_CHUNK and bin_chunk is None:
-                    bin_chunk = bytes(body)
-                pos += 8 + clen
-            if not isinstance(doc, dict):
-                raise ValueError("no JSON chunk")
-            return doc, bin_chunk
-        doc = json.loads(raw.decode("utf-8"))
-        if not isinstance(doc, dict):
-            raise ValueError("not a JSON object")
-        return doc, None
-    except (ValueError, UnicodeDecodeError, struct.error, RecursionError) as exc:
-        raise InputError(f"cannot read glTF ({exc})", path) from None
-
-
-def _data_uri(uri: str, path) -> bytes:
-    head, comma, payload = uri.partition(",")
-    if not comma or not head.endswith(";base64"):
-        raise InputError(f"data URI {uri[:40]!r}... is not base64 data", path)
-    try:
-        return base64.b64decode(payload)
-    except ValueError as exc:
-        raise InputError(f"bad base64 in a data URI ({exc})", path) from None
-
-
-def _relocated(uri, src_dir: str, out_dir: str):
-    """A relative file URI of the input, as seen from the output's folder."""
-    if not isinstance(uri, str) or uri.startswith("data:") or "://" in uri or src_dir == out_dir:
-        return uri
-    return quote(os.path.relpath(os.path.join(src_dir, unquote(uri)), out_dir).replace(os.sep, "/"))
-
-
 class _Appender:
     """New buffer views (8-byte aligned) in one new or extended buffer."""
 
@@ -363,7 +297,8 @@ class _Appender:
 
 
 def write_gltf(src, out_tmp, out_final, micromaps: list[dict], prim_omm: dict, pair_maps: list[dict],
-               prim_pairs: dict, warn=None) -> None:
+               prim_pairs: dict, warn=None, *, root=None, allow_outside: bool = False,
+               max_bytes: int | None = None) -> None:
     """Write ``src`` with the extensions to ``out_tmp`` (.glb or .gltf by ``out_final``'s suffix;
     ``out_final`` is where it will be renamed to, for relative URIs). Earlier micromaps of either
     extension in ``src`` are replaced.
@@ -371,20 +306,22 @@ def write_gltf(src, out_tmp, out_final, micromaps: list[dict], prim_omm: dict, p
     ``micromaps``: [{data: bytes, triangles: RECORD array, usage: [(count, level, format)], extras}];
     ``prim_omm``: (mesh, primitive) -> (micromap, signed int64 lookup values);
     ``pair_maps``: [{codec, blockBytes, mapSize, blocks: bytes, extras}];
-    ``prim_pairs``: (mesh, primitive) -> (maps, PAIR_RECORD array)."""
-    doc, bin_chunk = read_container(src)
+    ``prim_pairs``: (mesh, primitive) -> (maps, PAIR_RECORD array). ``root``, ``allow_outside``,
+    ``max_bytes``: the URI policy (``scene.container``) of ``src``, as the scene reader's: every
+    file URI the output keeps is checked under it, so the output names no file outside the root."""
+    c = read_container(src, AssetPolicy.of(root, allow_outside, max_bytes))
+    doc, bin_chunk = c.doc, c.bin
     glb_out = str(out_final).lower().endswith(".glb")
     src_dir = os.path.dirname(os.path.abspath(src))
     out_dir = os.path.dirname(os.path.abspath(out_final))
     buffers = doc.setdefault("buffers", [])
     views = doc.setdefault("bufferViews", [])
     accessors = doc.setdefault("accessors", [])
-    for b in buffers:
-        if isinstance(b, dict) and "uri" in b:
-            b["uri"] = _relocated(b["uri"], src_dir, out_dir)
-    for im in doc.get("images") or []:
-        if isinstance(im, dict) and "uri" in im:
-            im["uri"] = _relocated(im["uri"], src_dir, out_dir)
+    for key, items in (("buffer", buffers), ("image", doc.get("images") or [])):
+        for i, item in enumerate(items):
+            if isinstance(item, dict) and isinstance(item.get("uri"), str):
+                c.locate(item["uri"], f"{key} {i}", unread_ok=True)  # refused: an InputError, nothing written
+                item["uri"] = relocated_uri(item["uri"], src_dir, out_dir)
     # where the new bytes go: a GLB's binary chunk (buffer 0, which also takes the binary chunk
     # and every data-URI buffer of the input, so a GLB holds no data URI), or a new buffer
     uses_bin = bin_chunk is not None and buffers and isinstance(buffers[0], dict) and "uri" not in buffers[0]
@@ -393,7 +330,7 @@ def write_gltf(src, out_tmp, out_final, micromaps: list[dict], prim_omm: dict, p
         for i, b in enumerate(buffers):
             uri = b.get("uri") if isinstance(b, dict) else None
             if (i == 0 and uses_bin) or (isinstance(uri, str) and uri.startswith("data:")):
-                raw = bin_chunk if uri is None else _data_uri(uri, src)
+                raw = bin_chunk if uri is None else c.data_uri(uri, f"buffer {i}")
                 body += b"\0" * ((-len(body)) % 8)
                 new_index[i], shift[i] = 0, len(body)
                 body += raw[:b.get("byteLength", len(raw))] if isinstance(b.get("byteLength"), int) else raw
@@ -434,7 +371,7 @@ def write_gltf(src, out_tmp, out_final, micromaps: list[dict], prim_omm: dict, p
             uri = im.get("uri") if isinstance(im, dict) else None
             if isinstance(uri, str) and uri.startswith("data:"):
                 head = uri[5:].split(",", 1)[0].split(";")[0]
-                im["bufferView"] = first_view + app.add(_data_uri(uri, src))
+                im["bufferView"] = first_view + app.add(c.data_uri(uri, "image"))
                 im["mimeType"] = head or im.get("mimeType") or "image/png"
                 del im["uri"]
     if micromaps:
@@ -491,19 +428,12 @@ def write_gltf(src, out_tmp, out_final, micromaps: list[dict], prim_omm: dict, p
     if glb_out:
         body = bytes(bin_chunk) + b"\0" * (app.base - len(bin_chunk)) + bytes(app.blob)
         buffers[0]["byteLength"] = len(body)
-        body += b"\0" * ((-len(body)) % 4)
-        js = json.dumps(doc, separators=(",", ":"), ensure_ascii=False).encode("utf-8")
-        js += b" " * ((-len(js)) % 4)
-        total = 12 + 8 + len(js) + 8 + len(body)
         with open(out_tmp, "wb") as f:
-            f.write(struct.pack("<III", _GLB_MAGIC, 2, total))
-            f.write(struct.pack("<II", len(js), _JSON_CHUNK) + js)
-            f.write(struct.pack("<II", len(body), _BIN_CHUNK) + body)
+            write_glb(f, doc, body)
     else:
         if app.views:
             buffers[new_buffer]["byteLength"] = len(app.blob)
             buffers[new_buffer]["uri"] = ("data:application/octet-stream;base64,"
                                           + base64.b64encode(bytes(app.blob)).decode())
         with open(out_tmp, "w", encoding="utf-8") as f:
-            json.dump(doc, f, indent=1, ensure_ascii=False)
-            f.write("\n")
+            write_json(f, doc)

@@ -1,0 +1,310 @@
+"""The glTF container and the files it names: the one place omaps opens a glTF asset.
+
+Reading (``read_container``) gives the JSON document and the GLB binary chunk; every external
+resource of the document (buffers, images) is then found and read through the returned
+``Container`` under one policy (``AssetPolicy``), for the scene reader (``scene.gltf``) and the
+writer of baked scenes (``scene.micromaps``) alike. Writing (``write_glb``, ``write_json``) packs
+a document back into a file.
+
+The policy, for assets that may come from strangers (docs/guide/untrusted.md states the same):
+
+* a URI is a ``data:`` URI (base64) or a relative path, percent-decoded and resolved against the
+  asset's folder; its real path (symbolic links followed) must lie under the **root**: the
+  asset's own folder unless ``root`` names another (``--root DIR``); ``allow_outside``
+  (``--allow-outside``) turns that check off for an asset the user trusts;
+* an absolute path (``/x``) or a local ``file:`` URI is a path like any other: read only under the
+  root (or with ``allow_outside``);
+* a Windows path (``C:\\x``, ``C:/x``, ``\\\\server``), a URI with back-slashes and every other scheme
+  (``http:``, ``https:``, ...) are never read: omaps never fetches a URI. A buffer so named is an
+  error; an image so named is an error too, unless ``allow_outside`` is given: then it is a
+  warning and the image counts as missing;
+* sizes: the asset file, a buffer's declared ``byteLength``, an image file and a data URI's
+  decoded bytes may each be at most ``max_bytes`` (``DEFAULT_MAX_BYTES``, 2 GiB; the keyword, or
+  the environment variable ``OMAPS_MAX_ASSET_BYTES``), checked before anything is read or
+  allocated; a buffer's ``byteLength`` larger than its file is refused before the file is read.
+
+Every refusal is an ``InputError`` naming the asset file, the URI, where it resolves and the
+option that would allow it.
+"""
+
+from __future__ import annotations
+
+import base64
+import binascii
+import json
+import os
+import re
+import stat
+import struct
+from dataclasses import dataclass
+from urllib.parse import quote, unquote
+
+from ..errors import InputError
+
+__all__ = ["DEFAULT_MAX_BYTES", "MAX_BYTES_ENV", "AssetPolicy", "Container", "Location", "read_container",
+           "max_asset_bytes", "write_glb", "write_json", "relocated_uri"]
+
+DEFAULT_MAX_BYTES = 2 << 30  # 2 GiB: any one asset file, buffer, image file or data URI
+MAX_BYTES_ENV = "OMAPS_MAX_ASSET_BYTES"
+ROOT_OPTION, OUTSIDE_OPTION = "--root DIR", "--allow-outside"
+GLB_MAGIC, JSON_CHUNK, BIN_CHUNK = 0x46546C67, 0x4E4F534A, 0x004E4942
+_SCHEME = re.compile(r"^([A-Za-z][A-Za-z0-9+.\-]*):")
+_DRIVE = re.compile(r"^[A-Za-z]:([\\/]|$)")
+
+
+def max_asset_bytes(value=None) -> int:
+    """The size cap: ``value`` when given, else the environment variable ``OMAPS_MAX_ASSET_BYTES``,
+    else ``DEFAULT_MAX_BYTES``. An ``InputError`` unless it is a positive integer."""
+    where = "max_bytes"
+    if value is None:
+        value = os.environ.get(MAX_BYTES_ENV)
+        where = MAX_BYTES_ENV
+        if value is None or value == "":
+            return DEFAULT_MAX_BYTES
+    try:
+        n = int(value)
+    except (TypeError, ValueError):
+        n = 0
+    if isinstance(value, bool) or n < 1 or (isinstance(value, float) and value != n):
+        raise InputError(f"{where} is {value!r}, not a positive number of bytes")
+    return n
+
+
+@dataclass(frozen=True)
+class AssetPolicy:
+    """Where a glTF asset's URIs may lead (the module docstring states the rules).
+
+    Parameters
+    ----------
+    root : str or path, optional
+        The folder every file the asset names must lie under (symbolic links followed); default:
+        the asset's own folder.
+    allow_outside : bool
+        Read files anywhere (the root check off). Scheme URIs are still never fetched.
+    max_bytes : int, optional
+        The size cap (``max_asset_bytes``).
+    """
+
+    root: str | None = None
+    allow_outside: bool = False
+    max_bytes: int | None = None
+
+    @classmethod
+    def of(cls, root=None, allow_outside=False, max_bytes=None) -> "AssetPolicy":
+        """The policy of the library's keywords, checked: ``root`` an existing folder."""
+        if root is not None:
+            root = os.fspath(root)
+            if not os.path.isdir(root):
+                raise InputError("the root folder (--root) does not exist or is not a folder", root)
+        return cls(root, bool(allow_outside), max_asset_bytes(max_bytes))
+
+
+@dataclass(frozen=True)
+class Location:
+    """Where a URI leads: ``kind`` "data", "file" (``path``: the real path, allowed) or "unread"
+    (a scheme or Windows path, allowed to go unread: ``problem`` says why)."""
+
+    kind: str
+    path: str | None = None
+    problem: str | None = None
+
+
+def _inside(path: str, root: str) -> bool:
+    return path == root or path.startswith(root.rstrip(os.sep) + os.sep)
+
+
+class Container:
+    """A glTF asset's JSON document (``doc``), GLB binary chunk (``bin``, None for .gltf or a GLB
+    without one) and the policy its URIs are resolved under (``locate``, ``read``)."""
+
+    def __init__(self, path: str, doc: dict, bin_chunk: bytes | None, policy: AssetPolicy):
+        self.path = path
+        self.doc = doc
+        self.bin = bin_chunk
+        self.policy = policy
+        self.max_bytes = max_asset_bytes(policy.max_bytes)
+        self.folder = os.path.dirname(os.path.abspath(path))
+        given = policy.root is not None
+        self.root = os.path.realpath(policy.root if given else self.folder)
+        self._root_label = "the --root folder" if given else "the asset's folder"
+
+    # -- where a URI leads ------------------------------------------------------------------
+    def _refuse(self, what, uri, problem):
+        raise InputError(f"{what}: URI {_show(uri)} {problem}", self.path)
+
+    def _never_read(self, what, uri, problem, unread_ok):
+        if unread_ok and self.policy.allow_outside:
+            return Location("unread", problem=f"{what}: URI {_show(uri)} {problem}")
+        tail = (f"; give {OUTSIDE_OPTION} to go on without it" if unread_ok else "")
+        self._refuse(what, uri, problem + tail)
+
+    def locate(self, uri: str, what: str, unread_ok: bool = False) -> Location:
+        """Where ``uri`` (of ``what``: "buffer 0", "image 2") leads under the policy; an
+        ``InputError`` when it is refused. ``unread_ok``: a URI omaps never reads (a scheme, a
+        Windows path) is allowed to go unread with ``allow_outside`` (an image: then missing)."""
+        if uri.startswith("data:"):
+            return Location("data")
+        scheme = _SCHEME.match(uri)
+        local = None
+        if _DRIVE.match(uri) or uri.startswith(("\\\\", "//")):
+            return self._never_read(what, uri, "is a Windows or network path, not a relative path: omaps reads "
+                                    "only relative paths (with '/') and data: URIs", unread_ok)
+        if scheme:
+            name = scheme.group(1).lower()
+            rest = uri[len(name) + 1:]
+            if name == "file" and (not rest.startswith("//") or rest[2:].startswith(("/", "localhost/"))):
+                local = unquote(rest[2:] if rest.startswith("//") else rest)  # file:///x, file://localhost/x
+                local = local[len("localhost"):] if local.startswith("localhost/") else local
+            else:
+                return self._never_read(what, uri, f"is a {name}: URI; omaps never fetches URIs (no network "
+                                        "access): put the file beside the asset and name it by a relative path",
+                                        unread_ok)
+        if "\\" in uri or (local or unquote(uri)).find("\\") >= 0:
+            return self._never_read(what, uri, "has back-slashes: glTF URIs separate folders with '/'", unread_ok)
+        decoded = local if local is not None else unquote(uri)
+        if "\0" in decoded:
+            self._refuse(what, uri, "holds a NUL character: not a file name")
+        full = os.path.join(self.folder, decoded)
+        real = os.path.realpath(full)
+        if self.policy.allow_outside or _inside(real, self.root):
+            return Location("file", real)
+        kind = ("is a file: URI" if local is not None else "is an absolute path" if os.path.isabs(decoded)
+                else "leads")
+        self._refuse(what, uri, f"{kind} to {real}, outside {self.root} ({self._root_label}): omaps reads only "
+                                f"files under it; give {ROOT_OPTION} with a folder holding both, or "
+                                f"{OUTSIDE_OPTION} if you trust this asset")
+
+    # -- reading ----------------------------------------------------------------------------
+    def check_data_size(self, uri: str, what: str) -> None:
+        """An ``InputError`` when a data URI would decode to more bytes than the cap."""
+        size = len(uri) // 4 * 3
+        if size > self.max_bytes:
+            raise InputError(f"{what}: its data URI holds about {size} bytes, over the size cap of "
+                             f"{self.max_bytes} ({MAX_BYTES_ENV})", self.path)
+
+    def data_uri(self, uri: str, what: str) -> bytes:
+        """The bytes of a base64 ``data:`` URI, its decoded size checked against the cap first."""
+        self.check_data_size(uri, what)
+        head, comma, payload = uri.partition(",")
+        if not comma or not head.endswith(";base64"):
+            raise InputError(f"data URI {uri[:40]!r}... is not base64 data", self.path)
+        try:
+            return base64.b64decode(payload)
+        except (ValueError, binascii.Error) as exc:
+            raise InputError(f"bad base64 in a data URI ({exc})", self.path) from None
+
+    def read(self, uri: str, what: str, length: int | None = None, unread_ok: bool = False):
+        """The bytes ``uri`` names (``locate``): a data URI's, or the file's (``length``: its
+        first ``length`` bytes, a buffer's byteLength, refused when the file is shorter). Returns
+        None when the file is missing or unreadable, a ``Location`` of kind "unread" for a URI
+        allowed to go unread; an ``InputError`` for a refused URI or a size over the cap."""
+        if length is not None and length > self.max_bytes:
+            raise InputError(f"{what}: byteLength {length} is over the size cap of {self.max_bytes} bytes "
+                             f"({MAX_BYTES_ENV})", self.path)
+        loc = self.locate(uri, what, unread_ok)
+        if loc.kind == "data":
+            return self.data_uri(uri, what)
+        if loc.kind == "unread":
+            return loc
+        try:
+            st = os.stat(loc.path)
+            if not stat.S_ISREG(st.st_mode):
+                return None  # a folder, a device, a pipe: never opened
+            if st.st_size > self.max_bytes and length is None:
+                raise InputError(f"{what}: file {_show(uri)} holds {st.st_size} bytes, over the size cap of "
+                                 f"{self.max_bytes} ({MAX_BYTES_ENV})", self.path)
+            if length is not None and st.st_size < length:
+                raise InputError(f"{what}: file {_show(uri)} holds {st.st_size} bytes, byteLength says {length}",
+                                 self.path)
+            with open(loc.path, "rb") as f:
+                return f.read(st.st_size if length is None else length)
+        except InputError:
+            raise
+        except (OSError, ValueError):  # gone meanwhile, unreadable
+            return None
+
+
+def _show(uri: str) -> str:
+    return repr(uri if len(uri) <= 200 else uri[:200] + "...")
+
+
+def read_container(path, policy: AssetPolicy | None = None) -> Container:
+    """Read a .gltf (JSON) or .glb (binary container) file: an ``InputError`` naming it when it is
+    over the size cap, not glTF JSON, or a GLB whose header or chunks are broken."""
+    path = os.fspath(path)
+    policy = policy or AssetPolicy()
+    cap = max_asset_bytes(policy.max_bytes)
+    try:
+        with open(path, "rb") as f:
+            size = os.fstat(f.fileno()).st_size
+            if size > cap:
+                raise InputError(f"the file holds {size} bytes, over the size cap of {cap} ({MAX_BYTES_ENV})", path)
+            raw = f.read()
+    except OSError as exc:
+        raise InputError(f"cannot read ({exc.strerror})", path) from None
+    bin_chunk = None
+    try:
+        if path.lower().endswith(".glb"):
+            js, bin_chunk = _glb_chunks(raw, path)
+        else:
+            js = raw
+        doc = json.loads(js.decode("utf-8"))
+    except (ValueError, RecursionError) as exc:  # JSONDecodeError and UnicodeDecodeError are ValueErrors
+        raise InputError(f"cannot read glTF ({type(exc).__name__}: {exc})", path) from None
+    if not isinstance(doc, dict):
+        raise InputError(f"cannot read glTF (its JSON is {type(doc).__name__}, not an object)", path)
+    return Container(path, doc, bin_chunk, policy)
+
+
+def _glb_chunks(raw: bytes, path: str) -> tuple[bytes, bytes | None]:
+    """The JSON chunk and the BIN chunk (or None) of a GLB file; unknown chunks are skipped."""
+    if len(raw) < 20 or raw[:4] != b"glTF":
+        raise InputError("not a GLB file (no 'glTF' header)", path)
+    _, version, length = struct.unpack_from("<III", raw, 0)
+    if version != 2:
+        raise InputError(f"GLB version {version}; omaps reads version 2", path)
+    if length > len(raw):
+        raise InputError(f"the GLB header says {length} bytes, the file holds {len(raw)}", path)
+    pos, js, bin_chunk = 12, None, None
+    while pos + 8 <= length:
+        clen, ctype = struct.unpack_from("<II", raw, pos)
+        if pos + 8 + clen > length:
+            raise InputError(f"GLB chunk at byte {pos} ({clen} bytes) runs past the end ({length} bytes)", path)
+        body = raw[pos + 8:pos + 8 + clen]
+        if js is None:
+            if ctype != JSON_CHUNK:
+                raise InputError("the first GLB chunk is not JSON", path)
+            js = body
+        elif ctype == BIN_CHUNK and bin_chunk is None:
+            bin_chunk = bytes(body)
+        pos += 8 + clen
+    if js is None:
+        raise InputError("the GLB file has no JSON chunk", path)
+    return js, bin_chunk
+
+
+def relocated_uri(uri, src_dir: str, out_dir: str):
+    """A file URI of an asset in ``src_dir`` as seen from ``out_dir``: relative, percent-encoded.
+    Data URIs and URIs omaps never reads (schemes, Windows paths) are kept as they are."""
+    if (not isinstance(uri, str) or uri.startswith("data:") or "://" in uri or _SCHEME.match(uri)
+            or _DRIVE.match(uri) or "\\" in uri or src_dir == out_dir):
+        return uri
+    return quote(os.path.relpath(os.path.join(src_dir, unquote(uri)), out_dir).replace(os.sep, "/"))
+
+
+def write_glb(f, doc: dict, body: bytes) -> None:
+    """Write a GLB container to the binary file ``f``: the header, ``doc`` as the JSON chunk
+    (compact, padded with spaces) and ``body`` as the BIN chunk (padded with zeros)."""
+    body = bytes(body) + b"\0" * ((-len(body)) % 4)
+    js = json.dumps(doc, separators=(",", ":"), ensure_ascii=False).encode("utf-8")
+    js += b" " * ((-len(js)) % 4)
+    total = 12 + 8 + len(js) + 8 + len(body)
+    f.write(struct.pack("<III", GLB_MAGIC, 2, total))
+    f.write(struct.pack("<II", len(js), JSON_CHUNK) + js)
+    f.write(struct.pack("<II", len(body), BIN_CHUNK) + body)
+
+
+def write_json(f, doc: dict) -> None:
+    """Write ``doc`` as .gltf JSON to the text file ``f`` (indented by one, UTF-8 kept)."""
+    json.dump(doc, f, indent=1, ensure_ascii=False)
+    f.write("\n")
