@@ -37,9 +37,11 @@ def _ranges(summary: dict):
         yield int(g["mesh"]), int(g["primitive"]), int(g["first_triangle"]), int(g["triangles"])
 
 
-def write_gltf_result(src, out_tmp, out_final, result: OmmResult, extra_summary: dict | None = None) -> list[str]:
+def write_gltf_result(src, out_tmp, out_final, result: OmmResult, extra_summary: dict | None = None,
+                      **assets) -> list[str]:
     """Write scene ``src`` with ``result``'s micromaps (geometries from a glTF input: each
-    ``summary['geometries'][k]`` names its mesh and primitive). Returns warnings."""
+    ``summary['geometries'][k]`` names its mesh and primitive). Returns warnings. ``assets``:
+    ``root``, ``allow_outside``, ``max_bytes``, the URI policy of ``load_scene``."""
     from ..scene.micromaps import write_gltf
 
     summary = dict(result.summary, **(extra_summary or {}))
@@ -71,22 +73,23 @@ def write_gltf_result(src, out_tmp, out_final, result: OmmResult, extra_summary:
     said = []
     write_gltf(src, out_tmp, out_final,
                [{"data": data.tobytes(), "triangles": triangles, "usage": usage, "extras": {OMAPS_KEY: summary}}],
-               prim_omm, pair_maps, prim_pairs, said.append)
+               prim_omm, pair_maps, prim_pairs, said.append, **assets)
     return said
 
 
-def read_gltf(path, scene=None) -> OmmResult:
+def read_gltf(path, scene=None, **assets) -> OmmResult:
     """The micromaps of a glTF file omaps wrote, as the buffers of ``omm.files.read``: index in
     the order of the recorded geometries, and the summary with ``input`` pointing at the file
     itself (its own textures, for a re-bake). Every rule of the extension is checked by the
-    reader (an InputError naming the file)."""
+    reader (an InputError naming the file). ``assets``: ``root``, ``allow_outside``,
+    ``max_bytes``, the URI policy of ``load_scene``."""
     from ..scene import load_scene
 
     path = os.fspath(path)
     if scene is None:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
-            scene = load_scene(path)
+            scene = load_scene(path, **assets)
     stored = scene.micromaps
     if stored is None or not stored.micromaps:
         raise InputError("holds no EXT_mesh_opacity_micromap micromaps", path)

@@ -87,23 +87,24 @@ def load_uvs(path) -> np.ndarray:
         raise InputError(exc.problem, path) from None
 
 
-def load_geometries(spec: dict, view=None) -> tuple[list[Geometry], list[dict], list[str]]:
+def load_geometries(spec: dict, view=None, **assets) -> tuple[list[Geometry], list[dict], list[str]]:
     """(geometries, skipped primitives, warnings) of an input spec. ``view``: a scene's --budget
-    weights and hits per alpha triangle (``view.scene_view_samples``) instead of area."""
+    weights and hits per alpha triangle (``view.scene_view_samples``) instead of area.
+    ``assets``: ``root``, ``allow_outside``, ``max_bytes`` of a scene's ``load_scene``."""
     if spec["kind"] == "texture":
         tex = load_alpha(spec["texture"], spec.get("channel"))
         test = StateRule("cutoff", cutoff=spec["cutoff"]).alpha_test(tex, spec["filter"], spec["wrap"])
         return [Geometry(os.path.basename(spec["texture"]), test, load_uvs(spec["uvs"]))], [], []
-    return _gltf_geometries(spec, view)
+    return _gltf_geometries(spec, view, assets)
 
 
-def _gltf_geometries(spec, view=None):
+def _gltf_geometries(spec, view=None, assets=None):
     from ..budget import triangle_weights
     from ..scene import alpha_triangles, load_scene
 
     rules = MaterialRules(spec.get("cutoff"), spec.get("filter"), spec.get("wrap"), spec.get("blend", "levels"),
                           spec.get("blend_cutoff", 0.5))
-    scene = load_scene(spec["path"])
+    scene = load_scene(spec["path"], **(assets or {}))
     at = alpha_triangles(scene, rules)
     weight = triangle_weights(scene, at) if view is None else view[0]  # --budget's: world area x instances
     hits = None if view is None else np.asarray(view[1], np.int64).reshape(-1, 2)

@@ -21,8 +21,10 @@ from .pipeline import OmmResult, build
 __all__ = ["verify", "settings_from_summary"]
 
 
-def verify(folder) -> tuple[OmmResult, list[str], list[str]]:
+def verify(folder, **assets) -> tuple[OmmResult, list[str], list[str]]:
     """(the folder's buffers, problems, checks done). Layout problems raise InputError.
+    ``assets``: ``root``, ``allow_outside``, ``max_bytes``, the URI policy of the scenes read
+    (``load_scene``).
 
     Example::
 
@@ -34,7 +36,7 @@ def verify(folder) -> tuple[OmmResult, list[str], list[str]]:
     from . import gltf_io
 
     if gltf_io.is_gltf(folder):  # a scene with EXT_mesh_opacity_micromap: the reader checks the extension's rules
-        res = gltf_io.read_gltf(folder)
+        res = gltf_io.read_gltf(folder, **assets)
         problems, done = [], ["EXT_mesh_opacity_micromap rules: usage counts = records, regions in range and "
                               "disjoint, one index per triangle, index values valid"]
     else:
@@ -61,7 +63,7 @@ def verify(folder) -> tuple[OmmResult, list[str], list[str]]:
 
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
-                geoms, _, _ = load_geometries(spec)
+                geoms, _, _ = load_geometries(spec, **assets)
             if (res.summary.get("budget") or {}).get("weights") == "view":  # the plan came from a trace
                 problems += _compare_known(res, geoms)
                 done.append(f"every known micro-triangle against a re-bake of {src} at its stored level")
