@@ -132,6 +132,24 @@ def print_table(header: list, rows: list) -> None:
     print(format_table(header, rows))
 
 
+def add_asset_options(p: argparse.ArgumentParser) -> None:
+    """``--root DIR`` and ``--allow-outside``: where the files a glTF scene names may lie (the URI
+    policy of ``omaps.scene.container``), for every command that reads a scene."""
+    g = p.add_argument_group("untrusted assets")
+    g.add_argument("--root", metavar="DIR", default=None,
+                   help="read the files a scene names (buffers, images) only under DIR, symbolic links followed "
+                        "(default: the scene's own folder; omaps batch: the folder given as input)")
+    g.add_argument("--allow-outside", action="store_true",
+                   help="read the files a scene names wherever they are (a scene you trust); URIs with a scheme "
+                        "(http:, ...) are never fetched")
+
+
+def asset_options(a) -> dict:
+    """The keyword arguments of the library's scene readers (``root``, ``allow_outside``) from the
+    options ``add_asset_options`` added (absent ones: the defaults)."""
+    return {"root": getattr(a, "root", None), "allow_outside": bool(getattr(a, "allow_outside", False))}
+
+
 def show_warning(message, category, filename, lineno, file=None, line=None) -> None:
     """Library warnings as one line each: ``omaps: warning: ...``."""
     print(f"omaps: warning: {message}", file=sys.stderr)
