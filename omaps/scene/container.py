@@ -156,7 +156,8 @@ class Container:
                 local = unquote(rest[2:] if rest.startswith("//") else rest)  # file:///x, file://localhost/x
                 local = local[len("localhost"):] if local.startswith("localhost/") else local
             else:
-                return self._never_read(what, uri, f"is a {name}: URI; omaps never fetches URIs (no network "
+                article = "an" if name[0] in "aehiou" else "a"
+                return self._never_read(what, uri, f"is {article} {name}: URI; omaps never fetches URIs (no network "
                                         "access): put the file beside the asset and name it by a relative path",
                                         unread_ok)
         if "\\" in uri or (local or unquote(uri)).find("\\") >= 0:
