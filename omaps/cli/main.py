@@ -56,12 +56,13 @@ def parser(command: str | None = None) -> argparse.ArgumentParser:
 
         omm.add_parser(sub)
         return p
-    from . import batch, maps, omm, trace
+    from . import batch, maps, omm, report, trace
 
     maps.add_parsers(sub)
     trace.add_parser(sub)
     omm.add_parser(sub)
     batch.add_parser(sub)
+    report.add_parser(sub)
     return p
 
 

@@ -58,7 +58,7 @@ def _check_output(output) -> str:
 
 
 def build_report(input, output, schemes: str | None = None, *, size=512, shadows: bool = False, camera=None,
-                 jobs: int | None = None, min_size: int = 0, config=None, view: bool = True,
+                 jobs: int | None = None, rules=None, min_size: int = 0, config=None, view: bool = True,
                  progress: bool = False) -> ReportResult:
     """Write one self-contained HTML report (no network: scripts, styles and images inside) of a
     glTF scene or of a texture corpus.
@@ -82,6 +82,8 @@ def build_report(input, output, schemes: str | None = None, *, size=512, shadows
         The traced view (``omaps trace --camera``); the 3D view starts there.
     jobs : int, optional
         Processes for baking, encoding and evaluating (default: all cores).
+    rules : omaps.alpha_test.MaterialRules, optional
+        How a scene's materials are alpha-tested (as ``omaps trace``'s material options).
     min_size : int
         A corpus's smallest texture side evaluated (``omaps eval --min-size``).
     config : omaps.corpus.EvalConfig, optional
@@ -123,7 +125,7 @@ def build_report(input, output, schemes: str | None = None, *, size=512, shadows
     if os.path.exists(out) and os.path.exists(src) and os.path.samefile(out, src):
         raise InputError("is also the input", os.fspath(output))
     if kind == "scene":
-        text, numbers, timings, info = _scene_page(src, schemes, size, shadows, camera, jobs, view, progress)
+        text, numbers, timings, info = _scene_page(src, schemes, size, shadows, camera, jobs, rules, view, progress)
     else:
         from .corpus import corpus_page
 
@@ -182,7 +184,7 @@ def _scene_table(report: dict, names: list) -> str:
                     "them (omaps trace --json with the settings above).")
 
 
-def _scene_page(src, schemes, size, shadows, camera, jobs, view, progress):
+def _scene_page(src, schemes, size, shadows, camera, jobs, rules, view, progress):
     from .. import __version__
     from ..trace import DEFAULT_SCHEMES, trace_scene
     from .view3d import scene_view
@@ -190,6 +192,7 @@ def _scene_page(src, schemes, size, shadows, camera, jobs, view, progress):
     timings = {}
     t = time.perf_counter()
     res = trace_scene(src, schemes or DEFAULT_SCHEMES, size=size, shadows=shadows, camera=camera, jobs=jobs,
+                      rules=rules,
                       progress=progress)
     timings["trace_s"] = time.perf_counter() - t
     report = res.report

@@ -175,6 +175,9 @@ def uv_overlay(texture_rgba: np.ndarray, uv: np.ndarray, slots: np.ndarray, atla
     xs = (np.arange(size) * w) // size
     grey = texture_rgba[np.ix_(ys, xs)][..., 3].astype(np.float64)
     drawn = np.full((size, size), 3, np.uint8)
+    rows = np.column_stack([np.asarray(uv, np.float64).reshape(len(uv), 6), np.asarray(slots, np.float64)])
+    rows = np.unique(rows, axis=0)  # instances of a card: each distinct triangle drawn once
+    uv, slots = rows[:, :6].reshape(-1, 3, 2), rows[:, 6].astype(np.int64)
     _draw_uv(np.ascontiguousarray(uv, np.float64), np.ascontiguousarray(slots, np.int64), atlas["states"],
              atlas["res"], atlas["cols"], size, drawn)
     out = np.repeat(grey[..., None], 3, axis=2)
@@ -199,7 +202,7 @@ def png_data_uri(img: np.ndarray, palette: bool = False) -> str:
     if palette and im.mode == "RGB":
         im = im.quantize(colors=8, method=Image.Quantize.FASTOCTREE, dither=Image.Dither.NONE)
     buf = io.BytesIO()
-    im.save(buf, format="PNG", optimize=True)
+    im.save(buf, format="PNG", compress_level=9 if im.width * im.height <= 1 << 22 else 6)
     return "data:image/png;base64," + base64.b64encode(buf.getvalue()).decode()
 
 
