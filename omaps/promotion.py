@@ -28,10 +28,12 @@ from numba import njit
 
 from .errors import InputError
 
-__all__ = ["PROMOTIONS", "promotion_code", "hashed_threshold", "promote", "resolve_regions"]
+__all__ = ["PROMOTIONS", "promotion_code", "hashed_threshold", "promotion_cut", "hits_needed", "resolve_regions",
+           "NEAREST", "OPAQUE", "TRANSPARENT", "HASHED"]
 
 from .names import PROMOTIONS  # noqa: E402 (numba-free, for the command line)
 HASH_CELLS_PER_TEXEL = 64  # the hashed threshold is constant over 1/64-texel squares
+NEAREST, OPAQUE, TRANSPARENT, HASHED = (PROMOTIONS.index(n) for n in ("nearest", "opaque", "transparent", "hashed"))
 
 
 def promotion_code(name: str) -> int:
@@ -63,15 +65,28 @@ def hashed_threshold(x, y, seed):
 
 
 @njit(cache=True, inline="always")
-def promote(fraction, mode, threshold):
-    """True when a C region resolves to opaque under ``mode`` (index into PROMOTIONS)."""
-    if mode == 1:
-        return True
-    if mode == 2:
-        return False
-    if mode == 0:
-        return fraction > 0.5
-    return fraction > threshold
+def promotion_cut(mode, threshold):
+    """The rule: a C region becomes O when its opaque fraction (in [0, 1]) exceeds this cut.
+
+    ``mode`` indexes PROMOTIONS: -1 under ``opaque`` (every fraction exceeds it), 1 under
+    ``transparent`` (none does), 1/2 under ``nearest``, ``threshold`` (the region's
+    ``hashed_threshold``) under ``hashed``. ``promotion_cut.py_func`` takes an array of
+    thresholds too."""
+    if mode == OPAQUE:
+        return -1.0
+    if mode == TRANSPARENT:
+        return 1.0
+    if mode == NEAREST:
+        return 0.5
+    return threshold
+
+
+@njit(cache=True, inline="always")
+def hits_needed(mode, threshold, n):
+    """``promotion_cut`` as a count: the fewest of ``n`` sample points (a power of two) that must
+    pass the alpha test for the region to become O, floor(cut * n) + 1 -- exact, hits / n and
+    cut * n being exact. At most 0 under ``opaque``, n + 1 under ``transparent``."""
+    return int(math.floor(promotion_cut(mode, threshold) * n)) + 1
 
 
 @njit(cache=True)
@@ -88,13 +103,9 @@ def resolve_regions(states3, fractions, centroids_texel, promotion: str = "hashe
     s = np.asarray(states3, dtype=np.uint8)
     f = np.asarray(fractions, dtype=np.float64)
     mode = promotion_code(promotion)
-    if mode == 1:
-        opaque = np.ones(s.shape, dtype=bool)
-    elif mode == 2:
-        opaque = np.zeros(s.shape, dtype=bool)
-    elif mode == 0:
-        opaque = f > 0.5
-    else:
+    threshold = 0.0
+    if mode == HASHED:
         c = np.ascontiguousarray(np.asarray(centroids_texel, dtype=np.float64).reshape(-1, 2))
-        opaque = f > _thresholds(c, int(seed)).reshape(s.shape)
+        threshold = _thresholds(c, int(seed)).reshape(s.shape)
+    opaque = f > promotion_cut.py_func(mode, threshold)
     return np.where(s == 2, opaque, s).astype(np.uint8)

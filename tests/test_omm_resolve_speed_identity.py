@@ -1,4 +1,4 @@
-"""The fast opaque-fraction sampler (``coverage.micro_hits``: the taps read once per region, points
+"""The fast opaque-fraction sampler (``coverage.micro_hits_with``: the taps read once per region, points
 counted in branch-free blocks) and the 4-state / 2-state resolve built on it give exactly what
 the definition gives: ``alpha_test.sample_passes`` at every sample point of a micro-triangle,
 one point at a time, and ``omaps.promotion``'s rule on that fraction."""
@@ -18,6 +18,7 @@ from omaps.sampling import FILTERS, WRAP_MODES
 from omaps.texture import load_alpha
 
 SAMPLES = coverage.sample_points()
+TAPS = np.empty((coverage.TAPS, coverage.TAPS))  # the kernel's scratch
 
 
 def _points(corners, k):
@@ -64,11 +65,32 @@ def test_hits_are_the_shaders_test_point_by_point(h, w, r, filt, wrap_u, wrap_v,
     n = 4 ** k
     full = _reference_hits(test, corners, k)
     args = (test.value, float(test.threshold), bool(test.inclusive), filt_c, mu, mv, corners, SAMPLES, k)
-    assert coverage.micro_hits(*args, n + 1) == full
+    assert coverage.micro_hits_with(*args, n + 1, TAPS) == full
     for need in {1, n // 2, n // 2 + 1, n, max(1, full), full + 1, int(rng.integers(1, n + 2))}:
         if need >= 1:
-            got = coverage.micro_hits(*args, need)
+            got = coverage.micro_hits_with(*args, need, TAPS)
             assert (got >= need) == (full >= need), (need, got, full)
+
+
+def reference_promote(fraction, promo, threshold):
+    """The documented promotion rule: whether a C region of this opaque fraction becomes O."""
+    return {"opaque": True, "transparent": False, "nearest": fraction > 0.5, "hashed": fraction > threshold}[promo]
+
+
+@given(st.sampled_from(promotion.PROMOTIONS), st.floats(0.0, 1.0, exclude_min=True, exclude_max=True),
+       st.integers(0, coverage.MAX_SAMPLE_LEVEL), st.data())
+def test_the_rule_as_a_cut_and_as_a_count(promo, threshold, k, data):
+    """``promotion.promotion_cut`` (on fractions, scalar and array) and ``promotion.hits_needed``
+    (on sample counts, what the resolve stops at) are the documented rule."""
+    n = 4 ** k
+    hits = data.draw(st.integers(0, n))
+    mode = promotion.promotion_code(promo)
+    want = reference_promote(hits / n, promo, threshold)
+    assert (hits / n > promotion.promotion_cut(mode, threshold)) == want
+    assert (hits >= promotion.hits_needed(mode, threshold, n)) == want
+    assert bool(np.atleast_1d(hits / n > promotion.promotion_cut.py_func(mode, np.array([threshold])))[0]) == want
+    assert promotion.resolve_regions([2], [hits / n], [[0.0, 0.0]], promo).tolist() == [
+        int(reference_promote(hits / n, promo, promotion.hashed_threshold(0.0, 0.0, 0)))]
 
 
 def _reference_resolve(states3, starts, level, test, tris_uv, fmt, promo, seed):
@@ -83,7 +105,7 @@ def _reference_resolve(states3, starts, level, test, tris_uv, fmt, promo, seed):
             q = coverage.micro_corners(tris[t], i, level)
             frac = _reference_hits(test, q, int(ks[t])) / 4 ** int(ks[t])
             cx, cy = (q[0] + q[2] + q[4]) / 3.0, (q[1] + q[3] + q[5]) / 3.0
-            opaque = promotion.promote(frac, promotion.promotion_code(promo), promotion.hashed_threshold(cx, cy, seed))
+            opaque = reference_promote(frac, promo, promotion.hashed_threshold(cx, cy, seed))
             if fmt == omm_format.FORMAT_2_STATE:
                 out[starts[t] + i] = 1 if opaque else 0
             else:

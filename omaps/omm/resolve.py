@@ -8,15 +8,13 @@ output has no unknown: C becomes O or T outright (no longer conservative). The c
 
 from __future__ import annotations
 
-import math
-
 import numba
 import numpy as np
 from numba import njit, prange
 
 from ..alpha_test import AlphaTest
 from ..coverage import TAPS, micro_corners_of, micro_hits_with, sample_levels, sample_points, texel_triangles
-from ..promotion import hashed_threshold, promotion_code
+from ..promotion import HASHED, hashed_threshold, hits_needed, promotion_code
 from . import format as omm_format
 
 __all__ = ["resolve", "resolve_counted"]
@@ -39,13 +37,15 @@ def _resolve_one(states3, base, end, level, two_state, mode, seed, value, thr, i
                 n_o += 1
             continue
         n_c += 1
-        if mode == 1 or mode == 2:
-            opaque = mode == 1
-        else:  # O iff the opaque fraction hits / n_s > cut, i.e. hits >= floor(cut * n_s) + 1
+        need = hits_needed(mode, 0.0, n_s)
+        if 0 < need <= n_s:  # the opaque fraction decides: O iff at least ``need`` sample points pass
             q = micro_corners_of(tris, t, i - base, level)
-            cut = 0.5 if mode == 0 else hashed_threshold((q[0] + q[2] + q[4]) / 3.0, (q[1] + q[3] + q[5]) / 3.0, seed)
-            need = int(math.floor(cut * n_s)) + 1
+            if mode == HASHED:  # the cut is the threshold hashed from the centroid
+                need = hits_needed(mode, hashed_threshold((q[0] + q[2] + q[4]) / 3.0, (q[1] + q[3] + q[5]) / 3.0,
+                                                          seed), n_s)
             opaque = micro_hits_with(value, thr, inclusive, filt, mu, mv, q, samples, sample_k, need, taps) >= need
+        else:  # opaque or transparent whatever the fraction
+            opaque = need <= 0
         if two_state:
             o = 1 if opaque else 0
         else:
