@@ -853,3 +853,82 @@ def test_uv_array_and_omm_regressions(omm_seeds, tmp_path):
         with pytest.raises(InputError) as info:
             verify(folder)
         assert info.value.path == str(folder / omm_format.SUMMARY_FILE) and message in info.value.problem
+
+
+# -- URIs of an untrusted asset (docs/guide/untrusted.md) ------------------------------------------
+
+URI_PARTS = ["..", ".", "inside.bin", "outside", "secret.bin", "link", "sub", "%2e%2e", "%2E%2e", "%2f", "%5c",
+             "\\", "C:", "c:", "", "%00"]
+URI_PREFIXES = ["", "/", "//", "\\\\", "file://", "file:///", "file:", "http://", "https://", "HTTP://", "ftp://",
+                "C:\\", "C:/", "data:", "{outside}/", "{asset}/", "file://{outside}/", "file://localhost{outside}/"]
+
+
+@st.composite
+def asset_uris(draw):
+    """A buffer URI drawn from absolute paths, ``..``, symbolic links, schemes, percent-encoded
+    ``..`` and separators, Windows drive letters and back-slashes."""
+    relative = draw(st.booleans())  # half of them relative paths ending in a file name, often readable
+    prefix = "" if relative else draw(st.sampled_from(URI_PREFIXES))
+    parts = draw(st.lists(st.sampled_from(URI_PARTS), min_size=0 if relative else 1, max_size=5))
+    if relative:
+        parts.append(draw(st.sampled_from(["inside.bin", "secret.bin", "outside"])))
+    sep = draw(st.sampled_from(["/", "/", "/", "\\", "%2F"]))
+    return prefix + sep.join(parts)
+
+
+@lru_cache(maxsize=1)
+def _uri_tree() -> str:
+    """tmp/asset/{scene.gltf, inside.bin, sub/, link -> ../outside}, tmp/outside/secret.bin: the
+    inside buffer's quad at the origin, the outside one's (the same size) moved to x = 100."""
+    top = tempfile.mkdtemp()
+    asset, outside = os.path.join(top, "asset"), os.path.join(top, "outside")
+    os.makedirs(os.path.join(asset, "sub"))
+    os.makedirs(os.path.join(outside, "sub"))
+    os.symlink(outside, os.path.join(asset, "link"))
+    doc, blob = glb_seed()
+    n = doc["accessors"][0]["count"]
+    moved = bytearray(blob)
+    pos = np.frombuffer(blob, np.float32, 3 * n, doc["bufferViews"][0].get("byteOffset", 0)).copy()
+    pos[0::3] += 100
+    off = doc["bufferViews"][0].get("byteOffset", 0)
+    moved[off:off + pos.nbytes] = pos.tobytes()
+    for folder, data in ((asset, blob), (outside, bytes(moved)), (os.path.join(asset, "sub"), blob),
+                         (os.path.join(outside, "sub"), bytes(moved))):
+        for name in ("inside.bin", "secret.bin"):
+            with open(os.path.join(folder, name), "wb") as f:
+                f.write(data)
+    with open(os.path.join(outside, "outside"), "wb") as f:
+        f.write(bytes(moved))
+    return top
+
+
+@fuzz_settings(300)
+@given(asset_uris())
+def test_fuzzed_asset_uris_never_read_outside(uri):
+    """Whatever the URI, a scene loads only from a file under its folder (its geometry the inside
+    quad's, at the origin) or is refused with an InputError naming the file; a URI with a scheme
+    or a Windows path never loads."""
+    top = _uri_tree()
+    asset, outside = os.path.join(top, "asset"), os.path.join(top, "outside")
+    uri = uri.format(asset=asset, outside=outside)
+    doc, _ = glb_seed()
+    doc = copy.deepcopy(doc)
+    doc["buffers"][0]["uri"] = uri
+    fd, path = tempfile.mkstemp(suffix=".gltf", dir=asset)
+    with os.fdopen(fd, "w") as f:
+        f.write(dumps(doc))
+    try:
+        with quiet():
+            try:
+                scene = load_scene(path)
+            except InputError as exc:
+                assert exc.path == path and UNCHECKED not in exc.problem, exc
+                event("refused")
+                return
+        event("read")
+        xs = np.concatenate([p.positions[:, 0] for m in scene.meshes for p in m.primitives])
+        assert xs.max() < 50, f"{uri!r} read the outside quad"
+        low = uri.lower()
+        assert not low.startswith(("http", "ftp", "c:", "\\", "//")) and "\\" not in uri, uri
+    finally:
+        os.remove(path)
