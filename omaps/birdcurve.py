@@ -19,13 +19,47 @@ from numba import njit
 
 MAX_LEVEL = 12
 
-# Children as weights of the parent's vertices (rows: child vertex 0..2; columns: p0, p1, p2).
-_CHILDREN = np.array([
-    [[1, 0, 0], [.5, .5, 0], [.5, 0, .5]],
-    [[.5, 0, .5], [0, .5, .5], [.5, .5, 0]],
-    [[.5, .5, 0], [0, 1, 0], [0, .5, .5]],
-    [[0, .5, .5], [.5, 0, .5], [0, 0, 1]],
-])
+# The children's vertices (the figure above) among the parent's points 0 .. 5 = p0, p1, p2, m01,
+# m12, m02: the one statement of the order, which every walk of the curve reads (``child``)
+CHILD_VERTS = ((0, 3, 5), (5, 4, 3), (3, 1, 4), (4, 5, 2))
+# the points as weights of p0, p1, p2; children as weights (rows: child vertex 0..2; columns: p0, p1, p2)
+_POINTS = np.array([[1, 0, 0], [0, 1, 0], [0, 0, 1], [.5, .5, 0], [0, .5, .5], [.5, 0, .5]])
+_CHILDREN = _POINTS[np.array(CHILD_VERTS)]
+
+
+@njit(cache=True, inline="always")
+def child(c, p0, p1, p2, m01, m12, m02):
+    """Vertices (p0, p1, p2) of child ``c`` of a triangle, given its vertices and edge midpoints
+    (points of any one type: barycentric floats, the micromap baker's integer grid points)."""
+    points = (p0, p1, p2, m01, m12, m02)
+    a, b, d = CHILD_VERTS[c]
+    return points[a], points[b], points[d]
+
+
+@njit(cache=True, inline="always")
+def micro_vertices(index, level):
+    """Barycentric (b1, b2) of micro-triangle ``index``'s vertices (p0, p1, p2) at ``level``, as
+    three pairs: the curve's base-4 digits from the top, each a ``child``."""
+    p0 = (0.0, 0.0)
+    p1 = (1.0, 0.0)
+    p2 = (0.0, 1.0)
+    for d in range(level - 1, -1, -1):
+        p0, p1, p2 = child((index >> (2 * d)) & 3, p0, p1, p2, _mid(p0, p1), _mid(p1, p2), _mid(p0, p2))
+    return p0, p1, p2
+
+
+@njit(cache=True, inline="always")
+def bary_point(b1, b2, x0, x1, x2):
+    """One coordinate of the point of barycentric (b1, b2) -- the weights of p1 and p2 -- on a
+    triangle whose vertices have coordinates x0, x1, x2: (1 - b1 - b2) x0 + b1 x1 + b2 x2, in
+    that order of operations (every kernel maps its micro-triangles' points with it, so they
+    agree to the last bit)."""
+    return (1.0 - b1 - b2) * x0 + b1 * x1 + b2 * x2
+
+
+@njit(cache=True, inline="always")
+def _mid(a, b):
+    return 0.5 * (a[0] + b[0]), 0.5 * (a[1] + b[1])
 
 
 def micro_triangles(level: int) -> np.ndarray:
@@ -44,8 +78,7 @@ def uv_micro_triangles(tri_uv: np.ndarray, level: int) -> np.ndarray:
     """Micro-triangles of a triangle with texture coordinates ``tri_uv`` (3, 2) = (p0, p1, p2)."""
     b = micro_triangles(level)
     tri_uv = np.asarray(tri_uv, dtype=np.float64)
-    w0 = 1.0 - b[..., 0] - b[..., 1]
-    return (w0[..., None] * tri_uv[0] + b[..., 0, None] * tri_uv[1] + b[..., 1, None] * tri_uv[2])
+    return bary_point.py_func(b[..., 0, None], b[..., 1, None], tri_uv[0], tri_uv[1], tri_uv[2])
 
 
 @njit(cache=True)

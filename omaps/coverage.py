@@ -29,48 +29,17 @@ import numpy as np
 from numba import njit, prange
 
 from . import birdcurve
+from .birdcurve import bary_point
 from .alpha_test import AlphaTest, passes, sample_passes
 from .pair import pair_weights
 from .sampling import address, blend
 
-__all__ = ["micro_fractions", "cell_fractions", "micro_vertices", "micro_corners", "micro_corners_of", "micro_hits", "micro_hits_with", "SAMPLES_PER_TEXEL",
+__all__ = ["micro_fractions", "cell_fractions", "micro_corners", "micro_corners_of", "micro_hits_with", "SAMPLES_PER_TEXEL",
            "MAX_SAMPLE_LEVEL", "CELL_SAMPLES"]
 
 SAMPLES_PER_TEXEL = 16
 MAX_SAMPLE_LEVEL = 3
 CELL_SAMPLES = 4  # K x K points per square cell
-
-
-@njit(cache=True, inline="always")
-def _micro_vertices(index, level):
-    a1, a2, b1, b2, c1, c2 = 0.0, 0.0, 1.0, 0.0, 0.0, 1.0  # p0, p1, p2
-    for d in range(level - 1, -1, -1):
-        c = (index >> (2 * d)) & 3
-        m01 = (0.5 * (a1 + b1), 0.5 * (a2 + b2))
-        m12 = (0.5 * (b1 + c1), 0.5 * (b2 + c2))
-        m02 = (0.5 * (a1 + c1), 0.5 * (a2 + c2))
-        if c == 0:
-            b1, b2 = m01
-            c1, c2 = m02
-        elif c == 1:
-            a1, a2 = m02
-            b1, b2 = m12
-            c1, c2 = m01
-        elif c == 2:
-            a1, a2 = m01
-            c1, c2 = m12
-        else:
-            a1, a2 = m12
-            b1, b2 = m02
-    return a1, a2, b1, b2, c1, c2
-
-
-@njit(cache=True)
-def micro_vertices(index, level):
-    """Barycentric (b1, b2) of micro-triangle ``index``'s vertices (p0, p1, p2), walking the
-    bird curve's digits from the top (the children of ``omaps.birdcurve``): a (3, 2) array."""
-    a1, a2, b1, b2, c1, c2 = _micro_vertices(index, level)
-    return np.array([[a1, a2], [b1, b2], [c1, c2]])
 
 
 @njit(cache=True)
@@ -91,34 +60,23 @@ def micro_corners_of(tris_texel, t, index, level):
 @njit(cache=True, inline="always")
 def _corners(t0x, t0y, t1x, t1y, t2x, t2y, index, level):
     """``micro_corners`` of the texel-space triangle (t0, t1, t2) given as scalars."""
-    a1, a2, b1, b2, c1, c2 = _micro_vertices(index, level)
-    qax = (1.0 - a1 - a2) * t0x + a1 * t1x + a2 * t2x
-    qay = (1.0 - a1 - a2) * t0y + a1 * t1y + a2 * t2y
-    qbx = (1.0 - b1 - b2) * t0x + b1 * t1x + b2 * t2x
-    qby = (1.0 - b1 - b2) * t0y + b1 * t1y + b2 * t2y
-    qcx = (1.0 - c1 - c2) * t0x + c1 * t1x + c2 * t2x
-    qcy = (1.0 - c1 - c2) * t0y + c1 * t1y + c2 * t2y
-    return qax, qay, qbx, qby, qcx, qcy
+    (a1, a2), (b1, b2), (c1, c2) = birdcurve.micro_vertices(index, level)
+    return (bary_point(a1, a2, t0x, t1x, t2x), bary_point(a1, a2, t0y, t1y, t2y),
+            bary_point(b1, b2, t0x, t1x, t2x), bary_point(b1, b2, t0y, t1y, t2y),
+            bary_point(c1, c2, t0x, t1x, t2x), bary_point(c1, c2, t0y, t1y, t2y))
 
 
 BLOCK = 16  # points counted between two checks of the count (16 ran 2-6 % faster than 8, 4 slower)
-TAPS = 8  # texels per side of the block of taps ``micro_hits`` reads first (larger regions: texel by texel)
-
-
-@njit(cache=True)
-def micro_hits(value, threshold, inclusive, filt, mode_u, mode_v, corners, samples, k, need):
-    """Sample points of a micro-triangle (``micro_corners``) where the alpha test passes, of
-    its 4**k points (the centroids of its level-``k`` sub-triangles,
-    ``samples[(4**k - 1) // 3:][:4**k]``), counted until the count can no longer end on the
-    other side of ``need``: the result is >= need exactly when the full count is (``need`` >
-    4**k counts them all). Each point's answer is ``alpha_test.sample_passes``'."""
-    return micro_hits_with(value, threshold, inclusive, filt, mode_u, mode_v, corners, samples, k, need,
-                           np.empty((TAPS, TAPS)))
+TAPS = 8  # texels per side of the block of taps ``micro_hits_with`` reads first (larger regions: texel by texel)
 
 
 @njit(cache=True, _nrt=False)
 def micro_hits_with(value, threshold, inclusive, filt, mode_u, mode_v, corners, samples, k, need, taps):
-    """``micro_hits`` with a scratch block ``taps`` (TAPS, TAPS) (a kernel's, reused).
+    """Sample points of a micro-triangle (``micro_corners``) where the alpha test passes, of its
+    4**k points (the centroids of its level-``k`` sub-triangles,
+    ``samples[(4**k - 1) // 3:][:4**k]``), counted until the count can no longer end on the other
+    side of ``need``: the result is >= need exactly when the full count is (``need`` > 4**k counts
+    them all). ``taps`` (TAPS, TAPS): scratch (a kernel's, reused).
 
     Each point's answer is ``alpha_test.sample_passes``' -- the shader's fetch
     (``sampling.sample_texture``) compared with the threshold -- with the same arithmetic. This
@@ -156,11 +114,8 @@ def micro_hits_with(value, threshold, inclusive, filt, mode_u, mode_v, corners, 
         step = min(n, BLOCK)
         for b in range(first, first + n, step):
             for s in range(b, b + step):
-                w1 = samples[s, 0]
-                w2 = samples[s, 1]
-                w0 = 1.0 - w1 - w2
-                fx = (w0 * qax + w1 * qbx + w2 * qcx) - 0.5
-                fy = (w0 * qay + w1 * qby + w2 * qcy) - 0.5
+                fx = bary_point(samples[s, 0], samples[s, 1], qax, qbx, qcx) - 0.5
+                fy = bary_point(samples[s, 0], samples[s, 1], qay, qby, qcy) - 0.5
                 i = min(max(int(math.floor(fx)) - bx, 0), nbx - 1)
                 j = min(max(int(math.floor(fy)) - by, 0), nby - 1)
                 a = blend(taps[j, i], taps[j, i + 1], taps[j + 1, i], taps[j + 1, i + 1], fx - (i + bx),
@@ -172,9 +127,8 @@ def micro_hits_with(value, threshold, inclusive, filt, mode_u, mode_v, corners, 
     for s in range(first, first + n):
         w1 = samples[s, 0]
         w2 = samples[s, 1]
-        w0 = 1.0 - w1 - w2
-        hits += sample_passes(value, threshold, inclusive, filt, mode_u, mode_v, w0 * qax + w1 * qbx + w2 * qcx,
-                              w0 * qay + w1 * qby + w2 * qcy)
+        hits += sample_passes(value, threshold, inclusive, filt, mode_u, mode_v, bary_point(w1, w2, qax, qbx, qcx),
+                              bary_point(w1, w2, qay, qby, qcy))
         # one rarely taken branch per point: the count reached ``need``, or cannot any more
         if hits == need or (need <= n and hits + (first + n - 1 - s) < need):
             break

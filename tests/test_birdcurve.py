@@ -79,3 +79,20 @@ def test_level_out_of_range():
         birdcurve.micro_triangles(13)
     with pytest.raises(ValueError):
         birdcurve.micro_triangles(-1)
+
+
+@settings(max_examples=200, deadline=None)
+@given(st.integers(0, 7), st.data())
+def test_micro_vertices_walk_is_the_subdivision(level, data):
+    """``birdcurve.micro_vertices`` (the digit walk the kernels use) gives micro-triangle k's
+    vertices exactly as the whole subdivision does, and ``child`` on the micromap baker's integer
+    grid points gives the same children scaled by 2**level."""
+    k = data.draw(st.integers(0, 4 ** level - 1))
+    want = birdcurve.micro_triangles(level)[k]
+    np.testing.assert_array_equal(np.array(birdcurve.micro_vertices(k, level)), want)
+    n = 1 << level
+    p0, p1, p2 = (0, 0), (n, 0), (0, n)
+    for d in range(level - 1, -1, -1):
+        mid = lambda a, b: ((a[0] + b[0]) // 2, (a[1] + b[1]) // 2)  # noqa: E731
+        p0, p1, p2 = birdcurve.child((k >> (2 * d)) & 3, p0, p1, p2, mid(p0, p1), mid(p1, p2), mid(p0, p2))
+    np.testing.assert_array_equal(np.array([p0, p1, p2]) / n, want)

@@ -50,7 +50,7 @@ import numpy as np
 from numba import njit, prange
 
 from ..bilinear import POLY_MAX, cell_flag, point_flag
-from ..birdcurve import MAX_LEVEL
+from ..birdcurve import CHILD_VERTS, MAX_LEVEL, bary_point, child
 from ..errors import InputError
 from ..flag_table import MARGIN, box_counts, box_flag, flag_table, unmixed_flag
 from ..raster import edge_extent
@@ -175,9 +175,8 @@ def _vertex(tri, i, j, inv_n, w, h, offset):
     operations, in the same order, as ``bake.square`` maps a pair's points."""
     b1 = i * inv_n
     b2 = j * inv_n
-    b0 = 1.0 - b1 - b2
-    u = b0 * tri[0, 0] + b1 * tri[1, 0] + b2 * tri[2, 0]
-    v = b0 * tri[0, 1] + b1 * tri[1, 1] + b2 * tri[2, 1]
+    u = bary_point(b1, b2, tri[0, 0], tri[1, 0], tri[2, 0])
+    v = bary_point(b1, b2, tri[0, 1], tri[1, 1], tri[2, 1])
     return u * w + offset, v * h + offset
 
 
@@ -191,8 +190,6 @@ def _leaf_state(f):
 
 NODE_EXACT_CELLS = 16  # a node box this small with mixed cells is rasterised before descending
 STACK = 3 * MAX_LEVEL + 4  # nodes pending: 3 more per level down, plus the root
-# the four children of a node (p0, p1, p2 and the midpoints m01, m12, m02 = 0 .. 5), bird-curve order
-CHILD_VERTS = ((0, 3, 5), (5, 4, 3), (3, 1, 4), (4, 5, 2))
 
 
 @njit(cache=True, _nrt=False)
@@ -290,20 +287,8 @@ def _bake_one(sat, flags, mixed, values, bounds, period_x, period_y, tri, level,
         for c in range(3, -1, -1):
             st_l[top] = lv + 1
             st_k[top] = 4 * k + c
-            if c == 0:
-                a, b, d, e, f_, g = i0, j0, m01i, m01j, m02i, m02j
-            elif c == 1:
-                a, b, d, e, f_, g = m02i, m02j, m12i, m12j, m01i, m01j
-            elif c == 2:
-                a, b, d, e, f_, g = m01i, m01j, i1, j1, m12i, m12j
-            else:
-                a, b, d, e, f_, g = m12i, m12j, m02i, m02j, i2, j2
-            st_v[top, 0] = a
-            st_v[top, 1] = b
-            st_v[top, 2] = d
-            st_v[top, 3] = e
-            st_v[top, 4] = f_
-            st_v[top, 5] = g
+            (st_v[top, 0], st_v[top, 1]), (st_v[top, 2], st_v[top, 3]), (st_v[top, 4], st_v[top, 5]) = child(
+                c, (i0, j0), (i1, j1), (i2, j2), (m01i, m01j), (m12i, m12j), (m02i, m02j))
             top += 1
     return empty
 
