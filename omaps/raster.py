@@ -16,7 +16,7 @@ from numba import njit
 
 from . import states
 from .bilinear import POLY_MAX, cell_flag, point_flag
-from .flag_table import box_counts, unmixed_flag
+from .flag_table import box_counts, flag_table, unmixed_flag
 from .sampling import cell_index
 
 
@@ -60,51 +60,6 @@ def row_span(poly, k, r, grow, ymin, ymax):
     return int(math.floor(xmin)), int(math.ceil(xmax))
 
 
-@njit(cache=True)
-def polygon_flags(flags, mixed, values, bounds, period_x, period_y, poly, grow=0.0):
-    """OR of the flags of every cell overlapped by convex polygon ``poly`` (K, 2) given in cell
-    coordinates (texel coordinates plus the grid offset). 0 when the polygon has no area.
-    The grid's arrays come from ``FootprintGrid.kernel_args``: in an exact bilinear grid a mixed
-    cell's flag is the polygon's own part of it (``bilinear.cell_flag``).
-
-    ``grow`` > 0: the polygon grown by a square of half-side ``grow`` (its Minkowski sum), which
-    has area even when the polygon has none: per band, the polygon's x-extent over the band
-    widened by ``grow`` above and below, then widened by ``grow`` left and right."""
-    k = poly.shape[0]
-    ymin = poly[0, 1]
-    ymax = poly[0, 1]
-    for i in range(1, k):
-        ymin = min(ymin, poly[i, 1])
-        ymax = max(ymax, poly[i, 1])
-    hc, wc = flags.shape
-    exact = values.shape[0] > 0
-    buf_a = np.empty((0, 2))
-    buf_b = np.empty((0, 2))
-    acc = 0
-    for r in range(int(math.floor(ymin - grow)), int(math.ceil(ymax + grow))):
-        c0, c1 = row_span(poly, k, r, grow, ymin, ymax)
-        if c1 <= c0:
-            continue
-        row = cell_index(r, hc, period_y)
-        for c in range(c0, c1):
-            col = cell_index(c, wc, period_x)
-            f = flags[row, col]
-            if exact and mixed[row, col]:
-                if buf_a.shape[0] == 0:  # the first mixed cell: the vertices' own flags first
-                    for i in range(k):
-                        acc |= point_flag(flags, mixed, values, bounds, period_x, period_y, poly[i, 0], poly[i, 1],
-                                          grow)
-                    if acc == 3:
-                        return acc
-                    buf_a = np.empty((POLY_MAX, 2))
-                    buf_b = np.empty((POLY_MAX, 2))
-                f = cell_flag(values, bounds, period_x, period_y, row, col, poly, k, c, r, grow, buf_a, buf_b)
-            acc |= f
-            if acc == 3:
-                return acc
-    return acc
-
-
 @njit(cache=True, inline="always")
 def _vertex_flags(grid, poly, k, grow):
     flags, mixed, values, bounds, period_x, period_y = grid
@@ -116,15 +71,30 @@ def _vertex_flags(grid, poly, k, grow):
 
 @njit(cache=True, _nrt=False)
 def polygon_flags_table(sat, grid, poly, k, grow, points, buf_a, buf_b):
-    """``polygon_flags`` of convex polygon ``poly[:k]``, the same arithmetic (row bands,
-    x-extents, growth) and the same flag, with each row's cell span counted in O(1) from the
-    summed-area table ``sat`` (``flag_table.flag_table``); only a span holding mixed bilinear
-    cells is walked cell by cell. ``grid``: ``FootprintGrid.kernel_args()``; ``points``: the OR
-    of the vertices' own flags (``bilinear.point_flag``) when the caller has them (vertices shared
-    with neighbouring cells), else -1 (read here when needed); ``buf_*``
-    (POLY_MAX, 2) scratch for ``bilinear.cell_flag``. This runs once per leaf of the square baker
-    (millions of times): it allocates nothing and runs without numba's reference counting
+    """OR of the flags of every cell overlapped by convex polygon ``poly[:k]`` given in cell
+    coordinates (texel coordinates plus the grid offset), grown by ``grow``; 0 when the polygon
+    has no area. ``rows_flag`` (the one rasteriser) as a kernel of its own: the square baker's
+    per-cell call. It allocates nothing and runs without numba's reference counting
     (``_nrt=False``), whose atomic counts of the array arguments cost about a tenth of a bake."""
+    return rows_flag(sat, grid, poly, k, grow, points, buf_a, buf_b)
+
+
+@njit(cache=True, inline="always")
+def rows_flag(sat, grid, poly, k, grow, points, buf_a, buf_b):
+    """OR of the flags of every cell overlapped by convex polygon ``poly[:k]`` (cell coordinates:
+    texel coordinates plus the grid offset); 0 when the polygon has no area. Every baker's
+    regions are rasterised here.
+
+    Per row band, the polygon's x-extent (``row_span``) gives a span of cells, counted in O(1)
+    from the summed-area table ``sat`` (``flag_table.flag_table``); only a span holding mixed
+    bilinear cells is walked cell by cell, each mixed cell's part decided by
+    ``bilinear.cell_flag``. ``grid``: ``FootprintGrid.kernel_args()``; ``points``: the OR of the
+    vertices' own flags (``bilinear.point_flag``) when the caller has them (vertices shared with
+    neighbouring regions), else -1 (read here when needed); ``buf_*`` (POLY_MAX, 2) scratch.
+
+    ``grow`` > 0: the polygon grown by a square of half-side ``grow`` (its Minkowski sum), which
+    has area even when the polygon has none: per band, the polygon's x-extent over the band
+    widened by ``grow`` above and below, then widened by ``grow`` left and right."""
     flags, mixed, values, bounds, period_x, period_y = grid
     ymin = poly[0, 1]
     ymax = poly[0, 1]
@@ -148,7 +118,7 @@ def polygon_flags_table(sat, grid, poly, k, grow, points, buf_a, buf_b):
         nt, no, nm, n = box_counts(sat, r, r + 1, c0, c1, period_y, period_x)
         acc |= unmixed_flag(nt, no, nm)
         if nm > 0 and acc != 3:  # the mixed cells, each decided on its own
-            if not points_done:  # the vertices' own flags first (as ``polygon_flags``)
+            if not points_done:  # the vertices' own flags first
                 points_done = True
                 acc |= points if points >= 0 else _vertex_flags(grid, poly, k, grow)
                 if acc == 3:
@@ -167,18 +137,20 @@ def polygon_flags_table(sat, grid, poly, k, grow, points, buf_a, buf_b):
 
 
 @njit(cache=True)
-def polygons_flags(flags, mixed, values, bounds, period_x, period_y, polys):
-    """``polygon_flags`` for each polygon of ``polys`` (R, K, 2)."""
+def _regions_flags(sat, grid, polys):
+    buf_a = np.empty((POLY_MAX, 2))
+    buf_b = np.empty((POLY_MAX, 2))
     out = np.empty(polys.shape[0], dtype=np.uint8)
     for i in range(polys.shape[0]):
-        out[i] = polygon_flags(flags, mixed, values, bounds, period_x, period_y, polys[i])
+        out[i] = rows_flag(sat, grid, polys[i], polys.shape[1], 0.0, np.int64(-1), buf_a, buf_b)
     return out
 
 
 def region_states(grid, polys_texel: np.ndarray) -> np.ndarray:
-    """States (T/O/C codes) of convex regions given in *texel* coordinates, shape (R, K, 2)."""
+    """States (T/O/C codes) of convex regions given in *texel* coordinates, shape (R, K, 2), each
+    rasterised on its own."""
     polys = np.ascontiguousarray(polys_texel, dtype=np.float64) + grid.offset
-    f = polygons_flags(*grid.kernel_args(), polys)
+    f = _regions_flags(flag_table(grid), grid.kernel_args(), polys)
     if np.any(f == 0):
         bad = int(np.flatnonzero(f == 0)[0])
         raise ValueError(f"region {bad} has no area")

@@ -1,5 +1,6 @@
 """The fast micromap baker gives exactly the states of rasterising every micro-triangle with
-``raster.polygon_flags`` (with and without growth), and the brute-force reference's."""
+the cell-by-cell rasteriser ``reference_raster.polygon_flags`` (with and without growth), and
+the brute-force reference's."""
 
 import numpy as np
 import pytest
@@ -8,6 +9,7 @@ from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
 import reference as ref
+import reference_raster
 from conftest import needs_shared, real_textures
 from omaps import birdcurve, raster, states
 from omaps.bake import micromap
@@ -39,8 +41,8 @@ def _triangle(draw, coord):
 
 def raster_rows(grid, tris_uv, level, grow=0.0):
     """Micromaps (T, 4**level) by rasterising each micro-triangle on its own with
-    ``raster.polygon_flags`` (no tree walk, no summed-area table): the slow baker the fast one
-    must equal. Vertices as the baker computes them: b0 * p0 + b1 * p1 + b2 * p2, times the
+    ``reference_raster.polygon_flags`` (no tree walk, no summed-area table): the slow baker the
+    fast one must equal. Vertices as the baker computes them: b0 * p0 + b1 * p1 + b2 * p2, times the
     texture size, plus the grid offset."""
     t = np.asarray(tris_uv, dtype=np.float64)
     bary = birdcurve.micro_triangles(level)
@@ -48,7 +50,7 @@ def raster_rows(grid, tris_uv, level, grow=0.0):
     uv = (w0[None, ..., None] * t[:, None, None, 0] + bary[None, ..., 0, None] * t[:, None, None, 1]
           + bary[None, ..., 1, None] * t[:, None, None, 2])
     polys = uv.reshape(-1, 3, 2) * np.array([grid.width, grid.height], dtype=np.float64) + grid.offset
-    flags = np.array([raster.polygon_flags(*grid.kernel_args(), np.ascontiguousarray(p), grow)
+    flags = np.array([reference_raster.polygon_flags(*grid.kernel_args(), np.ascontiguousarray(p), grow)
                       for p in polys], dtype=np.uint8)
     assert np.all(flags > 0)  # every region reads something
     return states.FLAG_TO_STATE[flags].reshape(len(t), -1)
@@ -159,3 +161,20 @@ def test_real_textures_identical(path, rng):
         for level, grow in ((3, 0.0), (3, GROW_TEXEL), (5, GROW_TEXEL)):
             np.testing.assert_array_equal(micromap.bake_micromap_rows(g, tris, level, grow),
                                           raster_rows(g, tris, level, grow))
+
+
+@settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(st.one_of(state_images, binary_images), st.one_of(triangle_sets(dyadic), triangle_sets(anyfloat)),
+       st.integers(0, 3), st.sampled_from(FILTERS), st.sampled_from(WRAPS))
+def test_region_states_are_the_cell_by_cell_raster(img, tris, level, filter, wrap):
+    """``raster.region_states`` (each region through ``raster.rows_flag`` on its own) is the
+    cell-by-cell rasteriser's answer, on exact grids too."""
+    alpha = np.array([0.0, 255.0, 100.0])[img]  # T, O, C under the bounds below
+    for g in (footprint_grid(img, filter, wrap), footprint_grid(img, filter, wrap, values=alpha,
+                                                                 bounds=np.array([150.0, 0, 50.0, 1]))):
+        micro = np.concatenate([birdcurve.uv_micro_triangles(t, level) for t in tris])
+        texel = micro * np.array([g.width, g.height], dtype=np.float64)
+        want = np.array([reference_raster.polygon_flags(*g.kernel_args(), np.ascontiguousarray(p) + g.offset)
+                         for p in texel], dtype=np.uint8)
+        assume(np.all(want > 0))
+        np.testing.assert_array_equal(raster.region_states(g, texel), states.FLAG_TO_STATE[want])

@@ -2,20 +2,19 @@
 
 One baker serves every per-triangle map: eval's ``triL`` (the corpus pair's two triangles), the
 tracer's ``triL`` and the standard OMMs. A micro-triangle's state is the OR of the footprint
-flags of every cell its interior overlaps, exactly as ``raster.polygon_flags`` computes it -- the
-same vertex arithmetic, row bands and x-extents, and the same optional growth ``grow`` (texels,
-the Minkowski sum with a square; see ``GROW_TEXEL``). Each triangle is walked down the
-subdivision tree in the bird-curve order, and two facts make it fast without changing a state:
+flags of every cell its interior overlaps, as the one rasteriser ``raster.rows_flag`` computes
+it, with the optional growth ``grow`` (texels, the Minkowski sum with a square; see
+``GROW_TEXEL``). Each triangle is walked down the subdivision tree in the bird-curve order
+(``birdcurve.child``), and two facts make it fast without changing a state:
 
 * a summed-area table of the grid's T and O flag bits counts a box of cells in O(1): when the
   box around a node (its bounding box, widened by a margin far above float rounding) is all T,
   all O or all C, every micro-triangle below it has that state, and its index range is filled
   at once (the descendants of node k of level l are k*4^(L-l) ... (k+1)*4^(L-l) - 1);
-* a leaf (a micro-triangle under a mixed box) is rasterised exactly as ``raster.polygon_flags``
-  does -- the same vertex arithmetic, the same row bands and x-extents -- but each row's cell
-  span is read from the table in O(1) instead of cell by cell; only a span holding mixed
-  bilinear cells (``FootprintGrid.mixed``) is walked cell by cell, each mixed cell decided by
-  ``bilinear.cell_flag`` as ``raster.polygon_flags`` decides it.
+* a leaf (a micro-triangle under a mixed box) is rasterised by ``raster.rows_flag``: each row's
+  cell span is read from the same table in O(1); only a span holding mixed bilinear cells
+  (``FootprintGrid.mixed``) is walked cell by cell, each mixed cell decided by
+  ``bilinear.cell_flag``.
 
 A box holding a mixed cell is never filled as C from the table: part of it may be known. A small
 one (at most NODE_EXACT_CELLS cells) is rasterised like a leaf first; when the node is known, so
@@ -43,18 +42,16 @@ Example::
 
 from __future__ import annotations
 
-import math
-
 import numba
 import numpy as np
 from numba import njit, prange
 
-from ..bilinear import POLY_MAX, cell_flag, point_flag
+from ..bilinear import POLY_MAX, point_flag
 from ..birdcurve import CHILD_VERTS, MAX_LEVEL, bary_point, child
 from ..errors import InputError
-from ..flag_table import MARGIN, box_counts, box_flag, flag_table, unmixed_flag
-from ..raster import edge_extent
-from ..sampling import FootprintGrid, cell_index
+from ..flag_table import MARGIN, box_flag, flag_table
+from ..raster import rows_flag
+from ..sampling import FootprintGrid
 
 __all__ = ["bake_micromaps", "bake_micromap_rows", "dynamic_levels", "micro_starts", "check_level",
            "check_uv_triangles", "flag_table", "GROW_TEXEL", "MAX_LEVEL"]
@@ -88,75 +85,14 @@ def check_uv_triangles(tris_uv) -> np.ndarray:
 def _leaf_flag(sat, flags, mixed, values, bounds, period_x, period_y, x0, y0, x1, y1, x2, y2, grow, points, tri,
                buf_a, buf_b):
     """OR of the flags of the cells a micro-triangle (grown by ``grow``) overlaps (0: no area):
-    ``raster.polygon_flags``' arithmetic, each row's cell span read in O(1) unless it holds mixed
-    cells -- ``raster.polygon_flags_table`` for a triangle held in scalars: this is the baker's
-    innermost call (millions per bake), and the general polygon version, reading its vertices
-    from an array, made the oak bake about 15 % slower (1.42 against 1.24 s on one thread).
-
-    ``points``: the OR of the three vertices' own flags (``bilinear.point_flag``) when the caller
-    has them (a leaf's vertices are shared with its siblings), else -1 (read here when needed).
-    ``tri`` (3, 2) receives the triangle, the polygon ``bilinear.cell_flag`` clips; ``buf_*``
-    (POLY_MAX, 2) scratch. No reference counting (``_nrt=False``: it allocates nothing): numba's
-    atomic counts of the array arguments took about a tenth of the bake."""
-    points_done = False
-    ymin = min(y0, min(y1, y2))
-    ymax = max(y0, max(y1, y2))
-    acc = 0
-    if grow > 0.0 and mixed.shape[0] > 0:
-        # grown, every vertex's cell is in a row span below, so its flag is part of the OR: read
-        # first (cheap), a leaf across the cut-off is C before any row is counted. (Ungrown, a
-        # vertex on a row's lower edge lies outside the spans: then only after a mixed span.)
-        points_done = True
-        acc = points if points >= 0 else _points_flag(flags, mixed, values, bounds, period_x, period_y, x0, y0, x1,
-                                                      y1, x2, y2, grow)
-        if acc == 3:
-            return 3
-        _set_tri(tri, x0, y0, x1, y1, x2, y2)
-    for r in range(int(math.floor(ymin - grow)), int(math.ceil(ymax + grow))):
-        b0 = max(float(r) - grow, ymin)
-        b1 = min(float(r + 1) + grow, ymax)
-        if b1 < b0 or (b1 == b0 and grow == 0.0):
-            continue
-        xmin = np.inf
-        xmax = -np.inf
-        xmin, xmax = edge_extent(x0, y0, x1, y1, b0, b1, xmin, xmax)
-        xmin, xmax = edge_extent(x1, y1, x2, y2, b0, b1, xmin, xmax)
-        xmin, xmax = edge_extent(x2, y2, x0, y0, b0, b1, xmin, xmax)
-        xmin -= grow
-        xmax += grow
-        if not xmax > xmin:
-            continue
-        c0 = int(math.floor(xmin))
-        c1 = int(math.ceil(xmax))
-        nt, no, nm, n = box_counts(sat, r, r + 1, c0, c1, period_y, period_x)
-        acc |= unmixed_flag(nt, no, nm)
-        if nm > 0 and acc != 3:  # the mixed cells, each decided on its own
-            if not points_done:  # the vertices' own flags first (``raster.polygon_flags`` does the same)
-                points_done = True
-                acc |= points if points >= 0 else _points_flag(flags, mixed, values, bounds, period_x, period_y, x0,
-                                                               y0, x1, y1, x2, y2, grow)
-                if acc == 3:
-                    return 3
-                _set_tri(tri, x0, y0, x1, y1, x2, y2)
-            hc, wc = flags.shape
-            row = cell_index(r, hc, period_y)
-            for c in range(c0, c1):
-                col = cell_index(c, wc, period_x)
-                if mixed[row, col]:
-                    acc |= cell_flag(values, bounds, period_x, period_y, row, col, tri, 3, c, r, grow, buf_a, buf_b)
-                    if acc == 3:
-                        return 3
-        if acc == 3:
-            return 3
-    return acc
-
-
-@njit(cache=True, inline="always")
-def _points_flag(flags, mixed, values, bounds, period_x, period_y, x0, y0, x1, y1, x2, y2, grow):
-    """OR of the three vertices' own flags (``bilinear.point_flag``)."""
-    acc = point_flag(flags, mixed, values, bounds, period_x, period_y, x0, y0, grow)
-    acc |= point_flag(flags, mixed, values, bounds, period_x, period_y, x1, y1, grow)
-    return acc | point_flag(flags, mixed, values, bounds, period_x, period_y, x2, y2, grow)
+    ``raster.rows_flag`` on the triangle, written to ``tri`` (3, 2). ``points``: the OR of the
+    three vertices' own flags (``bilinear.point_flag``) when the caller has them (a leaf's
+    vertices are shared with its siblings), else -1 (read when needed); ``buf_*`` (POLY_MAX, 2)
+    scratch. This is the baker's innermost call (millions per bake): it allocates nothing and
+    runs without numba's reference counting (``_nrt=False``), whose atomic counts of the array
+    arguments took about a tenth of the bake."""
+    _set_tri(tri, x0, y0, x1, y1, x2, y2)
+    return rows_flag(sat, (flags, mixed, values, bounds, period_x, period_y), tri, 3, grow, points, buf_a, buf_b)
 
 
 @njit(cache=True, inline="always")

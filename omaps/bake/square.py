@@ -8,7 +8,7 @@ A pair is given by its corner UVs (P, 6, 2): the UVs at A's corners (0,0), (1,0)
 B's (0,0), (1,1), (0,1) (``omaps.pair``). Cell (i, j) covers s in [i/N, (i+1)/N], t in
 [j/N, (j+1)/N]; its part in A (t <= s) and its part in B (t >= s) are mapped to texture space by
 each triangle's own affine UV map (``pair.pair_weights``), grown by ``grow`` texels, and the
-cell's flag is the OR of the footprint flags either part overlaps (``raster.polygon_flags``; in
+cell's flag is the OR of the footprint flags either part overlaps (``raster.rows_flag``; in
 an exact bilinear grid, the part's own state in each mixed cell).
 A lone triangle (``has_b`` False) leaves the cells wholly in B at flag 0: cells no hit reaches,
 stored as C (a "don't care" encoders never need to keep).
