@@ -77,15 +77,6 @@ def hit_st(corners, tri, b1, b2):
 
 
 @njit(cache=True)
-def hit_to_uv(triangle, b1, b2):
-    """(u, v) of a hit with barycentrics (b1, b2) -- the weights of p1 and p2 -- on triangle
-    0 (A) or 1 (B)."""
-    if triangle == 0:
-        return b1 + b2, b2
-    return b1, b1 + b2
-
-
-@njit(cache=True)
 def uv_to_cell(u, v, n):
     """Square cell (i, j) of an n x n map holding (u, v); the far edges u = 1, v = 1 belong to
     the last cell, coordinates outside [0, 1] clamp."""
@@ -95,25 +86,9 @@ def uv_to_cell(u, v, n):
 
 
 @njit(cache=True)
-def hit_to_cell(triangle, b1, b2, n):
-    u, v = hit_to_uv(triangle, b1, b2)
-    return uv_to_cell(u, v, n)
-
-
-def square_cells(n: int) -> np.ndarray:
-    """The n*n cells as rectangles in UV, shape (n*n, 4, 2), in map order (j-major)."""
-    j, i = np.meshgrid(np.arange(n), np.arange(n), indexing="ij")
-    u0 = (i / n).ravel()
-    u1 = ((i + 1) / n).ravel()
-    v0 = (j / n).ravel()
-    v1 = ((j + 1) / n).ravel()
-    return np.stack([np.stack([u0, v0], -1), np.stack([u1, v0], -1),
-                     np.stack([u1, v1], -1), np.stack([u0, v1], -1)], axis=1)
-
-
-@njit(cache=True)
 def uv_to_hit(u, v):
-    """Inverse of ``hit_to_uv``: (triangle, b1, b2) of a point of the square (A where v <= u)."""
+    """(triangle, b1, b2) of a point (u, v) of the corpus pair's square (A where v <= u): the hit
+    there, barycentrics the weights of the triangle's p1 and p2."""
     if v <= u:
         return 0, u - v, v
     return 1, u, v - u

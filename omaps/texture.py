@@ -17,8 +17,6 @@ from .errors import InputError
 # Extensions we look for when a folder is given (Pillow decides what it can actually read).
 IMAGE_EXTENSIONS = (".png", ".tga", ".jpg", ".jpeg", ".bmp", ".dds", ".tif", ".tiff", ".webp", ".gif")
 
-CHANNEL_NAMES = {"R": 0, "G": 1, "B": 2, "A": 3, "L": 0}
-
 
 @dataclass(frozen=True)
 class AlphaTexture:

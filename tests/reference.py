@@ -387,3 +387,28 @@ def bilinear_extremes_many(values, mode, tris):
         out[r, 0] = mn
         out[r, 1] = mx
     return out
+
+
+# ---- the corpus pair's square (docs/FORMAT.md) ------------------------------------------------
+
+def hit_to_uv(triangle, b1, b2):
+    """(u, v) of a hit with barycentrics (b1, b2) -- the weights of p1 and p2 -- on the corpus
+    pair's triangle 0 (A: (0,0), (1,0), (1,1)) or 1 (B: (0,0), (1,1), (0,1))."""
+    if triangle == 0:
+        return b1 + b2, b2
+    return b1, b1 + b2
+
+
+def hit_to_cell(triangle, b1, b2, n):
+    """Square cell (i, j) of an n x n map that a hit on the corpus pair reads; the far edges
+    u = 1, v = 1 belong to the last cell."""
+    u, v = hit_to_uv(triangle, b1, b2)
+    return min(max(math.floor(u * n), 0), n - 1), min(max(math.floor(v * n), 0), n - 1)
+
+
+def square_cells(n):
+    """The n*n cells as rectangles in UV, shape (n*n, 4, 2), in map order (j-major)."""
+    j, i = np.meshgrid(np.arange(n), np.arange(n), indexing="ij")
+    u0, u1, v0, v1 = (i / n).ravel(), ((i + 1) / n).ravel(), (j / n).ravel(), ((j + 1) / n).ravel()
+    return np.stack([np.stack([u0, v0], -1), np.stack([u1, v0], -1),
+                     np.stack([u1, v1], -1), np.stack([u0, v1], -1)], axis=1)

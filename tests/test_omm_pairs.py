@@ -35,7 +35,7 @@ def test_every_micro_triangle_lies_in_its_cell(level, rng):
         pts = np.einsum("sk,mkd->msd", w, tri)
         for m in range(len(tri)):
             for b1, b2 in pts[m]:
-                i, j = pair.hit_to_cell(t, b1, b2, n)
+                i, j = ref.hit_to_cell(t, b1, b2, n)
                 assert j * n + i == cells[t, m]
     count_a = np.bincount(cells[0], minlength=n * n).reshape(n, n)
     count_b = np.bincount(cells[1], minlength=n * n).reshape(n, n)
@@ -59,7 +59,7 @@ def test_square_map_is_the_merge_of_the_direct_bake(img, level, filter, wrap):
 @given(state_images, st.integers(0, 5), st.sampled_from(FILTERS), st.sampled_from(WRAPS))
 def test_expansion_equals_per_micro_triangle_cell_lookup(img, level, filter, wrap):
     """Expanded micromaps read, micro-triangle by micro-triangle, the cell a hit at its centroid
-    reads (pair.hit_to_cell); a known micro-triangle's state is never contradicted by the direct
+    reads (ref.hit_to_cell); a known micro-triangle's state is never contradicted by the direct
     bake (the expansion is the square map, exactly, and the direct bake can only know more)."""
     g = footprint_grid(img, filter, wrap)
     n = 1 << level
@@ -70,7 +70,7 @@ def test_expansion_equals_per_micro_triangle_cell_lookup(img, level, filter, wra
     c = micro_triangles(level).mean(axis=1)
     for t in (0, 1):
         for m, (b1, b2) in enumerate(c):
-            i, j = pair.hit_to_cell(t, b1, b2, n)
+            i, j = ref.hit_to_cell(t, b1, b2, n)
             assert ex[t, m] == sq[j, i]
     direct = bake.bake_micromap_rows(g, pair.PAIR, level)
     assert states.is_conservative(direct, ex)

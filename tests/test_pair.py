@@ -4,6 +4,7 @@ import numpy as np
 from hypothesis import given
 from hypothesis import strategies as st
 
+import reference as ref
 from omaps import pair
 
 bary = st.tuples(st.floats(0, 1), st.floats(0, 1)).filter(lambda b: b[0] + b[1] <= 1)
@@ -14,22 +15,26 @@ def test_hit_to_cell_is_the_point_of_the_triangle(tri, b, n):
     b1, b2 = b
     p = pair.PAIR[tri]
     u, v = (1 - b1 - b2) * p[0] + b1 * p[1] + b2 * p[2]  # the hit's position on the triangle
-    assert np.allclose(pair.hit_to_uv(tri, b1, b2), (u, v))
-    i, j = pair.hit_to_cell(tri, b1, b2, n)
+    assert np.allclose(ref.hit_to_uv(tri, b1, b2), (u, v))
+    i, j = ref.hit_to_cell(tri, b1, b2, n)
     assert 0 <= i < n and 0 <= j < n
     assert i / n - 1e-12 <= u <= (i + 1) / n + 1e-12 and j / n - 1e-12 <= v <= (j + 1) / n + 1e-12
+    # the kernels' mapping (any pair's corner codes, here the corpus pair's) is the same, exactly
+    s, t = pair.hit_st(np.concatenate([pair.A_CORNERS, pair.B_CORNERS]), tri, b1, b2)
+    assert (s, t) == ref.hit_to_uv(tri, b1, b2)
+    assert pair.uv_to_cell(s, t, n) == (i, j)
 
 
 @given(st.floats(0, 1), st.floats(0, 1))
 def test_uv_to_hit_inverts(u, v):
     t, b1, b2 = pair.uv_to_hit(u, v)
     assert b1 >= 0 and b2 >= 0 and b1 + b2 <= 1 + 1e-12
-    assert np.allclose(pair.hit_to_uv(t, b1, b2), (u, v))
+    assert np.allclose(ref.hit_to_uv(t, b1, b2), (u, v))
     assert (t == 0) == (v <= u)  # A lies below the diagonal
 
 
 def test_square_cells_order():
-    cells = pair.square_cells(4)
+    cells = ref.square_cells(4)
     assert cells.shape == (16, 4, 2)
     np.testing.assert_allclose(cells[1], [[0.25, 0], [0.5, 0], [0.5, 0.25], [0.25, 0.25]])  # (i=1, j=0)
     np.testing.assert_allclose(cells[4, 0], [0, 0.25])  # row j = 1 starts at index 4
