@@ -30,7 +30,7 @@ def decoded_blocks(res: OmmResult) -> np.ndarray:
     return codec.decode_many(raw)
 
 
-def expand_result(res: OmmResult) -> OmmResult:
+def expand_result(res: OmmResult, **assets) -> OmmResult:
     """Standard micromaps only (no pair blocks) from a result read with pair blocks."""
     settings = settings_from_summary(res.summary)
     fmt = settings.format_code
@@ -40,7 +40,7 @@ def expand_result(res: OmmResult) -> OmmResult:
     three = pairs.expand(maps, rec["pair"].astype(np.int64), rec["corners"])  # (T, 4**L)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        geoms, _, _ = load_geometries(res.summary["input"])
+        geoms, _, _ = load_geometries(res.summary["input"], **assets)  # (root, allow_outside: load_scene's)
     packer = _Packer(settings)
     parts, first = [], 0
     for g in geoms:
