@@ -54,8 +54,9 @@ def self_contained(text: str) -> None:
 
 def trace_json(scene, tmp_path, size) -> dict:
     out = tmp_path / "t.json"
+    # (exit 1, a scheme changing a visible pixel, still writes the JSON: that check is test_trace's)
     assert main(["trace", str(scene), "--schemes", SCHEMES, "--size", str(size), "--jobs", "1", "--quiet",
-                 "--json", str(out)]) == 0
+                 "--json", str(out)]) in (0, 1)
     return json.loads(out.read_text())
 
 

@@ -227,7 +227,7 @@
     if (info) info.textContent = `${s.distinct} distinct triangle images, ${s.res} texels per leg; ` +
       `${(100 * s.known).toFixed(1)} % of the drawn area known (T or O)`;
     showMaterialScheme(name);
-    needsRender = true;
+    draw();
   }
   const MODES = { states: 0, alpha: 1, texture: 2 };
   function setMode(mode) {
@@ -235,7 +235,7 @@
     for (const m of Object.values(alphaMaterials)) m.uniforms.mode.value = MODES[mode];
     api.mode = mode;
     document.querySelectorAll("input[name=mode]").forEach((r) => { r.checked = r.value === mode; });
-    needsRender = true;
+    draw();
   }
   api.setScheme = setScheme;
   api.setMode = setMode;
@@ -273,22 +273,23 @@
       needsRender = true;
     }
   }
+  function draw() {  // at once (a scheme or mode chosen), not at the next animation frame
+    resize();
+    renderer.render(scene, camera);
+    needsRender = false;
+    api.frames++;
+    if (loaded) api.ready = true;
+  }
   function frame() {
     resize();
-    if (needsRender) {
-      renderer.render(scene, camera);
-      needsRender = false;
-      api.frames++;
-      if (loaded) api.ready = true;
-    }
+    if (needsRender) draw();
     requestAnimationFrame(frame);
   }
   let loaded = false;
   Promise.all(pending).then(() => {
+    loaded = true;
     setScheme(view.initial || api.schemes[0]);
     setMode("states");
-    loaded = true;
-    needsRender = true;
     requestAnimationFrame(frame);
   }).catch((e) => { api.errors.push(String(e)); console.error(e); });
 })();
