@@ -7,7 +7,9 @@ how many any-hit shader calls they remove, on a corpus of textures and in ray-tr
 The core, used by every command: ``alpha_test`` (the one alpha test), ``bake`` (the micromap and
 pair-square bakers), ``codecs`` (every stored square map, raw ``sqN`` included), ``schemes`` (the
 one scheme grammar), ``scene`` (the one glTF reader), ``coverage`` and ``promotion`` (C to O/T).
-On top: ``corpus`` (``omaps eval``), ``trace`` (``omaps trace``), ``omm`` (``omaps omm``), ``cli``.
+On top: ``corpus`` (``omaps eval``), ``trace`` (``omaps trace``), ``omm`` (``omaps omm``); then
+one call per command, each returning a result object: ``evaluate_corpus``, ``trace_scene``,
+``bake_omms`` and ``run_batch``; the ``cli`` parses, calls them and prints.
 
 Example::
 
@@ -34,6 +36,9 @@ _LAZY = {
     "footprint_grid": (".sampling", "footprint_grid"), "get_scheme": (".schemes", "get_scheme"),
     "parse_schemes": (".schemes", "parse_schemes"), "AlphaTexture": (".texture", "AlphaTexture"),
     "load_alpha": (".texture", "load_alpha"), "as_texture": (".texture", "as_texture"),
+    "evaluate_corpus": (".corpus", "evaluate_corpus"), "trace_scene": (".trace", "trace_scene"),
+    "bake_omms": (".jobs", "bake_omms"), "verify_omms": (".jobs", "verify_omms"), "expand_omms": (".jobs", "expand_omms"),
+    "run_batch": (".batch", "run_batch"),
 }
 
 
@@ -63,7 +68,7 @@ def load_scene(path, root=None, allow_outside=False, max_bytes=None):
 
 
 __all__ = [
-    "states", "AlphaTest", "MaterialRules", "StateRule", "bake_micromaps", "bake_pair_squares", "bake_pair_triangles",
+    "evaluate_corpus", "trace_scene", "bake_omms", "verify_omms", "expand_omms", "run_batch", "states", "AlphaTest", "MaterialRules", "StateRule", "bake_micromaps", "bake_pair_squares", "bake_pair_triangles",
     "bake_square", "known_fraction", "texel_limit", "get_codec", "EvalConfig", "default_corpus", "evaluate_many",
     "evaluate_texture", "InputError", "footprint_grid", "get_scheme", "parse_schemes", "AlphaTexture", "load_alpha",
     "as_texture", "load_scene",

@@ -1,10 +1,11 @@
-"""``omaps batch omm|eval|trace``: one command over many inputs, on Dask.
+"""``run_batch`` (``omaps batch omm|eval|trace``): one command's library call over many inputs, on
+Dask.
 
-Each input runs through exactly the single command's own function (``cmd_omm``, ``cmd_eval``,
-``cmd_trace``) with the batch's options, its output set to one path under OUTDIR (the same
-layout as the single command: an ``omm`` folder, the ``eval`` / ``trace`` JSON), so its outputs
-are those of ``omaps CMD INPUT -o/--json PATH`` byte for byte (a ``trace`` JSON differs only in
-its timings). Around it:
+Each input runs through exactly the single command's library call (``bake_omms``,
+``evaluate_corpus``, ``trace_scene``) with the batch's options (that call's keyword arguments),
+its output at one path under OUTDIR (the same layout as the single command: an ``omm`` folder, the
+``eval`` / ``trace`` JSON), so its outputs are those of ``omaps CMD INPUT -o/--json PATH`` byte
+for byte (a ``trace`` JSON differs only in its timings). Around it:
 
 * inputs: files, folders (searched recursively: images for ``eval``, ``.gltf`` / ``.glb`` for
   ``omm`` and ``trace``) and globs; output names are paths relative to the folder given (a file
@@ -26,9 +27,9 @@ its timings). Around it:
 
 from __future__ import annotations
 
-import argparse
 import contextlib
 import csv
+import dataclasses
 import glob
 import io
 import json
@@ -39,28 +40,32 @@ import traceback
 import warnings
 
 from . import atomic
-from .cli.common import plural as count  # "1 input", "2 inputs": the commands' one helper
 from .errors import InputError
+from .text import plural as count  # "1 input", "2 inputs"
+
+__all__ = ["run_batch", "plan_batch", "run_plan", "BatchPlan", "BatchResult", "COMMANDS", "library_call", "run_one",
+           "find_inputs", "output_names", "check_scheduler", "dask_client"]
 
 COMMANDS = ("omm", "eval", "trace")
 MARKERS = ".batch"
 SUMMARY = "summary"
 GLTF_EXTENSIONS = (".gltf", ".glb")
-# the single command's positional input and output option (namespace attributes)
-INPUT_DEST = {"omm": "inputs", "eval": "paths", "trace": "scene"}
-OUTPUT_DEST = {"omm": "output", "eval": "json", "trace": "json"}
-# options of the single command a batch sets itself (per input), or refuses
-# (hidden from the batch's help: ``--json`` of eval and trace too, the output being under OUTDIR)
-REFUSED = {"eval": ("csv", "plot", "show", "per_texture"), "omm": ("verify", "expand"),
-           "trace": ("heatmap", "render", "plot_budget")}
-# namespace attributes that belong to the batch, not to the command run per input
-BATCH_ONLY = ("func", "batch_command", "batch_output", "scheduler", "window", "command")
 
 
-def single_function(command: str):
-    from .cli import maps, omm, trace
+def library_call(command: str):
+    """The one library call a batch runs per input: ``bake_omms``, ``evaluate_corpus`` or
+    ``trace_scene``."""
+    if command == "omm":
+        from .jobs import bake_omms
 
-    return {"omm": omm.cmd_omm, "eval": maps.cmd_eval, "trace": trace.cmd_trace}[command]
+        return bake_omms
+    if command == "eval":
+        from .corpus import evaluate_corpus
+
+        return evaluate_corpus
+    from .trace import trace_scene
+
+    return trace_scene
 
 
 # ---------------------------------------------------------------------------------------------
@@ -176,12 +181,28 @@ def marker_path(outdir: str, name: str) -> str:
     return os.path.join(outdir, MARKERS, name + ".json")
 
 
-def command_options(a) -> dict:
-    """The options of the command run per input (what the marker records)."""
-    d = {k: v for k, v in vars(a).items() if k not in BATCH_ONLY}
-    d.pop(INPUT_DEST[a.batch_command], None)
-    d.pop(OUTPUT_DEST[a.batch_command], None)
-    return d
+def with_root(command: str, options: dict, path: str, rel: str) -> dict:
+    """An input's options with the root of its scene's URI policy (``omaps.load_scene``) where
+    none is given: the folder given that it was found in (``rel``: its path from there), its own
+    folder for a file named or a glob's match."""
+    if command == "eval" or options.get("root") is not None or options.get("allow_outside"):
+        return options
+    given = path[:len(path) - len(rel)] if rel and path.endswith(rel) else os.path.dirname(path)
+    return {**options, "root": given or "."}
+
+
+def plain(value):
+    """Options as JSON (what a marker and the summary record): a settings object (``MaterialRules``,
+    ``EvalConfig``) as its fields, tuples as lists."""
+    import dataclasses
+
+    if dataclasses.is_dataclass(value) and not isinstance(value, type):
+        return {f.name: plain(getattr(value, f.name)) for f in dataclasses.fields(value)}
+    if isinstance(value, dict):
+        return {str(k): plain(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [plain(v) for v in value]
+    return value
 
 
 def fingerprint(command: str, path: str, options: dict) -> dict:
@@ -190,7 +211,7 @@ def fingerprint(command: str, path: str, options: dict) -> dict:
         stat = [st.st_size, st.st_mtime_ns]
     except OSError:
         stat = None
-    return {"command": command, "input": os.path.abspath(path), "stat": stat, "options": options}
+    return {"command": command, "input": os.path.abspath(path), "stat": stat, "options": plain(options)}
 
 
 def remove_stale_temporaries(outdir: str) -> None:
@@ -226,49 +247,50 @@ def finished(command: str, out: str, marker: str, fp: dict) -> dict | None:
 # ---------------------------------------------------------------------------------------------
 # one input
 
-def figures(command: str, out: str) -> dict:
-    """What the summary keeps of one input's output."""
+def _run_call(command: str, options: dict, path: str, out: str) -> tuple[str, dict, list[str]]:
+    """The command's library call on one input, its output written at ``out``: (status, the
+    figures the summary keeps, the messages the single command would print on stderr)."""
+    call = library_call(command)
     if command == "omm":
-        if out.endswith(".glb"):
-            from .omm import gltf_io
-
-            st = gltf_io.read_gltf(out).summary["statistics"]
-        else:
-            with open(os.path.join(out, "omm.json"), encoding="utf-8") as f:
-                st = json.load(f)["statistics"]
-        return {k: st[k] for k in ("triangles", "micro_triangles", "transparent", "opaque", "unknown",
+        bake = call([path], out, **options)
+        st = bake.statistics
+        figs = {k: st[k] for k in ("triangles", "micro_triangles", "transparent", "opaque", "unknown",
                                    "known_area_fraction", "micromaps", "data_bytes") if k in st}
-    with open(out, encoding="utf-8") as f:
-        r = json.load(f)
+        return "ok", figs, bake.messages()
+    outputs = atomic.Outputs(inputs=[path])
+    outputs.file(out, "--json")
     if command == "eval":
-        t = r["textures"][0]
-        return {"width": t["width"], "height": t["height"],
-                "savings": {s: v["savings"] for s, v in t["schemes"].items()},
-                "bits": {s: v["bits"] for s, v in t["schemes"].items()}}
-    return {"passed": r["passed"], "triangles": r["scene"].get("triangles"),
+        res = call([path], **options)
+        with outputs.writing():
+            res.write_json(outputs.path(out))
+        t = res.results[0]
+        return "ok", {"width": t.width, "height": t.height, "savings": {s: t.savings[s] for s in res.names},
+                      "bits": {s: t.bits[s] for s in res.names}}, []
+    res = call(path, **options)
+    with outputs.writing():
+        res.write_json(outputs.path(out))
+    r = res.report
+    figs = {"passed": r["passed"], "triangles": r["scene"].get("triangles"),
             "alpha_tests_per_primary_ray": {s: v["alpha_tests_per_primary_ray"] for s, v in r["schemes"].items()}}
+    return ("ok" if res.passed else "problems"), figs, res.messages()
 
 
 def run_one(command: str, options: dict, path: str, name: str, outdir: str, fp: dict) -> dict:
-    """Run the single command on one input, its output at ``output_path``; then write the marker.
-    Returns the input's record: status ok / problems (the command's exit 1) / skipped / error."""
-    from .cli.common import show_warning
-
-    a = argparse.Namespace(**options)
-    setattr(a, INPUT_DEST[command], path if command == "trace" else [path])
-    out = output_path(command, outdir, name, options)
-    setattr(a, OUTPUT_DEST[command], out)
-    a.quiet = True
+    """Run the command's library call on one input, its output at ``output_path``; then write
+    the marker. Returns the input's record: status ok / problems (a scheme changed a visible
+    result) / skipped / error."""
+    out = output_path(command, outdir, name, {"glb": options.get("glb")})
+    options = {k: v for k, v in options.items() if k != "glb"}
     rec = {"input": path, "output": os.path.relpath(out, outdir), "status": None}
     t0 = time.perf_counter()
-    stdout, stderr = io.StringIO(), io.StringIO()
+    messages: list[str] = []
     try:
-        with contextlib.redirect_stdout(stdout), contextlib.redirect_stderr(stderr), warnings.catch_warnings():
-            warnings.showwarning = show_warning
+        with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always", UserWarning)
-            rc = single_function(command)(a)
-        rec["status"] = "ok" if rc == 0 else "problems"
-        rec["figures"] = figures(command, out)
+            try:
+                rec["status"], rec["figures"], messages = _run_call(command, options, path, out)
+            finally:
+                messages = [f"omaps: warning: {w.message}" for w in caught] + messages
     except InputError as exc:
         if command == "eval" and exc.problem.startswith("no texture is at least"):
             rec["status"], rec["reason"] = "skipped", f"smaller than --min-size {options.get('min_size')} px"
@@ -281,7 +303,6 @@ def run_one(command: str, options: dict, path: str, name: str, outdir: str, fp: 
         rec["status"] = "error"
         rec["error"] = f"{path}: {type(exc).__name__}: {exc} ({os.path.basename(tb.filename)}:{tb.lineno})"
     rec["seconds"] = round(time.perf_counter() - t0, 3)
-    messages = [ln for ln in stderr.getvalue().splitlines() if ln.startswith("omaps:")]
     if messages:
         rec["messages"] = messages
     if rec["status"] in ("error", "skipped"):  # no output
@@ -521,30 +542,196 @@ def summary_csv(records: list[dict], tot: dict) -> str:
     return buf.getvalue()
 
 
-def precheck(command: str, a) -> None:
-    """The command's own option checks, once before any work (else every input would fail alike)."""
-    from .cli import common, omm
+def precheck(command: str, options: dict) -> None:
+    """The library call's own option checks, once before any work (else every input would fail
+    alike)."""
     from .schemes import EVAL_KINDS, TRACE_KINDS, parse_schemes
 
+    jobs = options.get("jobs")
+    if jobs is not None and jobs < 1:
+        raise InputError(f"--jobs must be >= 1, got {jobs}")
     if command == "eval":
-        config = common.eval_config(a)
-        parse_schemes(a.schemes, EVAL_KINDS, config.encoder, config.effort, "omaps eval")
-        if a.min_size < 0:
-            raise InputError(f"--min-size must be >= 0, got {a.min_size}")
-        common.check_jobs(a.jobs)
+        from .corpus import EvalConfig
+
+        config = options.get("config") or EvalConfig()
+        if options.get("schemes") is not None:
+            parse_schemes(options["schemes"], EVAL_KINDS, config.encoder, config.effort, "omaps eval")
+        if options.get("min_size", 0) < 0:
+            raise InputError(f"--min-size must be >= 0, got {options['min_size']}")
     elif command == "trace":
         from .trace import parse_camera, parse_light
         from .trace.two_state import parse_modes
 
-        parse_schemes(a.schemes, TRACE_KINDS, a.encoder, a.effort, "omaps trace")
-        common.parse_size(a.size)
-        parse_modes(a.two_state)
-        common.check_jobs(a.jobs)
-        if a.shadows:
-            parse_light(a.light)
-        if a.camera:
-            parse_camera(a.camera)
+        parse_schemes(options.get("schemes", "none"), TRACE_KINDS, options.get("encoder"), options.get("effort"),
+                      "omaps trace")
+        parse_modes(options.get("two_state"))
+        if options.get("shadows") and isinstance(options.get("light"), (str, type(None))):
+            parse_light(options.get("light"))
+        if isinstance(options.get("camera"), str):
+            parse_camera(options["camera"])
     else:
-        omm._settings(a)
-        if a.threads is not None and a.threads < 1:
-            raise InputError(f"--threads must be >= 1, got {a.threads}")
+        from .jobs import omm_settings
+
+        omm_settings(**{k: v for k, v in options.items() if k in (
+            "level", "dynamic", "max_level", "budget", "format", "promote", "seed", "special", "dedup", "source",
+            "encoder", "effort", "jobs")})
+
+
+@dataclasses.dataclass
+class BatchPlan:
+    """What ``plan_batch`` found: the inputs with their output names, the records of inputs done
+    before (resumed) or refused, and the jobs to run (``run_one``'s arguments)."""
+
+    command: str
+    outdir: str
+    options: dict
+    scheduler: str
+    window: int | None
+    found: list
+    names: list
+    records: dict
+    jobs: list
+
+    def line(self) -> str:
+        """The line ``omaps batch`` prints before it runs."""
+        return (f"omaps batch {self.command}: {count(len(self.found), 'input')}, {len(self.found) - len(self.jobs)} "
+                f"already done or refused, {len(self.jobs)} to run (scheduler {self.scheduler})")
+
+
+@dataclasses.dataclass
+class BatchResult:
+    """What ``run_batch`` did: per input its record (status ok / problems / skipped / error, its
+    figures or error, seconds), the totals, and where the summary was written."""
+
+    command: str
+    records: list
+    totals: dict
+    summary_json: str
+    summary_csv: str
+    seconds: float
+
+    @property
+    def ok(self) -> bool:
+        """No input had an error or problems."""
+        return not (self.totals["error"] or self.totals["problems"])
+
+    def messages(self) -> list[str]:
+        """Each input's error or problems, one line each, as ``omaps batch`` prints them."""
+        out = []
+        for r in self.records:
+            if r["status"] == "error":
+                out.append(f"omaps: error: {r['error']}")
+            elif r["status"] == "problems":
+                out.append(f"omaps: {r['input']}: done with problems: " + "; ".join(r.get("messages", [])))
+        return out
+
+    def line(self) -> str:
+        """The closing line ``omaps batch`` prints (and the mean savings of an eval batch)."""
+        t = self.totals
+        text = (f"omaps batch {self.command}: {t['ok']} ok, {t['problems']} with problems, {t['skipped']} skipped, "
+                f"{count(t['error'], 'error')} ({t['resumed']} done before); {self.seconds:.2f} s; summary in "
+                f"{self.summary_json} and .csv")
+        if self.command == "eval" and "mean_savings" in t:
+            text += "\nmean savings: " + ", ".join(f"{s} {v:.3f}" for s, v in t["mean_savings"].items())
+        return text
+
+
+def plan_batch(command: str, inputs, outdir, options: dict | None = None, *, scheduler: str = "local",
+               window: int | None = None, glb: bool = False) -> BatchPlan:
+    """Check a batch before any work and find what it runs: the options (``precheck``), the
+    scheduler's address, OUTDIR, the inputs and their output names, and the inputs finished
+    before with the same options (resumed, not run again)."""
+    if command not in COMMANDS:
+        raise InputError(f"unknown batch command {command!r} (choose from {', '.join(COMMANDS)})")
+    options = {**(options or {}), **({"glb": True} if glb else {})}
+    if scheduler not in ("none", "local") and not scheduler.startswith(("tcp://", "tls://", "inproc://")):
+        raise InputError(f"--scheduler must be local, none or tcp://HOST:PORT, got {scheduler!r}")
+    check_scheduler(scheduler)
+    precheck(command, {k: v for k, v in options.items() if k != "glb"})
+    if window is not None and window < 1:
+        raise InputError(f"--window must be >= 1, got {window}")
+    outdir = os.fspath(outdir)
+    if os.path.lexists(outdir) and not os.path.isdir(outdir):
+        raise InputError("exists and is not a folder; -o is the batch's output folder", outdir)
+    atomic.check_file(os.path.join(outdir, SUMMARY + ".json"), "-o")  # OUTDIR can be created and written
+    found = find_inputs(command, inputs or [], outdir)
+    names = output_names(command, found, command == "omm" and not glb)
+    remove_stale_temporaries(outdir)
+    library_call(command)  # importable before any work
+    records: dict[str, dict] = {}
+    jobs = []
+    for (path, rel), name in zip(found, names):
+        fp = fingerprint(command, path, options)
+        out = output_path(command, outdir, name, options)
+        done = finished(command, out, marker_path(outdir, name), fp)
+        if done is not None:
+            records[name] = {**done, "resumed": True}
+            continue
+        if command == "omm" and os.path.isdir(out) and os.listdir(out) and "omm.json" not in os.listdir(out):
+            records[name] = {"input": path, "output": os.path.relpath(out, outdir), "status": "error",
+                             "error": f"{out}: folder is not empty and holds no omm.json (not written by omaps): "
+                                      "not replacing it"}
+            continue
+        jobs.append((command, with_root(command, options, path, rel), path, name, outdir, fp))
+    return BatchPlan(command, outdir, options, scheduler, window, found, names, records, jobs)
+
+
+def run_plan(plan: BatchPlan, progress: bool = False) -> BatchResult:
+    """Run a ``plan_batch`` plan and write OUTDIR/summary.json and summary.csv."""
+    t0 = time.perf_counter()
+    records = dict(plan.records)
+    by_input = {j[2]: j[3] for j in plan.jobs}
+    for rec in run_all(plan.command, plan.jobs, plan.scheduler, plan.window, progress):
+        records[by_input.get(rec["input"], rec["input"])] = rec
+    dt = time.perf_counter() - t0
+    ordered = [records[n] for n in plan.names if n in records]
+    ordered += [r for n, r in records.items() if n not in plan.names]
+    tot = totals(plan.command, ordered)
+    tot["seconds"] = round(dt, 3)
+    tot["inputs_per_second"] = round(len(plan.jobs) / dt, 4) if plan.jobs and dt > 0 else None
+    settings = {"command": plan.command, "scheduler": plan.scheduler, "options": plain(plan.options)}
+    with contextlib.suppress(OSError):
+        os.rmdir(os.path.join(plan.outdir, MARKERS))  # only if empty (nothing done)
+    js, cs = os.path.join(plan.outdir, SUMMARY + ".json"), os.path.join(plan.outdir, SUMMARY + ".csv")
+    atomic.write_text(js, json.dumps({"settings": settings, "inputs": ordered, "totals": tot}, indent=1) + "\n")
+    atomic.write_text(cs, summary_csv(ordered, tot))
+    return BatchResult(plan.command, ordered, tot, js, cs, dt)
+
+
+def run_batch(command: str, inputs, outdir, options: dict | None = None, *, scheduler: str = "local",
+              window: int | None = None, glb: bool = False, progress: bool = False) -> BatchResult:
+    """Run one command's library call over many inputs, one output per input under ``outdir``.
+
+    Parameters
+    ----------
+    command : {"omm", "eval", "trace"}
+        ``bake_omms``, ``evaluate_corpus`` or ``trace_scene`` per input.
+    inputs : list of str
+        Files, folders (searched recursively: images for eval, .gltf / .glb for omm and trace)
+        and globs.
+    outdir : str
+        OUTDIR/NAME/ (omm; OUTDIR/NAME.glb with ``glb``) or OUTDIR/NAME.json per input, and
+        OUTDIR/summary.json and summary.csv.
+    options : dict, optional
+        The library call's keyword arguments, the same for every input.
+    scheduler : str
+        ``none`` (serial, in this process), ``local`` (a Dask LocalCluster, one worker process per
+        core) or ``tcp://HOST:PORT`` (an existing Dask scheduler).
+    window : int, optional
+        At most this many inputs in flight (default: twice the workers' threads).
+    progress : bool
+        A progress bar on stderr.
+
+    Returns
+    -------
+    BatchResult
+        A bad input is a recorded error, never a failed batch; a re-run skips finished inputs.
+
+    Examples
+    --------
+    >>> import omaps                                                               # doctest: +SKIP
+    >>> res = omaps.run_batch("eval", ["textures/"], "out", {"schemes": "sq16,vq4"}, scheduler="none")  # doctest: +SKIP
+    >>> res.totals["ok"], res.totals["mean_savings"]["vq4"]                        # doctest: +SKIP
+    """
+    plan = plan_batch(command, inputs, outdir, options, scheduler=scheduler, window=window, glb=glb)
+    return run_plan(plan, progress)

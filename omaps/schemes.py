@@ -29,8 +29,7 @@ from __future__ import annotations
 import re
 from dataclasses import dataclass
 
-from .codecs.options import EFFORTS
-from .codecs.registry import Codec, check_choice, codec_names, get_codec
+from .codecs.registry import EFFORTS, Codec, check_choice, codec_names, get_codec
 from .errors import InputError
 
 __all__ = ["Scheme", "get_scheme", "parse_schemes", "square_scheme_choices", "DEFAULT_SCHEMES", "KINDS", "EVAL_KINDS",

@@ -58,6 +58,7 @@ def test_trace_budget_reads_each_pair_through_its_own_codec():
     from omaps.schemes import get_scheme
     from omaps.trace import prepare
     from omaps.trace.budget import budget_maps
+    from omaps.codecs import format_names
     from omaps.trace.lookups import mixed_map_state
     from omaps.trace.tables import T_MAP_FORMAT, T_MAP_OFFSET, scheme_tables
 
@@ -77,7 +78,7 @@ def test_trace_budget_reads_each_pair_through_its_own_codec():
         if b1 + b2 > 1:
             b1, b2 = 1 - b1, 1 - b2
         row = sm.rows[tri]
-        option = PAIR_OPTIONS[fmt[row]]
+        option = format_names()[fmt[row]]  # the format code is its codec's (the registry's)
         if option == "none":
             expect = states.C
         else:

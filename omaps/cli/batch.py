@@ -4,16 +4,17 @@
 from __future__ import annotations
 
 import argparse
-import contextlib
-import json
-import os
 import sys
-import time
 
-from .. import atomic
 from .. import batch as engine
 from ..errors import InputError
 from .common import show_progress
+
+# the single command's positional input (namespace attribute), and its options a batch refuses (it
+# writes one output per input itself); hidden from the batch's help, as is eval's and trace's --json
+INPUT_DEST = {"omm": "inputs", "eval": "paths", "trace": "scene"}
+REFUSED = {"eval": ("csv", "plot", "show", "per_texture"), "omm": ("verify", "expand"),
+           "trace": ("heatmap", "render", "plot_budget")}
 
 
 NAMING = ("Output names: an input's path relative to the folder given, extension dropped; a file named (or "
@@ -48,9 +49,9 @@ def add_parser(sub) -> None:
                          + ", then OUTDIR/summary.json and summary.csv. " + NAMING)
         p.epilog = None  # (trace's: its printed table, which a batch does not print)
         p.formatter_class = argparse.HelpFormatter
-        hidden = set(engine.REFUSED[name]) | ({"json"} if name != "omm" else set())
+        hidden = set(REFUSED[name]) | ({"json"} if name != "omm" else set())
         for act in p._actions:  # the single command's input becomes many inputs
-            if act.dest == engine.INPUT_DEST[name]:
+            if act.dest == INPUT_DEST[name]:
                 act.nargs, act.metavar = "+", "INPUT"
                 act.help = "files, folders (searched recursively) or globs"
             elif act.dest in hidden:
@@ -79,78 +80,28 @@ def add_parser(sub) -> None:
 
 
 def cmd_batch(a: argparse.Namespace) -> int:
-    if a.batch_command == "omm":
-        a.output = None  # moved to batch_output; the per-input output is set by the batch
-    return run_batch(a)
+    """``omaps batch``: the single command's options as its library call's keyword arguments,
+    then ``omaps.batch.plan_batch`` and ``run_plan``. Exit 0 when every input is ok or skipped, 1
+    when one has an error or problems (all listed in the summary), 2 bad batch options."""
+    from . import maps, omm, trace
 
-
-def run_batch(a) -> int:
-    """``omaps batch``: see the module docstring. Exit 0 when every input is ok or skipped, 1 when
-    one has an error or problems (all listed in the summary), 2 bad batch options."""
     command, outdir = a.batch_command, a.batch_output
+    if command == "omm":
+        a.output = None  # moved to batch_output; the per-input output is set by the batch
     if not outdir:
         raise InputError(f"give the output folder with -o OUTDIR (omaps batch {command} INPUTS... -o OUTDIR)")
-    for opt in engine.REFUSED[command]:
+    for opt in REFUSED[command]:
         if getattr(a, opt, None):
             raise InputError(f"omaps batch {command} writes one output per input under OUTDIR; "
                              f"--{opt.replace('_', '-')} is not available here")
     if command != "omm" and getattr(a, "json", None):
         raise InputError(f"omaps batch {command} writes each input's JSON under OUTDIR; drop --json")
-    if a.scheduler not in ("none", "local") and not a.scheduler.startswith(("tcp://", "tls://", "inproc://")):
-        raise InputError(f"--scheduler must be local, none or tcp://HOST:PORT, got {a.scheduler!r}")
-    engine.check_scheduler(a.scheduler)
-    engine.precheck(command, a)
-    if a.window is not None and a.window < 1:
-        raise InputError(f"--window must be >= 1, got {a.window}")
-    if os.path.lexists(outdir) and not os.path.isdir(outdir):
-        raise InputError("exists and is not a folder; -o is the batch's output folder", outdir)
-    atomic.check_file(os.path.join(outdir, engine.SUMMARY + ".json"), "-o")  # OUTDIR can be created and written
-    found = engine.find_inputs(command, getattr(a, engine.INPUT_DEST[command]) or [], outdir)
-    names = engine.output_names(command, found, command == "omm" and not getattr(a, "glb", False))
-    engine.remove_stale_temporaries(outdir)
-    options = engine.command_options(a)
-    engine.single_function(command)  # importable before any work
-    records: dict[str, dict] = {}
-    jobs = []
-    for (path, _), name in zip(found, names):
-        fp = engine.fingerprint(command, path, options)
-        out = engine.output_path(command, outdir, name, options)
-        done = engine.finished(command, out, engine.marker_path(outdir, name), fp)
-        if done is not None:
-            records[name] = {**done, "resumed": True}
-            continue
-        if command == "omm" and os.path.isdir(out) and os.listdir(out) and "omm.json" not in os.listdir(out):
-            records[name] = {"input": path, "output": os.path.relpath(out, outdir), "status": "error",
-                             "error": f"{out}: folder is not empty and holds no omm.json (not written by omaps): "
-                                      "not replacing it"}
-            continue
-        jobs.append((command, options, path, name, outdir, fp))
-    t0 = time.perf_counter()
-    print(f"omaps batch {command}: {engine.count(len(found), 'input')}, {len(found) - len(jobs)} already done "
-          f"or refused, {len(jobs)} to run (scheduler {a.scheduler})", flush=True)
-    by_input = {j[2]: j[3] for j in jobs}
-    for rec in engine.run_all(command, jobs, a.scheduler, a.window, show_progress(a.quiet)):
-        records[by_input.get(rec["input"], rec["input"])] = rec
-    dt = time.perf_counter() - t0
-    ordered = [records[n] for n in names if n in records]
-    ordered += [r for n, r in records.items() if n not in names]
-    tot = engine.totals(command, ordered)
-    tot["seconds"] = round(dt, 3)
-    tot["inputs_per_second"] = round(len(jobs) / dt, 4) if jobs and dt > 0 else None
-    settings = {"command": command, "scheduler": a.scheduler, "options": options}
-    with contextlib.suppress(OSError):
-        os.rmdir(os.path.join(outdir, engine.MARKERS))  # only if empty (nothing done)
-    atomic.write_text(os.path.join(outdir, engine.SUMMARY + ".json"),
-                      json.dumps({"settings": settings, "inputs": ordered, "totals": tot}, indent=1) + "\n")
-    atomic.write_text(os.path.join(outdir, engine.SUMMARY + ".csv"), engine.summary_csv(ordered, tot))
-    for r in ordered:
-        if r["status"] == "error":
-            print(f"omaps: error: {r['error']}", file=sys.stderr)
-        elif r["status"] == "problems":
-            print(f"omaps: {r['input']}: done with problems: " + "; ".join(r.get("messages", [])), file=sys.stderr)
-    print(f"omaps batch {command}: {tot['ok']} ok, {tot['problems']} with problems, {tot['skipped']} skipped, "
-          f"{engine.count(tot['error'], 'error')} ({tot['resumed']} done before); {dt:.2f} s; summary in "
-          f"{os.path.join(outdir, engine.SUMMARY + '.json')} and .csv")
-    if command == "eval" and "mean_savings" in tot:
-        print("mean savings: " + ", ".join(f"{s} {v:.3f}" for s, v in tot["mean_savings"].items()))
-    return 1 if tot["error"] or tot["problems"] else 0
+    options = {"omm": omm.bake_options, "eval": maps.eval_options, "trace": trace.trace_options}[command](a)
+    plan = engine.plan_batch(command, getattr(a, INPUT_DEST[command]), outdir, options, scheduler=a.scheduler,
+                             window=a.window, glb=getattr(a, "glb", False))
+    print(plan.line(), flush=True)
+    res = engine.run_plan(plan, show_progress(a.quiet))
+    for m in res.messages():
+        print(m, file=sys.stderr)
+    print(res.line())
+    return 0 if res.ok else 1

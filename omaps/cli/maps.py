@@ -3,22 +3,20 @@ and single maps of one texture."""
 
 from __future__ import annotations
 
-import os
 import sys
-import time
 
 import numpy as np
 
 from ..atomic import Outputs
 from ..bake import GROW_TEXEL, bake_micromap_rows, bake_square, known_fraction
 from ..codecs import get_codec
-from ..corpus import default_corpus, evaluate_many, mean_results, report
+from ..corpus import evaluate_corpus, report
 from ..corpus.evaluate import scheme_map
 from ..errors import InputError
 from ..omm.inputs import load_uvs
 from ..schemes import DEFAULT_SCHEMES, EVAL_KINDS, get_scheme, parse_schemes
-from ..texture import find_images, load_alpha
-from .common import add_codec_options, add_state_options, eval_config, plural, print_table, show_progress
+from ..texture import load_alpha
+from .common import add_codec_options, add_state_options, eval_config, plural, show_progress
 
 
 def add_parsers(sub) -> None:
@@ -86,84 +84,52 @@ def _add_map_parsers(sub) -> None:
     de.set_defaults(func=cmd_decode)
 
 
-PER_TEXTURE_ROWS = 20  # per-texture rows printed without --per-texture
-
-
-def _print_table(results, names, per_texture: bool) -> None:
-    means = mean_results(results, names)
-    rows = []
-    if per_texture:
-        rows += [[r.name if len(r.name) <= 40 else "..." + r.name[-37:]] + [f"{r.savings[n]:.3f}" for n in names]
-                 for r in results]
-    rows.append([f"MEAN savings ({len(results)})"] + [f"{means[n]['savings']:.3f}" for n in names])
-    rows.append(["mean bits/pair"] + [f"{means[n]['bits']:.0f}" for n in names])
-    print_table(["texture"] + names, rows)
-
-
 def cmd_eval(a) -> int:
+    from ..corpus.experiment import PER_TEXTURE_ROWS
+
     config = eval_config(a)
-    schemes = parse_schemes(a.schemes, EVAL_KINDS, config.encoder, config.effort, "omaps eval")
-    names = [s.name for s in schemes]
-    if a.min_size < 0:
-        raise InputError(f"--min-size must be >= 0, got {a.min_size}")
-    if a.jobs is not None and a.jobs < 1:
-        raise InputError(f"--jobs must be >= 1, got {a.jobs}")
+    parse_schemes(a.schemes, EVAL_KINDS, config.encoder, config.effort, "omaps eval")  # before the outputs
     outputs = Outputs(inputs=a.paths)
     outputs.file(a.json, "--json")
     outputs.file(a.csv, "--csv")
     outputs.file(a.plot, "--plot", report.plot_suffixes() if a.plot else None)
     outputs.folder(a.show, "--show", report.SHOW_MANIFEST)
-    named = set()
-    if a.paths:
-        items, skipped_other = find_images(a.paths)
-        if skipped_other:
-            print(f"omaps: skipping {plural(len(skipped_other), 'file')} without an image extension "
-                  f"(e.g. {skipped_other[0]})", file=sys.stderr)
-        if not items:
-            raise InputError("no image files found", ", ".join(a.paths))
-        named = {p for p in a.paths if not os.path.isdir(p)}
-        source = plural(len(items), "file")
-    else:
-        items = default_corpus()
-        source = "the embedded procedural corpus"
     progress = show_progress(a.quiet)
-    t0 = time.perf_counter()
-    unreadable: list = []
-    results, small = evaluate_many(items, schemes, config, a.jobs, keep_maps=bool(a.show), min_size=a.min_size,
-                                   progress=progress, unreadable=unreadable)
-    dt = time.perf_counter() - t0
-    for path, problem in unreadable:
-        if path in named:  # a file named on the command line is bad input
-            raise InputError(problem, path)
-    if small:
-        print(f"omaps: skipped {plural(len(small), 'texture')} smaller than {a.min_size} px", file=sys.stderr)
-    if not results:
-        if unreadable:
-            _print_unreadable(unreadable)
-            raise InputError("no texture could be read", ", ".join(a.paths))
-        raise InputError(f"no texture is at least {a.min_size} px")
-    print(f"omaps eval: {plural(len(results), 'texture')} from {source}, mode {config.rule.mode}, "
-          f"filter {config.filter}, wrap {config.wrap}, {dt:.2f} s")
-    per_texture = a.per_texture or (not a.quiet and len(results) <= PER_TEXTURE_ROWS)
-    _print_table(results, names, per_texture)
+    try:
+        res = evaluate_corpus(a.paths, **eval_options(a), keep_maps=bool(a.show), progress=progress)
+    except InputError as exc:
+        if getattr(exc, "unreadable", None):
+            _print_unreadable(exc.unreadable)
+        raise
+    if res.skipped_other:
+        print(f"omaps: skipping {plural(len(res.skipped_other), 'file')} without an image extension "
+              f"(e.g. {res.skipped_other[0]})", file=sys.stderr)
+    if res.small:
+        print(f"omaps: skipped {plural(len(res.small), 'texture')} smaller than {a.min_size} px", file=sys.stderr)
+    print(res.heading())
+    per_texture = a.per_texture or (not a.quiet and len(res.results) <= PER_TEXTURE_ROWS)
+    print(res.table(per_texture))
     if not per_texture and not a.quiet:
-        print(f"({plural(len(results), 'per-texture row')} not shown: --per-texture prints them)")
-    settings = {"source": source, **config.settings(), "min_size": a.min_size,
-                "schemes": {s.name: s.settings() for s in schemes}}
+        print(f"({plural(len(res.results), 'per-texture row')} not shown: --per-texture prints them)")
     # everything is computed; now write: all outputs are renamed into place together at the end
     with outputs.writing():
         if a.json:
-            report.write_json(outputs.path(a.json), results, names, settings, unreadable)
+            res.write_json(outputs.path(a.json))
         if a.csv:
-            report.write_csv(outputs.path(a.csv), results, names)
+            res.write_csv(outputs.path(a.csv))
         if a.plot:
-            report.plot_savings(outputs.path(a.plot), results, names)
+            res.plot(outputs.path(a.plot))
         if a.show:
-            report.write_show(outputs.path(a.show), results, settings, progress)
-    if unreadable:
-        _print_unreadable(unreadable)
+            res.write_show(outputs.path(a.show), progress)
+    if res.unreadable:
+        _print_unreadable(res.unreadable)
         return 1
     return 0
+
+
+def eval_options(a) -> dict:
+    """``evaluate_corpus``' keyword arguments from the command line (``omaps batch eval`` too)."""
+    return dict(schemes=a.schemes, config=eval_config(a), jobs=a.jobs, min_size=a.min_size)
 
 
 def _print_unreadable(unreadable) -> None:

@@ -4,12 +4,10 @@ and ``omaps omm --verify DIR``. ``add_parser`` registers the subcommand on omaps
 from __future__ import annotations
 
 import sys
-import time
 
-from ..atomic import Outputs
 from ..errors import InputError
 from ..names import BUDGET_WEIGHTS, OMM_FORMATS, PROMOTIONS
-from .common import (add_codec_options, add_material_options, check_jobs, material_rules, parse_size, plural,
+from .common import (add_asset_options, add_codec_options, add_material_options, asset_options, material_rules, parse_size, plural,
                      show_progress)
 
 
@@ -70,160 +68,54 @@ def add_parser(sub) -> None:
     o.add_argument("--quiet", action="store_true", help="no progress bar")
     add_material_options(o)
     add_codec_options(o, "--from codecs named without a variant")
+    add_asset_options(o)
     o.set_defaults(func=cmd_omm)
-
-
-def _spec(a) -> dict:
-    from ..omm import inputs
-    from ..scene.files import SCENE_RULE, is_scene_file  # the scene loader's rule (omaps trace's too)
-
-    if len(a.inputs) == 1 and is_scene_file(a.inputs[0]):
-        if a.channel:
-            raise InputError("--channel applies to a texture input, not to glTF")
-        return inputs.gltf_spec(a.inputs[0], material_rules(a))
-    if len(a.inputs) == 2:
-        return inputs.texture_spec(a.inputs[0], a.inputs[1], a.cutoff, a.filter, a.wrap, a.channel)
-    if len(a.inputs) == 1:
-        raise InputError(f"a texture needs a .npy array of UV triangles (T, 3, 2) after it; {SCENE_RULE}",
-                         a.inputs[0])
-    raise InputError("give SCENE.gltf|.glb, or TEXTURE UVS.npy (and -o DIR), or --verify DIR")
-
-
-def _settings(a):
-    from ..omm.pipeline import OmmSettings
-
-    if sum(x is not None for x in (a.level, a.dynamic, a.budget)) > 1:
-        raise InputError("--level, --dynamic and --budget exclude each other")
-    budget = None
-    if a.budget is not None:
-        from ..budget import parse_bytes
-
-        budget = parse_bytes(a.budget)
-    check_jobs(a.jobs)
-    if a.level is not None and a.source != "texture":
-        raise InputError("--from fixes the level to log2 N of the square map; drop --level")
-    return OmmSettings(format=a.format, level=4 if a.level is None else a.level, dynamic_scale=a.dynamic,
-                       max_level=a.max_level, promotion=a.promote, special=not a.no_special, dedup=not a.no_dedup,
-                       source=a.source, encoder=a.encoder, effort=a.effort, seed=a.seed, jobs=a.jobs,
-                       budget=budget)
 
 
 def cmd_omm(a) -> int:
     # the library is imported here, not at the top: parsing (and --help) loads no numba kernel
-    from ..omm import files, gltf_io, inputs
-    from ..omm import format as omm_format
-    from ..omm.pipeline import build
+    from ..jobs import bake_omms
 
-    if a.threads is not None:
-        import numba
-
-        if a.threads < 1:
-            raise InputError(f"--threads must be >= 1, got {a.threads}")
-        numba.set_num_threads(min(a.threads, numba.config.NUMBA_NUM_THREADS))
+    if a.threads is not None and a.threads < 1:
+        raise InputError(f"--threads must be >= 1, got {a.threads}")
     if a.verify:
         if a.inputs or a.output:
             raise InputError("--verify DIR takes no inputs and no -o")
-        return _cmd_verify(a.verify)
+        return _cmd_verify(a.verify, a)
     if a.expand:
         return _cmd_expand(a)
-    spec = _spec(a)
-    if not a.output:
-        raise InputError("give the output folder with -o DIR")
-    outputs = Outputs(inputs=a.inputs)
-    to_gltf = gltf_io.is_gltf(a.output)
-    if to_gltf:
-        if spec["kind"] != "gltf":
-            raise InputError("a .glb / .gltf output needs a glTF input (a texture and UVs have no scene)", a.output)
-        outputs.file(a.output, "-o")
-    else:
-        outputs.folder(a.output, "-o", omm_format.SUMMARY_FILE, (".glb", ".gltf"))  # before the work, not after
-    settings = _settings(a)
-    t0 = time.perf_counter()
-    view, view_info = None, None
-    if a.weights == "view":  # where the view's hits fall: the same counting trace as trace's budget
-        if settings.budget is None or spec["kind"] != "gltf":
-            raise InputError("--weights view needs --budget and a glTF scene")
-        from ..scene import load_scene
-        from ..trace.view import scene_view_samples
+    if a.inputs and not a.output:
+        from ..jobs import omm_input_spec
 
-        w, h = parse_size(a.size)
-        weights, hits, cam = scene_view_samples(load_scene(spec["path"]), material_rules(a), w, h)
-        view, view_info = (weights, hits), {"weights": "view", "size": [w, h], "camera": cam, "hits": int(len(hits))}
-    geoms, skipped, warned = inputs.load_geometries(spec, view)
-    if show_progress(a.quiet):
-        bar = _Bar()
-        try:
-            result = build(geoms, settings, bar)
-        finally:
-            bar.close()
-    else:
-        result = build(geoms, settings)
-    dt = time.perf_counter() - t0
-    if "budget" in result.summary:
-        result.summary["budget"].update(view_info or {"weights": "area"})
-    extra = {"input": spec, "skipped_primitives": skipped, "warnings": warned}
-    with outputs.writing():
-        if to_gltf:
-            for w in gltf_io.write_gltf_result(spec["path"], outputs.path(a.output), a.output, result, extra):
-                print(f"omaps: warning: {w}", file=sys.stderr)
-        else:
-            files.write_into(outputs.path(a.output), result, extra)
-    st = result.summary["statistics"]
-    print(f"{a.output}: {plural(st['triangles'], 'triangle')}, {plural(st['micro_triangles'], 'micro-triangle')} "
-          f"({_held_states(st, settings)}); {plural(st['micromaps'], 'micromap')} after reuse "
-          f"(of {st['micromaps_without_reuse']}), {plural(st['data_bytes'], 'data byte')}; {dt:.2f} s")
-    for s in skipped:
-        print(f"omaps: skipped mesh {s['mesh']} primitive {s['primitive']} ({s['name']}): {s['reason']}",
-              file=sys.stderr)
+        omm_input_spec(a.inputs, material_rules(a), a.channel)  # the inputs' own error first
+    if not a.output:
+        raise InputError("give the output folder with -o DIR" if a.inputs else
+                         "give SCENE.gltf|.glb, or TEXTURE UVS.npy (and -o DIR), or --verify DIR")
+    bake = bake_omms(a.inputs, a.output, **bake_options(a), progress=show_progress(a.quiet))
+    print(bake.line())
+    for m in bake.messages():
+        print(m, file=sys.stderr)
     return 0
 
 
-class _Bar:
-    """``omm.pipeline.Progress`` as a progress bar on stderr: one bar a stage (--budget's pricing,
-    in micro-triangles; the baking, in geometries), its total known when it starts."""
-
-    FORMAT = "{desc}: {percentage:3.0f}%|{bar}| {n_fmt}/{total_fmt} {unit} [{elapsed}<{remaining}]"
-
-    def __init__(self):
-        self.bar = None
-
-    def stage(self, name: str, total: int, unit: str) -> None:
-        from tqdm import tqdm  # only for the bar (its import costs 25 ms of the start)
-
-        self.close()
-        self.bar = tqdm(total=total, desc=f"omm {name}", unit=unit, unit_scale=unit == "micro-triangles",
-                        bar_format=self.FORMAT, leave=False)
-
-    def advance(self, n: int = 1) -> None:
-        self.bar.update(n)
-
-    def close(self) -> None:
-        if self.bar is not None:
-            self.bar.close()
-            self.bar = None
+def bake_options(a) -> dict:
+    """``bake_omms``' keyword arguments from the command line (``omaps batch omm`` too)."""
+    return dict(level=a.level, dynamic=a.dynamic, max_level=a.max_level, budget=a.budget, weights=a.weights,
+                size=parse_size(a.size) if a.weights == "view" else (512, 512), format=a.format,
+                promote=a.promote, seed=a.seed, special=not a.no_special, dedup=not a.no_dedup, source=a.source,
+                encoder=a.encoder, effort=a.effort, jobs=a.jobs, threads=a.threads, rules=material_rules(a),
+                channel=a.channel, **asset_options(a))
 
 
-def _held_states(st: dict, settings) -> str:
-    """The micro-triangle states the output holds. The statistics count the bake's T, O and
-    unknown (C); 4-state output keeps every unknown one (as unknown-transparent or
-    unknown-opaque), 2-state output has none: each became T or O by the --promote rule."""
-    known_area = f"known area {st['known_area_fraction']:.1%}"
-    if settings.format != "2state":
-        return f"{st['transparent']} T, {st['opaque']} O, {st['unknown']} unknown; {known_area}"
-    to_t, to_o = st["unknown_resolved"]["transparent"], st["unknown_resolved"]["opaque"]
-    return (f"{st['transparent'] + to_t} T, {st['opaque'] + to_o} O, 0 unknown: {st['unknown']} unknown resolved "
-            f"to 2 states by {settings.promotion}, {to_t} to T and {to_o} to O; {known_area} before resolving")
+def _cmd_verify(folder, a=None) -> int:
+    from ..jobs import verify_omms
 
-
-def _cmd_verify(folder) -> int:
-    from ..omm.verify import verify
-
-    res, problems, done = verify(folder)
-    st = res.summary["statistics"]
-    for d in done:
+    check = verify_omms(folder, **asset_options(a))
+    st = check.result.summary["statistics"]
+    for d in check.done:
         print(f"checked: {d}")
-    if problems:
-        for p in problems:
+    if check.problems:
+        for p in check.problems:
             print(f"omaps: {folder}: {p}", file=sys.stderr)
         return 1
     print(f"{folder}: OK ({plural(st['triangles'], 'triangle')}, {plural(st['micromaps'], 'micromap')}, "
@@ -233,23 +125,17 @@ def _cmd_verify(folder) -> int:
 
 def _cmd_expand(a) -> int:
     """``omaps omm BAKED.glb --expand -o STD.glb``: the stored pair blocks decoded and expanded
-    into standard micromaps (``omm.pairs.expand``), packed as ``build`` packs them."""
-    from ..omm import gltf_io
-    from ..omm.expand import expand_result
+    into standard micromaps, packed as a bake packs them."""
+    from ..jobs import expand_omms
 
-    if len(a.inputs) != 1 or not gltf_io.is_gltf(a.inputs[0]) or not a.output or not gltf_io.is_gltf(a.output):
+    if len(a.inputs) != 1 or not a.output:
         raise InputError("--expand takes one baked .glb/.gltf and -o OUT.glb|OUT.gltf")
-    outputs = Outputs(inputs=a.inputs)
-    outputs.file(a.output, "-o")
-    res = gltf_io.read_gltf(a.inputs[0])
-    if res.pair_blocks is None:
-        raise InputError("holds no OMAPS_pair_opacity_maps pair blocks to expand", a.inputs[0])
-    out = expand_result(res)
-    with outputs.writing():
-        for w in gltf_io.write_gltf_result(a.inputs[0], outputs.path(a.output), a.output, out, None):
-            print(f"omaps: warning: {w}", file=sys.stderr)
-    st = out.summary["statistics"]
-    blocks = res.summary["pair_blocks"]
+    bake = expand_omms(a.inputs[0], a.output, **asset_options(a))
+    for w in bake.warnings:
+        print(f"omaps: warning: {w}", file=sys.stderr)
+    st = bake.statistics
+    blocks = bake.source_blocks
     print(f"{a.output}: {plural(st['triangles'], 'triangle')} from "
-          f"{plural(blocks['blocks'], blocks['codec'] + ' pair block')}; {plural(st['micromaps'], 'micromap')}, {plural(st['data_bytes'], 'data byte')}")
+          f"{plural(blocks['blocks'], blocks['codec'] + ' pair block')}; {plural(st['micromaps'], 'micromap')}, "
+          f"{plural(st['data_bytes'], 'data byte')}")
     return 0

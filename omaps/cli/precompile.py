@@ -14,11 +14,9 @@ commands use. ``python bench/bench_cold.py`` measures what it saves.
 
 from __future__ import annotations
 
-import contextlib
 import importlib
 import io
 import os
-import re
 import sys
 import time
 
@@ -28,17 +26,14 @@ __all__ = ["FAMILIES", "uncached", "families_for", "announce", "start_ahead", "f
 # family: (modules whose kernels it compiles, seconds to compile them with an empty cache on one
 # core of the 2-core reference machine: numba's compile events, summed per family, of the palm
 # trace command and of omaps eval)
-FAMILIES = {
+# (the codecs' own families, vq2, vq4, synth and wavelet, are declared in the codec registry;
+# ``FAMILIES`` is both, read on first use so that parsing a command line imports no codec)
+COMMAND_FAMILIES = {
     "square": (("omaps.flag_table", "omaps.raster", "omaps.bake.square"), 10),
     "micromap": (("omaps.flag_table", "omaps.bake.micromap"), 9),
     "trace": (("omaps.trace.rays", "omaps.scene.pairing"), 10),
-    "vq2": (("omaps.codecs.vq2_encode",), 10),
-    "vq4": (("omaps.codecs.vq4_encode",), 30),
     "omm": (("omaps.omm.resolve", "omaps.omm.format", "omaps.coverage"), 6),
-    "budget": (("omaps.budget", "omaps.omm.budget"), 10),
-    "synth": (("omaps.codecs.vq4_synth_encode", "omaps.codecs.vq4_synth_block"), 12),
-    "wavelet": (("omaps.codecs.wavelet3_encode", "omaps.codecs.wavelet3_block", "omaps.codecs.vec4_search", "omaps.budget"),
-                19),
+    "budget": (("omaps.allocate", "omaps.omm.budget"), 10),
 }
 # what the README's first command compiles ahead, beside its own evaluation (which compiles
 # "square" and "micromap"): two processes, the VQ4 encoder with the two codecs built on its
@@ -71,26 +66,45 @@ def _module_cached(name: str) -> bool:
 
 def uncached(families) -> list[str]:
     """The families (names in ``FAMILIES``) whose kernels numba's cache does not hold."""
-    return [f for f in dict.fromkeys(families) if not all(_module_cached(m) for m in FAMILIES[f][0])]
+    fam = _families()
+    return [f for f in dict.fromkeys(families) if not all(_module_cached(m) for m in fam[f][0])]
+
+
+def _families() -> dict:
+    """Every family: the commands' own (``COMMAND_FAMILIES``) and the codecs' (the codec registry's
+    ``COMPILE_FAMILIES``)."""
+    from ..codecs.registry import COMPILE_FAMILIES
+
+    return {**COMMAND_FAMILIES, **COMPILE_FAMILIES}
+
+
+def __getattr__(name):
+    if name == "FAMILIES":
+        return _families()
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
 def _scheme_families(text) -> list[str]:
-    """The families that baking and encoding these comma-separated schemes compiles."""
+    """The families that baking and encoding these comma-separated schemes compiles: a micromap
+    level's, each codec's own (its registry entry), a budget's options' and its allocator's. A name
+    that is no scheme compiles nothing here (the command reports it)."""
+    from ..budget import PAIR_OPTIONS
+    from ..codecs.registry import entry
+    from ..errors import InputError
+    from ..schemes import get_scheme
+
     out = []
     for name in str(text or "").lower().split(","):
-        name = name.strip()
-        if name.startswith("budget:"):
-            out += ["square", "vq2", "vq4", "budget"]
-        elif re.match(r"sq\d+$", name):
-            out.append("square")
-        elif re.match(r"tri\d+$", name):
+        try:
+            s = get_scheme(name.strip())
+        except InputError:
+            continue
+        if s.kind == "micromap":
             out.append("micromap")
-        elif re.match(r"vq2(-|$)", name):
-            out += ["square", "vq2"]
-        elif re.match(r"vq4(x64)?(-|$)", name):
-            out += ["square", "vq4"] + (["synth"] if name.startswith("vq4-synth") else [])
-        elif re.match(r"wavelet3(-|$)", name):
-            out += ["square", "wavelet"]
+        elif s.kind == "square":
+            out += list(entry(s.codec.name).families)
+        elif s.kind == "budget":
+            out += [f for o in PAIR_OPTIONS[1:] for f in entry(o).families] + ["budget"]
     return out
 
 
@@ -123,7 +137,8 @@ def _wanted() -> bool:
 
 
 def _seconds(families) -> int:
-    return sum(FAMILIES[f][1] for f in families)
+    fam = _families()
+    return sum(fam[f][1] for f in families)
 
 
 def announce(args) -> None:
@@ -324,57 +339,57 @@ def _quad_scene(folder: str) -> str:
 
 
 def warm(families, report=None) -> None:
-    """Compile the families' kernels by running the commands that use them on tiny inputs;
-    ``report``: a stream that gets each family's name when its kernels are compiled."""
+    """Compile the families' kernels by running the library calls the commands make on tiny
+    inputs; ``report``: a stream that gets each family's name when its kernels are compiled."""
     import tempfile
+    import warnings
 
     import numpy as np
 
-    from .main import main
+    from .. import bake_omms, evaluate_corpus, trace_scene, verify_omms
+    from ..alpha_test import MaterialRules
 
     with tempfile.TemporaryDirectory(prefix="omaps-precompile-") as tmp:
         scene = _quad_scene(tmp)
         leaf = os.path.join(tmp, "leaf.png")
         uvs = os.path.join(tmp, "uvs.npy")
         np.save(uvs, np.random.default_rng(0).random((48, 3, 2)))
-        trace = ["trace", scene, "--size", "16", "--camera", "0.5,0.5,2:0.5,0.5,0:60", "--quiet", "--jobs", "1"]
+
+        def ev(schemes):
+            return lambda: evaluate_corpus([leaf], schemes, jobs=1)
+
+        def tr(schemes, path=scene, **kw):
+            return lambda: trace_scene(path, schemes, size=16, camera="0.5,0.5,2:0.5,0.5,0:60", jobs=1, **kw)
+
+        def omm(out, inputs=(scene,), **kw):
+            return lambda: bake_omms(list(inputs), os.path.join(tmp, out), threads=1, **kw)
+
         runs = {
-            "square": [["eval", leaf, "--quiet", "--jobs", "1", "--schemes", "sq4,sq16"]],
-            "micromap": [["eval", leaf, "--quiet", "--jobs", "1", "--schemes", "tri2,tri3"]],
-            "trace": [trace + ["--schemes", "none,tri3,sq16", "--shadows", "--two-state", "all"]],
+            "square": [ev("sq4,sq16")],
+            "micromap": [ev("tri2,tri3")],
+            "trace": [tr("none,tri3,sq16", shadows=True, two_state="all")],
             # the deck's encoder and thorough are kernels of their own (vq4's share one)
-            "vq2": [trace + ["--schemes", "none,vq2"],
-                    ["eval", leaf, "--quiet", "--jobs", "1", "--schemes", "vq2,vq2-paper,vq2-thorough"]],
-            "vq4": [trace + ["--schemes", "none,vq4,vq4x64"],
-                    ["eval", leaf, "--quiet", "--jobs", "1", "--schemes", "vq4,vq4x64"]],
-            "omm": [["omm", scene, "-o", os.path.join(tmp, "omm"), "--quiet", "--threads", "1"],
-                    ["omm", scene, "-o", os.path.join(tmp, "omm_2"), "--quiet", "--threads", "1", "--format", "2state",
-                     "--promote", "hashed"],
-                    ["omm", scene, "-o", os.path.join(tmp, "omm.glb"), "--quiet", "--threads", "1"],
-                    ["omm", "--verify", os.path.join(tmp, "omm")],
-                    ["trace", os.path.join(tmp, "omm.glb")] + trace[2:] + ["--schemes", "none,omm"]],
-            "synth": [["eval", leaf, "--quiet", "--jobs", "1", "--schemes", "vq4-synth"],
-                      trace + ["--schemes", "none,vq4-synth"]],
-            "wavelet": [["eval", leaf, "--quiet", "--jobs", "1", "--schemes", "wavelet3,wavelet3-fast"],
-                        trace + ["--schemes", "none,wavelet3-fast"]],
-            "budget": [["omm", scene, "-o", os.path.join(tmp, "omm_budget"), "--quiet", "--threads", "1",
-                        "--budget", "200"], trace + ["--schemes", "none,budget:1KiB"],
-                       ["omm", scene, "-o", os.path.join(tmp, "omm_view"), "--quiet", "--threads", "1", "--budget", "200",
-                        "--weights", "view", "--size", "16"],
+            "vq2": [tr("none,vq2"), ev("vq2,vq2-paper,vq2-thorough")],
+            "vq4": [tr("none,vq4,vq4x64"), ev("vq4,vq4x64")],
+            "omm": [omm("omm"), omm("omm_2", format="2state", promote="hashed"), omm("omm.glb"),
+                    lambda: verify_omms(os.path.join(tmp, "omm")),
+                    tr("none,omm", path=os.path.join(tmp, "omm.glb"))],
+            "synth": [ev("vq4-synth"), tr("none,vq4-synth")],
+            "wavelet": [ev("wavelet3,wavelet3-fast"), tr("none,wavelet3-fast")],
+            "budget": [omm("omm_budget", budget=200), tr("none,budget:1KiB"),
+                       omm("omm_view", budget=200, weights="view", size=(16, 16)),
                        # enough distinct micromaps for the budget's merged options (omaps.omm.budget's kernels)
-                       ["omm", leaf, uvs, "-o", os.path.join(tmp, "omm_merge"), "--quiet", "--threads", "1", "--budget",
-                        "3000", "--filter", "linear"]],
+                       omm("omm_merge", (leaf, uvs), budget=3000, rules=MaterialRules(filter="linear"))],
         }
         failed = []
         for f in families:  # one family failing (no Embree, say) leaves the others compiled
-            for argv in runs[f]:
-                with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(io.StringIO()) as err:
-                    try:
-                        rc = main(argv)
-                    except Exception as exc:  # noqa: BLE001 - reported below, the next family goes on
-                        rc = repr(exc)
-                if rc not in (0, 1):
-                    failed.append(f"{f}: omaps {argv[0]} exited {rc}: {err.getvalue().strip()[-200:]}")
+            for run in runs[f]:
+                try:
+                    with warnings.catch_warnings():
+                        warnings.simplefilter("ignore")
+                        run()
+                except Exception as exc:  # noqa: BLE001 - reported below, the next family goes on
+                    failed.append(f"{f}: {type(exc).__name__}: {str(exc)[-200:]}")
                     break
             else:
                 if report is not None:
@@ -384,7 +399,8 @@ def warm(families, report=None) -> None:
 
 
 if __name__ == "__main__":
-    unknown = [f for f in sys.argv[1:] if f not in FAMILIES]
+    known = _families()
+    unknown = [f for f in sys.argv[1:] if f not in known]
     if unknown:
-        sys.exit(f"unknown families: {', '.join(unknown)} (known: {', '.join(FAMILIES)})")
-    warm(sys.argv[1:] or list(FAMILIES), report=sys.stdout)
+        sys.exit(f"unknown families: {', '.join(unknown)} (known: {', '.join(known)})")
+    warm(sys.argv[1:] or list(known), report=sys.stdout)

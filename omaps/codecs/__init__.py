@@ -1,10 +1,16 @@
 """Stored square maps. Each codec keeps the physical block (bytes) apart from the symbolic block
 (indices, codebook, transforms), the encoder search and the decoders; ``registry`` gives them all
-one interface (``get_codec``), the raw ``sqN`` map included."""
+one interface (``get_codec``), the raw ``sqN`` map included, and is the one list of codecs
+(``ENTRIES``). Outside this package, omaps uses only the names below: the registry, the raw
+2-bit layout and ``block_state``, the tracer's read of any codec's block by its format code."""
 
 from ..lazy import exports
 
-__all__ = ["Codec", "get_codec", "codec_names", "ENCODERS", "EFFORTS"]
+_REGISTRY = ["Codec", "CodecEntry", "ENTRIES", "get_codec", "codec_names", "entry", "budget_options", "format_names",
+             "COMPILE_FAMILIES", "ENCODERS", "EFFORTS"]
+_RAW = ["pack_states", "unpack_states", "row_bytes", "read_state"]  # the one 2-bit layout of every raw map
+__all__ = _REGISTRY + _RAW + ["block_state", "MAX_BLOCK_BYTES"]
 
-# the registry on first use: the OMM format reads ``codecs.raw`` alone
-__getattr__, __dir__ = exports(__name__, dict.fromkeys(__all__, "registry"))
+# each name from its module on first use: the OMM format reads the raw layout alone
+__getattr__, __dir__ = exports(__name__, {**dict.fromkeys(_REGISTRY, "registry"), **dict.fromkeys(_RAW, "raw"),
+                                          "block_state": "dispatch", "MAX_BLOCK_BYTES": "dispatch"})

@@ -1,5 +1,12 @@
 """Stored square maps by name: the raw ``sqN`` map and the compressed codecs, one interface.
 
+This module is the one list of codecs: each declares itself once in ``ENTRIES`` (a
+``CodecEntry``: its name, the tracer's format code, map size, block bytes, random-access lookup,
+whether a byte budget may choose it, and the compile families of its kernels). The tracer's
+dispatch (``codecs.dispatch``), the budget's options (``budget_options``), ``omm --from``, the
+scheme grammar's messages and the compile-ahead families are derived from it; adding a codec is
+its own modules plus one entry.
+
 A ``Codec`` stores one N x N map in a fixed number of bytes: ``encode`` (map -> bytes, the same
 kind of object for every codec), ``decode`` (bytes -> map) and a numba ``lookup(block, x, y)``
 that reads one cell by random access (the tracer's any-hit filter calls it). The codec owns its
@@ -21,7 +28,7 @@ Example::
 from __future__ import annotations
 
 import re
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Callable
 
 import numpy as np
@@ -30,7 +37,8 @@ from .. import states
 from ..errors import InputError
 from .options import EFFORTS, ENCODERS
 
-__all__ = ["Codec", "get_codec", "codec_names", "ENCODERS", "EFFORTS", "check_choice"]
+__all__ = ["Codec", "CodecEntry", "ENTRIES", "get_codec", "codec_names", "entry", "budget_options", "format_names",
+           "COMPILE_FAMILIES", "ENCODERS", "EFFORTS", "check_choice"]
 
 
 def check_choice(kind: str, value, allowed) -> None:
@@ -56,6 +64,7 @@ class Codec:
     lookup: Callable
     # (P, block_bytes) uint8 -> (P, N, N) maps in compiled code; None: ``_decode`` block by block
     _decode_many: Callable[[np.ndarray], np.ndarray] | None = None
+    code: int = 0  # the tracer's format code of this codec's blocks (``CodecEntry.code``)
 
     @property
     def compressed(self) -> bool:
@@ -166,9 +175,92 @@ def _synth(name: str) -> Codec:
                  "best", "medium", enc, block.decode, block.lookup)
 
 
-_COMPRESSED = ("vq2", "vq4", "vq4x64", "vq4-synth", "wavelet3")
+@dataclass(frozen=True)
+class CodecEntry:
+    """One codec's declaration: what every part of omaps derives from the registry.
+
+    ``code`` is the tracer's format code of a pair's block (0 is no map); ``lookup()`` imports the
+    codec's block module only and returns its numba ``(block, x, y) -> state``; ``make()`` builds the
+    full ``Codec`` (encoders, decoders) on first use; ``families`` are the compile-ahead families
+    (``COMPILE_FAMILIES`` and ``omaps.cli.precompile``) that baking and encoding its maps compile;
+    ``budget``: a byte budget may choose it for a pair."""
+
+    name: str
+    code: int
+    map_size: int
+    block_bytes: int
+    lookup: Callable[[], Callable]
+    make: Callable[[], Codec]
+    families: tuple[str, ...]
+    budget: bool = False
+
+
+def _raw_lookup(n: int):
+    def get():
+        from .raw import square_lookup
+
+        return square_lookup(n)
+    return get
+
+
+def _block_lookup(module: str, attr: str = "lookup"):
+    def get():
+        import importlib
+
+        return getattr(importlib.import_module(f"{__package__}.{module}"), attr)
+    return get
+
+
+_RAW_SIZES = tuple(1 << k for k in range(8))  # sq1 .. sq128 (``bake.square.MAX_SQUARE``)
+_RAW_BUDGET = 64  # a budget chooses raw maps up to sq64
+ENTRIES: tuple[CodecEntry, ...] = tuple(
+    CodecEntry(f"sq{n}", 1 + k, n, max(1, n * n // 4), _raw_lookup(n), lambda n=n: _raw(n), ("square",),
+               n <= _RAW_BUDGET) for k, n in enumerate(_RAW_SIZES)) + (
+    CodecEntry("vq2", 9, 16, 32, _block_lookup("vq2_block"), lambda: _vq("vq2"), ("square", "vq2"), True),
+    CodecEntry("vq4", 10, 32, 64, _block_lookup("vq4_block"), lambda: _vq("vq4"), ("square", "vq4"), True),
+    CodecEntry("vq4x64", 11, 64, 256, _block_lookup("vq4_block", "lookup_x64"), lambda: _vq("vq4x64"),
+               ("square", "vq4"), True),
+    CodecEntry("vq4-synth", 12, 32, 64, _block_lookup("vq4_synth_block"), lambda: _synth("vq4-synth"),
+               ("square", "vq4", "synth")),
+    CodecEntry("wavelet3", 13, 64, 64, _block_lookup("wavelet3_block"), lambda: _synth("wavelet3"),
+               ("square", "wavelet")),
+)
+_BY_NAME = {e.name: e for e in ENTRIES}
+_COMPRESSED = tuple(e.name for e in ENTRIES if not e.name.startswith("sq"))
+
+# the compile-ahead families of the codecs' own kernels: (modules whose numba kernels they compile,
+# seconds to compile them with an empty cache on one core of the 2-core reference machine)
+COMPILE_FAMILIES = {
+    "vq2": (("omaps.codecs.vq2_encode",), 10),
+    "vq4": (("omaps.codecs.vq4_encode",), 30),
+    "synth": (("omaps.codecs.vq4_synth_encode", "omaps.codecs.vq4_synth_block"), 12),
+    "wavelet": (("omaps.codecs.wavelet3_encode", "omaps.codecs.wavelet3_block", "omaps.codecs.vec4_search",
+                 "omaps.allocate"), 19),
+}
+
+
+def entry(name: str) -> CodecEntry:
+    """A codec's declaration by name (``sqN`` or a compressed codec); InputError if unknown."""
+    key = str(name).strip().lower()
+    if key not in _BY_NAME:
+        raise InputError(f"unknown codec {name!r} (choose from sqN, {', '.join(_COMPRESSED)})")
+    return _BY_NAME[key]
+
+
+def budget_options() -> tuple[str, ...]:
+    """The codecs a byte budget may choose for a pair, in registry order."""
+    return tuple(e.name for e in ENTRIES if e.budget)
+
+
+def format_names() -> tuple[str, ...]:
+    """Every format code's codec name, indexed by code (0: ``none``, no map)."""
+    names = ["none"] * (1 + max(e.code for e in ENTRIES))
+    for e in ENTRIES:
+        names[e.code] = e.name
+    return tuple(names)
+
+
 _CACHE: dict[str, Codec] = {}
-_RAW = re.compile(r"sq(\d+)")
 
 
 def codec_names() -> list[str]:
@@ -181,13 +273,12 @@ def get_codec(name: str) -> Codec:
     ``wavelet3``."""
     key = str(name).strip().lower()
     if key not in _CACHE:
-        m = _RAW.fullmatch(key)
-        if m:
-            _CACHE[key] = _raw(int(m.group(1)))
-        elif key in ("vq4-synth", "wavelet3"):
-            _CACHE[key] = _synth(key)
-        elif key in _COMPRESSED:
-            _CACHE[key] = _vq(key)
-        else:
-            raise InputError(f"unknown codec {name!r} (choose from sqN, {', '.join(_COMPRESSED)})")
+        m = re.fullmatch(r"sq(\d+)", key)
+        if m and key not in _BY_NAME:
+            from ..bake.square import check_square_size
+
+            key = f"sq{check_square_size(int(m.group(1)))}"  # its own message for a size that is no codec
+        e = entry(key)
+        codec = e.make()
+        _CACHE[key] = replace(codec, code=e.code)
     return _CACHE[key]

@@ -9,7 +9,7 @@ R blocks' options.
    vectors (four cells). A node takes the entry that covers it and keeps most. Any prefix of the
    greedy order is the greedy codebook of that size, so every size E = 0..15 is tried.
 3. Each R block has options (bits, cells kept): C (0, 0); at 32x32 (1 + w, its vector's cells);
-   at 64x64 (1 + 8 + w n, its T/O children's cells and its n best R children's). ``budget.allocate``
+   at 64x64 (1 + 8 + w n, its T/O children's cells and its n best R children's). ``allocate.allocate``
    picks one per block within 512 - 132 - 20E bits (hull steps in falling cells per bit); the best
    E wins, then the codebook is chosen again with the items weighted by the options taken, twice.
 
@@ -26,7 +26,7 @@ import numpy as np
 from numba import njit
 
 from .. import states
-from ..budget import allocate_arrays
+from ..allocate import allocate_arrays
 from .options import check_maps, check_options
 from .symmetry import position_tables
 from .vec4 import FULL, GENERAL, entry_code, untransform_mask

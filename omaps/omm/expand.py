@@ -2,7 +2,7 @@
 decoded by their codec, each pair's square map split into its triangles' level-log2 N micromaps
 (``pairs.expand``), unknown regions resolved by the recorded promotion with the scene's own
 alpha tests (``resolve.resolve``), then given special indices and shared as ``pipeline.build``
-does (its ``_Packer``): the micromaps equal those ``omm --from`` wrote beside the blocks."""
+does (its ``Packer``): the micromaps equal those ``omm --from`` wrote beside the blocks."""
 
 from __future__ import annotations
 
@@ -16,7 +16,7 @@ from . import pairs, resolve
 from . import format as omm_format
 from .files import settings_from_summary
 from .inputs import load_geometries
-from .pipeline import OmmResult, _Packer
+from .pipeline import OmmResult, Packer
 
 __all__ = ["decoded_blocks", "expand_result"]
 
@@ -41,7 +41,7 @@ def expand_result(res: OmmResult, **assets) -> OmmResult:
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         geoms, _, _ = load_geometries(res.summary["input"], **assets)  # (root, allow_outside: load_scene's)
-    packer = _Packer(settings)
+    packer = Packer(settings)
     parts, first = [], 0
     for g in geoms:
         n = len(g.tris_uv)
@@ -57,7 +57,7 @@ def expand_result(res: OmmResult, **assets) -> OmmResult:
         raise RuntimeError(f"internal error: {first} triangles in the scene, {len(three)} pair records")
     index = np.concatenate(parts) if parts else np.zeros(0, np.int32)
     triangles = packer.record_array()
-    data = np.frombuffer(b"".join(packer.chunks), dtype=np.uint8).copy()
+    data = packer.data()
     usage = omm_format.usage_histograms(triangles["level"], triangles["format"], index)
     summary = {k: v for k, v in res.summary.items() if k != "pair_blocks"}
     summary["expanded_from"] = res.summary["pair_blocks"]

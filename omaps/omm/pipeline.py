@@ -42,7 +42,8 @@ from . import resolve
 # expansion) are imported where they are used, so that baking from the texture loads none of
 # their modules and kernels: start-up is part of every omm run's time.
 
-__all__ = ["Geometry", "OmmSettings", "OmmResult", "Progress", "build"]
+__all__ = ["Geometry", "OmmSettings", "OmmResult", "Progress", "build", "GeometryPlan", "plan_geometry", "bake_states",
+           "Packer"]
 
 CHUNK_MICRO_TRIANGLES = 1 << 24  # bake this many micro-triangles at a time (bounded memory)
 
@@ -167,9 +168,13 @@ class OmmResult:
         return np.array([-1 - i], dtype=np.uint8)
 
 
-class _Packer:
-    """Collects micromaps, turning uniform ones into special indices and sharing duplicates
-    (found by a 64-bit hash of the packed rows, then compared byte for byte)."""
+class Packer:
+    """The pack stage: collects micromaps, turning uniform ones into special indices and sharing
+    duplicates (found by a 64-bit hash of the packed rows, then compared byte for byte).
+
+    Preconditions of ``add``: rows of OMM states (0..3, ``omm.format``) of one level, every row
+    ``4**level`` long, 2-state rows holding only 0 and 1. ``record_array`` and ``data`` give the
+    packed buffers in the order micromaps were first added."""
 
     def __init__(self, settings: OmmSettings):
         self.s = settings
@@ -265,6 +270,10 @@ class _Packer:
             self.records = [np.concatenate(self.records) if self.records else np.zeros(0, omm_format.TRIANGLE_RECORD)]
         return self.records[0]
 
+    def data(self) -> np.ndarray:
+        """Every micromap's packed states so far, as one uint8 array (record ``data_offset`` into it)."""
+        return np.frombuffer(b"".join(self.chunks), dtype=np.uint8).copy()
+
     def _new(self, raw: bytes, level: int, fmt: int) -> int:
         self.singles.append((self.size, level, fmt))
         self.n_records += 1
@@ -330,14 +339,79 @@ class Progress(Protocol):
     def advance(self, n: int = 1) -> None: ...
 
 
+@dataclass
+class GeometryPlan:
+    """What the plan stage (``plan_geometry``) decided for one geometry: the triangles to bake (the
+    distinct ones: instanced and repeated foliage cards are baked and resolved once), each one's
+    subdivision level, how many input triangles each stands for, their known-area weights, the
+    triangles forced unknown, and which baked triangle each input triangle takes (``inverse``; None:
+    one to one). ``merged``: with a budget, micromaps shared by merging (triangle -> (its 3-state
+    meet, its stored row))."""
+
+    tris: np.ndarray
+    levels: np.ndarray
+    weight: np.ndarray
+    area: np.ndarray
+    unknown: np.ndarray | None
+    inverse: np.ndarray | None
+    merged: dict
+    n_input: int
+
+
+def plan_geometry(g: Geometry, settings: OmmSettings, n_map: int | None = None, budget_plan=None) -> GeometryPlan:
+    """The plan stage: check a geometry's UV triangles and choose each one's level (one level,
+    ``dynamic_levels`` from its texel area, log2 N of a square source ``n_map``, or the budget's
+    ``budget_plan`` (levels, merged) from ``omm.budget.budget_levels``); with ``dedup`` (and neither
+    a square source nor a budget), identical triangles -- the same UVs, level and unknown flag --
+    are planned once."""
+    tris = check_uv_triangles(g.tris_uv) if len(g.tris_uv) else np.zeros((0, 3, 2))
+    n_tris = len(tris)
+    levels, merged = budget_plan if budget_plan is not None else (_triangle_levels(g.test, tris, settings, n_map), {})
+    area = g.areas(tris)
+    unknown = None if g.unknown is None else np.asarray(g.unknown, dtype=bool)
+    inverse = None
+    if settings.dedup and n_map is None and budget_plan is None and len(tris):  # (no reuse: a micromap each)
+        key = [np.ascontiguousarray(tris, dtype=np.float64).reshape(len(tris), 6).view(np.uint64),
+               levels.astype(np.uint64)[:, None]] + ([] if unknown is None else [unknown.astype(np.uint64)[:, None]])
+        first_of, inverse = omaps_rows.first_occurrences(np.concatenate(key, axis=1))
+        if len(first_of) == len(tris):
+            inverse = None
+    if inverse is None:
+        weight = np.ones(len(tris), dtype=np.int64)
+    else:
+        weight = np.bincount(inverse, minlength=len(first_of))
+        area = np.bincount(inverse, weights=area, minlength=len(first_of))
+        tris, levels = tris[first_of], levels[first_of]
+        unknown = None if unknown is None else unknown[first_of]
+    return GeometryPlan(tris, levels, weight, area, unknown, inverse, merged, n_tris)
+
+
+def bake_states(grid, tris: np.ndarray, levels: np.ndarray, sat=None, unknown=None) -> tuple[np.ndarray, np.ndarray]:
+    """The bake stage: 3-state micromaps (T/O/C, flat, bird-curve order) of UV triangles at their
+    levels from a footprint grid (``AlphaTest.grid``), grown by ``GROW_TEXEL`` as the tracer bakes,
+    and the start of each triangle's states; a triangle flagged ``unknown`` is all C. ``sat``: the
+    grid's ``flag_table`` when the caller bakes several chunks of one grid."""
+    s3, starts = bake_micromaps(grid, tris, levels, GROW_TEXEL, sat)
+    if unknown is not None:
+        for i in np.flatnonzero(unknown):
+            s3[starts[i]:starts[i + 1]] = states.C
+    return s3, starts
+
+
 def build(geometries: list[Geometry], settings: OmmSettings = OmmSettings(),
           progress: Progress | None = None) -> OmmResult:
     """Bake every geometry's micromaps and pack them into the standard buffers; ``progress``:
-    told of each stage and step (``Progress``)."""
+    told of each stage and step (``Progress``).
+
+    The stages, each public over arrays: plan (``plan_geometry``: levels, identical triangles
+    once; with a budget, ``omm.budget.budget_levels`` first), bake (``bake_states``, or a square
+    source's pair maps stored, decoded and expanded), resolve (``omm.resolve.resolve_counted``:
+    unknown regions to the OMM states the format holds, with counts), pack (``Packer``: special
+    indices, reuse of identical micromaps)."""
     scheme = settings.scheme
     n_map = scheme.codec.map_size if scheme is not None else None
     fmt = settings.format_code
-    packer = _Packer(settings)
+    packer = Packer(settings)
     index_parts, blocks_all, records_all, geo_info = [], [], [], []
     n_blocks_total = 0
     counts3 = np.zeros(3, dtype=np.int64)
@@ -355,29 +429,12 @@ def build(geometries: list[Geometry], settings: OmmSettings = OmmSettings(),
     if progress is not None:
         progress.stage("baking", len(geometries), "geometries")
     for gi, g in enumerate(geometries):
-        tris = check_uv_triangles(g.tris_uv) if len(g.tris_uv) else np.zeros((0, 3, 2))
-        n_tris = len(tris)
+        gp = plan_geometry(g, settings, n_map, plan[gi] if plan is not None else None)
+        tris, levels, weight, area, unknown, inverse, merged = (gp.tris, gp.levels, gp.weight, gp.area, gp.unknown,
+                                                                gp.inverse, gp.merged)
+        n_tris = gp.n_input
         grid = g.test.grid()
-        sat = flag_table(grid)
-        levels, merged = plan[gi] if plan is not None else (_triangle_levels(g.test, tris, settings, n_map), {})
-        area = g.areas(tris)
-        unknown = None if g.unknown is None else np.asarray(g.unknown, dtype=bool)
-        # identical triangles (the same UVs, level and unknown flag: instanced and repeated foliage
-        # cards) are baked and resolved once; ``weight`` says how many triangles each one stands for
-        inverse = None
-        if settings.dedup and n_map is None and plan is None and len(tris):  # (no reuse: a micromap each)
-            key = [np.ascontiguousarray(tris, dtype=np.float64).reshape(len(tris), 6).view(np.uint64),
-                   levels.astype(np.uint64)[:, None]] + ([] if unknown is None else [unknown.astype(np.uint64)[:, None]])
-            first_of, inverse = omaps_rows.first_occurrences(np.concatenate(key, axis=1))
-            if len(first_of) == len(tris):
-                inverse = None
-        if inverse is None:
-            weight = np.ones(len(tris), dtype=np.int64)
-        else:
-            weight = np.bincount(inverse, minlength=len(first_of))
-            area = np.bincount(inverse, weights=area, minlength=len(first_of))
-            tris, levels = tris[first_of], levels[first_of]
-            unknown = None if unknown is None else unknown[first_of]
+        sat = flag_table(grid) if n_map is None else None
         idx = np.empty(len(tris), dtype=np.int32)
         n_blocks = 0
         if n_map is not None:
@@ -389,14 +446,15 @@ def build(geometries: list[Geometry], settings: OmmSettings = OmmSettings(),
             n_blocks = len(blk)
         for a, b in _chunks(levels):
             lv = levels[a:b]
+            chunk_unknown = None if unknown is None else unknown[a:b]
             if n_map is None:
-                s3, starts = bake_micromaps(grid, tris[a:b], lv, GROW_TEXEL, sat)
+                s3, starts = bake_states(grid, tris[a:b], lv, sat, chunk_unknown)
             else:
                 s3 = s3_all[starts_all[a]:starts_all[b]]
                 starts = starts_all[a:b + 1] - starts_all[a]
-            if unknown is not None:
-                for i in np.flatnonzero(unknown[a:b]):
-                    s3[starts[i]:starts[i + 1]] = states.C
+                if chunk_unknown is not None:
+                    for i in np.flatnonzero(chunk_unknown):
+                        s3[starts[i]:starts[i + 1]] = states.C
             mine = [t for t in merged if a <= t < b]  # --budget: micromaps shared by merging (their meet)
             for t in mine:
                 s3[starts[t - a]:starts[t - a + 1]] = merged[t][0]
@@ -444,7 +502,7 @@ def build(geometries: list[Geometry], settings: OmmSettings = OmmSettings(),
             progress.advance(1)
     index = np.concatenate(index_parts) if index_parts else np.zeros(0, dtype=np.int32)
     triangles = packer.record_array()
-    data = np.frombuffer(b"".join(packer.chunks), dtype=np.uint8).copy()
+    data = packer.data()
     usage = omm_format.usage_histograms(triangles["level"], triangles["format"], index)
     special = {str(int(v)): int(np.count_nonzero(index == v)) for v in omm_format.SPECIAL_INDEX}
     summary = {

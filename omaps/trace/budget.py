@@ -67,7 +67,7 @@ def budget_maps(at, tests: dict, scheme, weights: np.ndarray, jobs: int = 1, pro
             blk = blocks[used]
             known[sel] = kf[sel]
         pair_row[sel] = row0 + inv.ravel()
-        fmt_parts.append(np.full(len(used), PAIR_OPTIONS.index(o), np.int32))  # lookups.mixed_map_state's code
+        fmt_parts.append(np.full(len(used), 0 if o == "none" else get_codec(o).code, np.int32))  # its format code
         off_parts.append(off + blk.shape[1] * np.arange(len(used), dtype=np.int64))
         data_parts.append(blk.ravel())
         row0 += len(used)

@@ -72,6 +72,13 @@ class TraceResult:
         """True when no scheme changed a visible result (pixel or shadow ray)."""
         return bool(self.report["passed"])
 
+    def messages(self) -> list[str]:
+        """The error ``omaps trace`` prints on stderr when a scheme changed a visible result."""
+        bad = self.report["changed_visible_result"]
+        if not bad:
+            return []
+        return ["omaps: error: a scheme changed the visible result: " + ", ".join(f"{n} ({v})" for n, v in bad.items())]
+
     def table(self) -> str:
         """The report as ``omaps trace`` prints it."""
         return format_report(self.report, self.names, self.shadows)
@@ -103,7 +110,8 @@ class TraceResult:
 
 def trace_scene(scene, schemes=DEFAULT_SCHEMES, *, size=512, camera=None, shadows: bool = False, light=None,
                 weights: str = "area", two_state=None, rules: MaterialRules | None = None, jobs: int | None = None,
-                encoder: str | None = None, effort: str | None = None, progress: bool = False) -> TraceResult:
+                encoder: str | None = None, effort: str | None = None, progress: bool = False, root=None,
+                allow_outside: bool = False) -> TraceResult:
     """Trace primary (and shadow) rays through a scene with each scheme's maps read in the
     any-hit filter, and compare every scheme's visible result with ``none``'s.
 
@@ -135,6 +143,11 @@ def trace_scene(scene, schemes=DEFAULT_SCHEMES, *, size=512, camera=None, shadow
         Codec choices for codec schemes named without a variant.
     progress : bool
         Progress bars on stderr.
+    root : str, optional
+        A scene's URI policy (``omaps.load_scene``): the folder the files it names must lie under
+        (default: its own folder).
+    allow_outside : bool
+        Read the files a scene names wherever they are (a scene you trust).
 
     Returns
     -------
@@ -154,9 +167,10 @@ def trace_scene(scene, schemes=DEFAULT_SCHEMES, *, size=512, camera=None, shadow
     """
     from tqdm import tqdm
 
-    from . import SHADOW_TNEAR, summary, trace_scheme
+    from .camera import SHADOW_TNEAR
     from .maps import default_jobs
-    from .prepare import prepare
+    from .metrics import summary
+    from .prepare import prepare, trace_scheme
 
     if isinstance(schemes, str):
         schemes = parse_schemes(schemes, TRACE_KINDS, encoder, effort, "omaps trace")
@@ -174,7 +188,7 @@ def trace_scene(scene, schemes=DEFAULT_SCHEMES, *, size=512, camera=None, shadow
     if not hasattr(scene, "meshes"):
         from ..scene import load_scene
 
-        scene = load_scene(scene)
+        scene = load_scene(scene, root=root, allow_outside=allow_outside)
     if not any(len(scene.meshes[mi].merged["triangles"]) for mi, _ in scene.instances):
         raise InputError("the scene has no triangles", scene.path)
     if isinstance(cam_given, (int, np.integer)) and not isinstance(cam_given, bool):
@@ -275,7 +289,8 @@ def _timing(run, seconds: list[float]) -> dict:
 
 def _trace_two_state(prep, names, modes, cam, w, h, ref) -> dict:
     """Each square / codec scheme traced again with its C cells resolved by each rule."""
-    from . import coverage_error, trace_scheme
+    from .metrics import coverage_error
+    from .prepare import trace_scheme
     from .two_state import two_state_maps
 
     out: dict = {}

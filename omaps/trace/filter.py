@@ -5,6 +5,11 @@ triangle it looks the hit's region state up in the scheme's stored data and coun
 per *distinct* (instance, triangle) of a ray -- Embree may report one hit twice (spatial splits)
 and a repeated report is one candidate and at most one alpha test -- and alpha tests. In record
 mode (deferred shadow rays) C candidates are recorded untested instead.
+
+numba's on-disk cache keys a kernel on its own file only: these filters compile the state
+functions of ``lookups`` and the codecs' ``block_state`` (format codes from the codec registry)
+into themselves, so a change there needs this file touched too (a change to the format codes
+did).
 """
 
 from __future__ import annotations

@@ -3,7 +3,7 @@
 A state function ``(table, tri, b1, b2) -> T/O/C`` reads one scheme's *stored* data: nothing
 (``none``: always C), a per-triangle 2-bit micromap through the bird curve, or a pair's square
 map through its codec's random-access ``lookup`` (the raw ``sqN`` map included), chosen by
-a format code (``MAP_FORMATS``). The shader is
+its codec's format code (``codecs.block_state``, built from the codec registry). The shader is
 ``alpha_test.sample_passes`` on the material's texture values -- the same numbers and comparison
 the bakers classified -- times the interpolated COLOR_0 alpha.
 """
@@ -15,17 +15,16 @@ from numba import carray, njit
 
 from .. import birdcurve, pair, states
 from ..budget import HIT_LEVEL
-from ..codecs import vq2_block, vq4_block, vq4_synth_block, wavelet3_block
-from ..codecs.raw import read_state
+from ..codecs import MAX_BLOCK_BYTES, block_state, read_state
 from ..alpha_test import passes
 from ..sampling import sample_texture
 from .embree import f64_ptr, i8_ptr, i32_ptr, i64_ptr, u8_ptr, u16_ptr
-from .tables import (MAP_FORMATS, codec_format, T_COUNT, T_MAP_CODEC, T_MAP_DATA, T_MAP_FORMAT, T_MAP_LEVEL, T_MAP_OFFSET, T_MAP_PARAM, T_MAP_ROW, T_MAP_ROW_BYTES, T_MAT_FILTER, T_MAT_H, T_MAT_INCL,
+from .tables import (T_COUNT, T_MAP_CODEC, T_MAP_DATA, T_MAP_FORMAT, T_MAP_LEVEL, T_MAP_OFFSET, T_MAP_PARAM, T_MAP_ROW, T_MAP_ROW_BYTES, T_MAT_FILTER, T_MAT_H, T_MAT_INCL,
                      T_MAT_TEX_START, T_MAT_THR, T_MAT_W, T_MAT_WRAP_U, T_MAT_WRAP_V, T_TEX, T_TRI_CORNER,
                      T_TRI_MAT, T_TRI_UV, T_TRI_VALPHA)
 
 __all__ = ["clamp_bary", "shader_alpha_test", "no_map_state", "micro_map_state", "mixed_map_state", "pair_map_state",
-           "codec_format", "state_function", "MAP_FORMATS"]
+           "state_function"]
 
 
 @njit(cache=True, inline="always")
@@ -102,39 +101,20 @@ def counting_state(table, tri, b1, b2):
     return states.C
 
 
-_F_SYNTH, _F_WAVELET, _F_SQ128 = (MAP_FORMATS.index(n) for n in ("vq4-synth", "wavelet3", "sq128"))
-
-
 @njit(cache=True, inline="always")
 def _pair_block_state(table, tri, b1, b2, fmt, off):
-    """The hit's state in a pair's block of format ``fmt`` (its index in ``MAP_FORMATS``) at byte
-    ``off`` of the map data, read with that format's random-access lookup."""
+    """The hit's state in a pair's block of format ``fmt`` (its codec's format code, from the codec
+    registry; 0 no map) at byte ``off`` of the map data, read with that codec's random-access
+    lookup (``codecs.block_state``)."""
     if fmt == 0:
         return states.C
     s, t = pair.hit_st(i8_ptr(table[T_TRI_CORNER]), tri, b1, b2)
-    if fmt <= 7 or fmt == _F_SQ128:
-        n = 128 if fmt == _F_SQ128 else 1 << (fmt - 1)
-        i, j = pair.uv_to_cell(s, t, n)
-        return read_state(u8_ptr(table[T_MAP_DATA]), off, j * n + i)
-    if fmt == 8:
-        i, j = pair.uv_to_cell(s, t, vq2_block.SIZE)
-        return vq2_block.lookup(carray(u8_ptr(table[T_MAP_DATA] + off), vq2_block.BLOCK_BYTES), i, j)
-    if fmt == 9:
-        i, j = pair.uv_to_cell(s, t, vq4_block.SIZE)
-        return vq4_block.lookup(carray(u8_ptr(table[T_MAP_DATA] + off), vq4_block.BLOCK_BYTES), i, j)
-    if fmt == _F_SYNTH:
-        i, j = pair.uv_to_cell(s, t, vq4_synth_block.SIZE)
-        return vq4_synth_block.lookup(carray(u8_ptr(table[T_MAP_DATA] + off), vq4_synth_block.BLOCK_BYTES), i, j)
-    if fmt == _F_WAVELET:
-        i, j = pair.uv_to_cell(s, t, wavelet3_block.SIZE)
-        return wavelet3_block.lookup(carray(u8_ptr(table[T_MAP_DATA] + off), wavelet3_block.BLOCK_BYTES), i, j)
-    i, j = pair.uv_to_cell(s, t, vq4_block.X64_SIZE)
-    return vq4_block.lookup_x64(carray(u8_ptr(table[T_MAP_DATA] + off), vq4_block.X64_BYTES), i, j)
+    return block_state(fmt, carray(u8_ptr(table[T_MAP_DATA] + off), MAX_BLOCK_BYTES), s, t)
 
 
 @njit(cache=True)
 def mixed_map_state(table, tri, b1, b2):
-    """A budget's maps (``trace.budget``): the pair's row has a format code (``MAP_FORMATS``) and
+    """A budget's maps (``trace.budget``): the pair's row has a format code (its codec's) and
     the byte offset of its block; the hit's cell is read with that format's random-access lookup."""
     row = np.int64(i32_ptr(table[T_MAP_ROW])[tri])
     return _pair_block_state(table, tri, b1, b2, i32_ptr(table[T_MAP_FORMAT])[row], i64_ptr(table[T_MAP_OFFSET])[row])

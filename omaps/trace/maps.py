@@ -21,7 +21,7 @@ from ..bake import GROW_TEXEL, bake_micromaps, bake_pair_flags, or_downsample
 from ..bake.square import flags_to_states
 from ..budget import PAIR_OPTIONS
 from ..codecs import get_codec
-from ..codecs.raw import pack_states
+from ..codecs import pack_states
 from ..rows import unique_rows
 from ..scene.alpha import AlphaTriangles, distinct_rows, pair_corner_uvs
 from ..workers import encode_maps as parallel_encode

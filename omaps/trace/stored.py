@@ -18,7 +18,7 @@ from __future__ import annotations
 import numpy as np
 
 from .. import states
-from ..codecs.raw import pack_states, row_bytes, unpack_states
+from ..codecs import pack_states, row_bytes, unpack_states
 from ..errors import InputError
 from .tables import T_MAP_LEVEL, T_MAP_OFFSET, T_TRI_CORNER, SchemeMaps
 

@@ -11,7 +11,6 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..budget import PAIR_OPTIONS
 from .embree import CONTEXT_BYTES
 
 __all__ = ["TraceTables", "base_tables", "scheme_tables"]
@@ -22,9 +21,9 @@ T_MAT_TEX_START, T_MAT_W, T_MAT_H, T_MAT_WRAP_U, T_MAT_WRAP_V, T_MAT_FILTER, T_M
 T_TEX = 14
 T_MAP_ROW, T_MAP_DATA, T_MAP_ROW_BYTES, T_MAP_PARAM = 15, 16, 17, 18
 T_MAP_LEVEL, T_MAP_OFFSET = 19, 20  # stored micromaps (scheme omm): per row its level (int32) and byte offset (int64)
-T_MAP_FORMAT = 21  # a budget's maps: per row the format code (int32, ``budget.PAIR_OPTIONS``); offsets in T_MAP_OFFSET
+T_MAP_FORMAT = 21  # a budget's maps: per row its codec's format code (int32, 0 no map); offsets in T_MAP_OFFSET
 T_COUNT = 22  # view weights: candidate hits per alpha triangle (int64), counted by lookups.counting_state
-T_MAP_CODEC = 23  # square maps of one codec: its format code (``budget.PAIR_OPTIONS``; lookups.pair_map_state)
+T_MAP_CODEC = 23  # square maps of one codec: its format code (``Codec.code``; lookups.pair_map_state)
 TABLE_WORDS = 24
 
 # ---- a query context: Embree's part, then ours (int64 words) -----------------------------------
@@ -112,23 +111,8 @@ def scheme_tables(base: dict, sm) -> TraceTables:
     table[T_MAP_ROW_BYTES] = sm.row_bytes
     table[T_MAP_PARAM] = sm.param
     if sm.codec is not None:
-        table[T_MAP_CODEC] = codec_format(sm.codec)
+        table[T_MAP_CODEC] = sm.codec.code  # its format code (codecs.registry)
     return TraceTables(arrays, table)
-
-
-# The tracer's format codes of a pair's stored square map: the budget's options first (their
-# index in ``budget.PAIR_OPTIONS``: 0 none, 1..7 raw sq1..sq64, 8 vq2, 9 vq4, 10 vq4x64), then the
-# codecs a budget does not choose among. Every codec is read by one module-level kernel
-# (``pair_map_state``), whose filters numba compiles once and caches.
-MAP_FORMATS = PAIR_OPTIONS + ("vq4-synth", "wavelet3", "sq128")
-
-
-def codec_format(codec) -> int:
-    """The codec's format code (its index in ``MAP_FORMATS``), read by ``pair_map_state``."""
-    name = getattr(codec, "name", None)
-    if name not in MAP_FORMATS or name == "none":
-        raise ValueError(f"the tracer has no format code for codec {name!r} (known: {', '.join(MAP_FORMATS[1:])})")
-    return MAP_FORMATS.index(name)
 
 
 @dataclass

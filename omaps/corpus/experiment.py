@@ -1,0 +1,180 @@
+"""One call evaluates a corpus: ``evaluate_corpus`` returns a ``CorpusResult`` with each
+texture's savings per scheme, the means ``omaps eval`` prints, and methods that write its JSON,
+CSV, chart and per-texture panels."""
+
+from __future__ import annotations
+
+import os
+import time
+from dataclasses import dataclass, field
+
+from ..errors import InputError
+from ..schemes import DEFAULT_SCHEMES, EVAL_KINDS, parse_schemes
+from ..text import format_table, plural
+from .evaluate import EvalConfig, evaluate_many, mean_results
+
+__all__ = ["evaluate_corpus", "CorpusResult", "PER_TEXTURE_ROWS"]
+
+PER_TEXTURE_ROWS = 20  # per-texture rows printed by default when there are at most this many textures
+
+
+@dataclass
+class CorpusResult:
+    """What ``evaluate_corpus`` measured.
+
+    Attributes
+    ----------
+    results : list of TextureResult
+        Per texture (in input order): its name, size, savings and bits per scheme.
+    names : list of str
+        The schemes, in order.
+    settings : dict
+        The source, the texel-state rules, filter, wrap, channel, codec choices and schemes.
+    source : str
+        "N files" or "the embedded procedural corpus".
+    unreadable : list of (str, str)
+        Files found in folders that could not be read, with the problem (left out).
+    small : list of str
+        Textures left out for being smaller than ``min_size``.
+    skipped_other : list of str
+        Files in the folders given without an image extension.
+    seconds : float
+    """
+
+    results: list
+    names: list
+    settings: dict
+    source: str
+    unreadable: list = field(default_factory=list)
+    small: list = field(default_factory=list)
+    skipped_other: list = field(default_factory=list)
+    seconds: float = 0.0
+
+    @property
+    def means(self) -> dict:
+        """Per scheme the mean savings and the mean bits per pair over the textures."""
+        return mean_results(self.results, self.names)
+
+    def table(self, per_texture: bool = False) -> str:
+        """The savings table as ``omaps eval`` prints it (each texture's row when ``per_texture``)."""
+        means = self.means
+        rows = []
+        if per_texture:
+            rows += [[r.name if len(r.name) <= 40 else "..." + r.name[-37:]] + [f"{r.savings[n]:.3f}" for n in self.names]
+                     for r in self.results]
+        rows.append([f"MEAN savings ({len(self.results)})"] + [f"{means[n]['savings']:.3f}" for n in self.names])
+        rows.append(["mean bits/pair"] + [f"{means[n]['bits']:.0f}" for n in self.names])
+        return format_table(["texture"] + self.names, rows)
+
+    def heading(self) -> str:
+        """The line ``omaps eval`` prints above the table."""
+        s = self.settings
+        return (f"omaps eval: {plural(len(self.results), 'texture')} from {self.source}, mode {s['mode']}, "
+                f"filter {s['filter']}, wrap {s['wrap']}, {self.seconds:.2f} s")
+
+    def write_json(self, path) -> None:
+        """Settings, per-texture and mean results, and unreadable files as JSON."""
+        from .report import write_json
+
+        write_json(path, self.results, self.names, self.settings, self.unreadable)
+
+    def write_csv(self, path) -> None:
+        """One row per texture and scheme."""
+        from .report import write_csv
+
+        write_csv(path, self.results, self.names)
+
+    def plot(self, path) -> None:
+        """Mean savings against bits per pair (the suffix picks the format)."""
+        from .report import plot_savings
+
+        plot_savings(path, self.results, self.names)
+
+    def write_show(self, folder, progress: bool = False) -> None:
+        """One PNG per texture with its maps, and show.json (needs ``keep_maps=True``)."""
+        from .report import write_show
+
+        write_show(folder, self.results, self.settings, progress)
+
+
+def evaluate_corpus(paths=None, schemes=None, *, config: EvalConfig | None = None, jobs: int | None = None,
+                    min_size: int = 0, keep_maps: bool = False, progress: bool = False) -> CorpusResult:
+    """Savings (the fraction of hits needing no any-hit shader) of each scheme on each texture
+    mapped to the corpus pair.
+
+    Parameters
+    ----------
+    paths : list of str, optional
+        Image files and folders (searched recursively); None or empty: the embedded procedural
+        corpus.
+    schemes : str or list of Scheme, optional
+        Comma-separated names (``sqN``, ``triL``, ``texel``, a codec); default
+        ``omaps.schemes.DEFAULT_SCHEMES``.
+    config : EvalConfig, optional
+        Texel-state rule, filter, wrap, channel and codec choices.
+    jobs : int, optional
+        Worker processes (default: all cores).
+    min_size : int
+        Leave out textures whose smaller side is below this.
+    keep_maps : bool
+        Keep each texture's maps (for ``CorpusResult.write_show``).
+    progress : bool
+        A progress bar on stderr.
+
+    Returns
+    -------
+    CorpusResult
+
+    Raises
+    ------
+    InputError
+        For bad options, a file named in ``paths`` that cannot be read, or no texture at all (its
+        ``unreadable`` attribute then lists the files that could not be read).
+
+    Examples
+    --------
+    >>> from omaps.corpus import evaluate_corpus
+    >>> res = evaluate_corpus(schemes="sq16,tri3", jobs=1)
+    >>> res.source, sorted(res.means), 0 < res.means["sq16"]["savings"] < 1
+    ('the embedded procedural corpus', ['sq16', 'tri3'], True)
+    """
+    from ..texture import find_images
+    from .procedural import default_corpus
+
+    config = EvalConfig() if config is None else config
+    if schemes is None or isinstance(schemes, str):
+        schemes = parse_schemes(schemes or ",".join(DEFAULT_SCHEMES), EVAL_KINDS, config.encoder, config.effort,
+                                "omaps eval")
+    names = [s.name for s in schemes]
+    if min_size < 0:
+        raise InputError(f"--min-size must be >= 0, got {min_size}")
+    if jobs is not None and jobs < 1:
+        raise InputError(f"--jobs must be >= 1, got {jobs}")
+    paths = [os.fspath(p) for p in paths or []]
+    skipped_other: list = []
+    named: set = set()
+    if paths:
+        items, skipped_other = find_images(paths)
+        if not items:
+            raise InputError("no image files found", ", ".join(paths))
+        named = {p for p in paths if not os.path.isdir(p)}
+        source = plural(len(items), "file")
+    else:
+        items = default_corpus()
+        source = "the embedded procedural corpus"
+    t0 = time.perf_counter()
+    unreadable: list = []
+    results, small = evaluate_many(items, schemes, config, jobs, keep_maps=keep_maps, min_size=min_size,
+                                   progress=progress, unreadable=unreadable)
+    seconds = time.perf_counter() - t0
+    for path, problem in unreadable:
+        if path in named:  # a file named on the command line is bad input
+            raise InputError(problem, path)
+    if not results:
+        exc = (InputError("no texture could be read", ", ".join(paths)) if unreadable
+               else InputError(f"no texture is at least {min_size} px"))
+        exc.unreadable = unreadable
+        raise exc
+    settings = {"source": source, **config.settings(), "min_size": min_size,
+                "schemes": {s.name: s.settings() for s in schemes}}
+    return CorpusResult(results, names, settings, source, unreadable, small, list(skipped_other), seconds)
