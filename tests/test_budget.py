@@ -8,7 +8,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from omaps.budget import allocate, parse_bytes, upper_hull
+from omaps.allocate import allocate, upper_hull
+from omaps.budget import parse_bytes
 from omaps.errors import InputError
 
 
