@@ -8,7 +8,7 @@ OMM's unknown-opaque / unknown-transparent and 2-state outputs, and the tracer's
 * micro-triangles: the centroids of their level-K sub-triangles, K the smallest giving 16 samples
   per texel of the micro-triangle's area, at most 3 (64 samples);
 * square cells of a pair: K x K points of the cell, each mapped through the pair triangle it
-  lies in (``pair.pair_weights``).
+  lies in (``pair.square_uv``).
 
 Example::
 
@@ -31,7 +31,7 @@ from numba import njit, prange
 from . import birdcurve
 from .birdcurve import bary_point
 from .alpha_test import AlphaTest, passes, sample_passes
-from .pair import pair_weights
+from .pair import square_uv
 from .sampling import address, blend
 
 __all__ = ["micro_fractions", "cell_fractions", "micro_corners", "micro_corners_of", "micro_hits_with", "SAMPLES_PER_TEXEL",
@@ -200,10 +200,7 @@ def _st_to_uv(uv6, has_b, s, t):
     tri = 0 if t <= s else 1
     if tri == 1 and not has_b:
         return 0.0, 0.0, False
-    w0, w1, w2 = pair_weights(tri, s, t)
-    o = 3 * tri
-    u = w0 * uv6[o, 0] + w1 * uv6[o + 1, 0] + w2 * uv6[o + 2, 0]
-    v = w0 * uv6[o, 1] + w1 * uv6[o + 1, 1] + w2 * uv6[o + 2, 1]
+    u, v = square_uv(uv6, 3 * tri, tri, s, t)
     return u, v, True
 
 

@@ -59,6 +59,16 @@ def pair_weights(tri, s, t):
 
 
 @njit(cache=True, inline="always")
+def square_uv(uv, o, tri, s, t):
+    """Texture (u, v) of square point (s, t) through triangle ``tri``'s affine UV map: its
+    corners' UVs at ``uv[o:o + 3]`` (``bake.square``'s layout), weighted by ``pair_weights``."""
+    w0, w1, w2 = pair_weights(tri, s, t)
+    u = w0 * uv[o, 0] + w1 * uv[o + 1, 0] + w2 * uv[o + 2, 0]
+    v = w0 * uv[o, 1] + w1 * uv[o + 1, 1] + w2 * uv[o + 2, 1]
+    return u, v
+
+
+@njit(cache=True, inline="always")
 def hit_st(corners, tri, b1, b2):
     """(s, t) of a hit with barycentrics (b1, b2) on triangle ``tri`` in its pair's square: the
     barycentric combination of the square corners of its three vertices (``corners`` a flat

@@ -38,3 +38,15 @@ def test_square_cells_order():
     assert cells.shape == (16, 4, 2)
     np.testing.assert_allclose(cells[1], [[0.25, 0], [0.5, 0], [0.5, 0.25], [0.25, 0.25]])  # (i=1, j=0)
     np.testing.assert_allclose(cells[4, 0], [0, 0.25])  # row j = 1 starts at index 4
+
+
+@given(st.integers(0, 1), bary, st.lists(st.floats(-4, 4), min_size=12, max_size=12))
+def test_square_uv_is_the_triangles_affine_map(tri, b, coords):
+    """``pair.square_uv`` (what both square kernels map a point of the square with): the point
+    of the square on triangle ``tri`` (the corpus pair's (s, t) of a hit there) goes to the
+    hit's UV, the barycentric combination of that triangle's corner UVs."""
+    b1, b2 = b
+    uv = np.array(coords).reshape(6, 2)
+    s, t = ref.hit_to_uv(tri, b1, b2)
+    want = (1 - b1 - b2) * uv[3 * tri] + b1 * uv[3 * tri + 1] + b2 * uv[3 * tri + 2]
+    np.testing.assert_allclose(pair.square_uv(uv, 3 * tri, tri, s, t), want, atol=1e-12)

@@ -7,7 +7,7 @@ square's corners), the tracer's square and codec maps (a mesh's pairs with their
 A pair is given by its corner UVs (P, 6, 2): the UVs at A's corners (0,0), (1,0), (1,1), then at
 B's (0,0), (1,1), (0,1) (``omaps.pair``). Cell (i, j) covers s in [i/N, (i+1)/N], t in
 [j/N, (j+1)/N]; its part in A (t <= s) and its part in B (t >= s) are mapped to texture space by
-each triangle's own affine UV map (``pair.pair_weights``), grown by ``grow`` texels, and the
+each triangle's own affine UV map (``pair.square_uv``), grown by ``grow`` texels, and the
 cell's flag is the OR of the footprint flags either part overlaps (``raster.rows_flag``; in
 an exact bilinear grid, the part's own state in each mixed cell).
 A lone triangle (``has_b`` False) leaves the cells wholly in B at flag 0: cells no hit reaches,
@@ -33,7 +33,7 @@ from numba import njit, prange
 from .. import raster, states
 from ..bilinear import POLY_MAX, point_flag
 from ..errors import InputError
-from ..pair import pair_weights
+from ..pair import square_uv
 from ..sampling import FootprintGrid
 from ..flag_table import MARGIN, box_flag, flag_table
 
@@ -88,10 +88,8 @@ def _area2(poly, k):
 def _texel_point(uv, b, tri, s, t, w, h, off):
     """Texel coordinates (plus the grid offset) of square point (s, t) through triangle ``tri``'s
     affine UV map (its corners' UVs at ``uv[b:b + 3]``)."""
-    w0, w1, w2 = pair_weights(tri, s, t)
-    u = w0 * uv[b, 0] + w1 * uv[b + 1, 0] + w2 * uv[b + 2, 0]
-    vv = w0 * uv[b, 1] + w1 * uv[b + 1, 1] + w2 * uv[b + 2, 1]
-    return u * w + off, vv * h + off
+    u, v = square_uv(uv, b, tri, s, t)
+    return u * w + off, v * h + off
 
 
 @njit(cache=True, _nrt=False)
