@@ -28,7 +28,7 @@ MAX_TEXTURE = 512  # an alpha texture's longest side on the page
 MAX_OVERLAY_TRIANGLES = 200_000  # triangles drawn over one material's UV layout
 
 
-@njit(cache=True)
+@njit  # not cached: its key holds the state function's dispatcher, which numba's cache cannot pickle reliably
 def _triangle_images(state_fn, table, n_tris, res):
     """Every alpha triangle's image: (n_tris, res * (res + 1) / 2) states, texels (i, j) with
     i + j <= res - 1 in order of j, then i."""
