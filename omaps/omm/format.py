@@ -20,7 +20,7 @@ import numpy as np
 from numba import njit
 
 from ..birdcurve import MAX_LEVEL  # the APIs' largest subdivision level
-from ..codecs.raw import pack_states, row_bytes, unpack_states
+from ..codecs import pack_states, row_bytes, unpack_states
 from ..names import OMM_FORMATS
 
 FORMAT_2_STATE = 1
