@@ -3,6 +3,8 @@
     none                 no map: every candidate hit runs the any-hit shader (trace)
     texel                the per-texel limit of an infinitely fine map (eval)
     triL                 two per-triangle micromaps of 4^L micro-triangles, L = 0..12
+    succinctL            the same micromaps, each its pruned 4-way tree with rank support (lossless)
+    csmL                 the same micromaps, identical subtrees of the whole set stored once (lossless)
     sqN                  the raw N x N square map over a pair, N a power of two up to 128
     CODEC[-VARIANT]      vq2, vq4, vq4x64, vq4-synth or wavelet3; VARIANT: paper (the deck's
                          encoder; vq2, vq4, vq4x64) or an effort of
@@ -14,8 +16,10 @@
     budget:BYTES         (trace) per pair the option (none, sqN up to 64, vq2, vq4, vq4x64) that saves
                          the most alpha tests per byte, all pairs within BYTES (1263936, 1.2MiB, 800KiB)
 
-A ``Scheme`` says what is stored (its ``kind``: none, texel, micromap or square with its
-``codec``) and what it costs (``bits_for``: storage bits per pair). The bakers make the maps.
+A ``Scheme`` says what is stored (its ``kind``: none, texel, micromap -- with its
+``representation``: raw, succinct or csm -- or square with its ``codec``) and what it costs
+(``bits_for``: storage bits per pair; None where the size depends on the map, as for the
+hierarchical micromaps). The bakers make the maps.
 
 Example::
 
@@ -40,7 +44,8 @@ EVAL_KINDS = ("texel", "micromap", "square")  # omaps eval
 TRACE_KINDS = ("none", "micromap", "square", "stored", "budget")  # omaps trace ("stored": read from the traced file)
 VARIANTS = ("paper",) + tuple(EFFORTS)
 DEFAULT_SCHEMES = ("sq4", "sq8", "sq16", "sq32", "sq64", "tri2", "tri3", "tri4", "tri5", "texel")
-_TRI = re.compile(r"tri(\d+)")
+_TRI = re.compile(r"(tri|succinct|csm)(\d+)")
+MICROMAP_REPRESENTATIONS = {"tri": "raw", "succinct": "succinct", "csm": "csm"}  # name prefix -> representation
 _SQ = re.compile(r"sq(\d+)")
 
 
@@ -53,13 +58,14 @@ class Scheme:
     encoder: str | None = None
     effort: str | None = None
     budget: int | None = None  # budget: the scene's map bytes
+    representation: str = "raw"  # micromap: raw (2 bits per micro-triangle), succinct or csm (lossless trees)
 
     @property
     def family(self) -> str:
         """Lines of a plot connect schemes of one family: sq, tri, a codec (vq4 and vq4x64 share
         one) with its variant."""
         if self.kind == "micromap":
-            return "tri"
+            return "tri" if self.representation == "raw" else self.representation
         if self.kind == "square" and not self.codec.compressed:
             return "sq"
         if self.kind == "square":
@@ -71,9 +77,12 @@ class Scheme:
     def map_size(self) -> int | None:
         return self.codec.map_size if self.codec is not None else None
 
-    def bits_for(self, width: int, height: int) -> int:
-        """Storage bits per pair for a width x height texture."""
+    def bits_for(self, width: int, height: int) -> int | None:
+        """Storage bits per pair for a width x height texture; None for a hierarchical micromap,
+        whose size depends on its states (``omaps.corpus.evaluate.scheme_bits``)."""
         if self.kind == "micromap":
+            if self.representation != "raw":
+                return None
             return 2 * 4 ** self.level * 2  # two triangles, 2 bits per micro-triangle
         if self.kind == "square":
             return self.codec.bits
@@ -85,6 +94,8 @@ class Scheme:
         out = {"kind": self.kind}
         if self.level is not None:
             out["level"] = self.level
+        if self.kind == "micromap" and self.representation != "raw":
+            out["representation"] = self.representation
         if self.budget is not None:
             out.update(budget_bytes=self.budget, encoder=self.encoder, effort=self.effort)
         if self.codec is not None:
@@ -135,7 +146,8 @@ def get_scheme(name: str, encoder: str | None = None, effort: str | None = None)
     if m:
         from .bake.micromap import check_level
 
-        return Scheme(key, "micromap", level=check_level(int(m.group(1)), "triL level"))
+        rep = MICROMAP_REPRESENTATIONS[m.group(1)]
+        return Scheme(key, "micromap", level=check_level(int(m.group(2)), f"{m.group(1)}L level"), representation=rep)
     if _SQ.fullmatch(key):
         return Scheme(key, "square", codec=get_codec(key))
     base, _, variant = (key, "", "") if key in codec_names() else key.rpartition("-")
@@ -150,7 +162,7 @@ def get_scheme(name: str, encoder: str | None = None, effort: str | None = None)
             encoder, effort = "best", variant
         enc, eff = codec.options(encoder, effort)
         return Scheme(key, "square", codec=codec, encoder=enc, effort=eff)
-    raise InputError(f"unknown scheme {name!r} (known: none, texel, triL, omm, file:CODEC, budget:BYTES, "
+    raise InputError(f"unknown scheme {name!r} (known: none, texel, triL, succinctL, csmL, omm, file:CODEC, budget:BYTES, "
                      f"{square_scheme_choices()})")
 
 

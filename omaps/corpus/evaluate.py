@@ -29,7 +29,8 @@ from ..schemes import EVAL_KINDS, Scheme, parse_schemes
 from ..texture import AlphaTexture, as_texture, load_alpha
 from ..workers import process_pool
 
-__all__ = ["EvalConfig", "TextureResult", "evaluate_texture", "evaluate_many", "mean_results", "scheme_map"]
+__all__ = ["EvalConfig", "TextureResult", "evaluate_texture", "evaluate_many", "mean_results", "scheme_map",
+           "scheme_bits"]
 
 
 @dataclass(frozen=True)
@@ -60,11 +61,43 @@ def scheme_map(scheme: Scheme, grid) -> np.ndarray:
     if scheme.kind == "texel":
         return states.FLAG_TO_STATE[grid.cells_within_texture()[0]]
     if scheme.kind == "micromap":
-        return bake_pair_triangles(grid, scheme.level)
+        m = bake_pair_triangles(grid, scheme.level)
+        if scheme.representation == "raw":
+            return m
+        return _hierarchical(scheme, m)[0]  # lossless: the decoded maps equal the baked ones
     m = bake_square(grid, scheme.codec.map_size)
     if not scheme.codec.compressed:
         return m
     return scheme.codec.encode_many(m[None], scheme.encoder, scheme.effort)[1][0]
+
+
+def _hierarchical(scheme: Scheme, m: np.ndarray) -> tuple[np.ndarray, int]:
+    """A hierarchical micromap scheme's pair (2, 4**L) encoded and decoded again: (the decoded
+    micromaps, the bits stored). ``succinct``: the two triangles' blobs, each its exact bits;
+    ``csm``: one blob of both triangles' micromaps with common subtrees merged."""
+    from ..codecs import csm_bits, csm_decode, csm_encode, succinct_decode, succinct_encode_many
+
+    level = scheme.level
+    if scheme.representation == "succinct":
+        data, starts, bits = succinct_encode_many(m, level)
+        decoded = np.stack([succinct_decode(data[starts[i]:starts[i + 1]], level) for i in range(len(m))])
+        total = int(bits.sum())
+    else:
+        blob, n_nodes = csm_encode(m, level)
+        decoded = csm_decode(blob, level, len(m))
+        total = csm_bits(n_nodes, len(m))
+    if not np.array_equal(decoded, m):
+        raise RuntimeError(f"internal error: {scheme.name} did not decode to the baked micromaps")
+    return decoded, total
+
+
+def scheme_bits(scheme: Scheme, width: int, height: int, m: np.ndarray) -> int:
+    """Storage bits of a scheme's map of the corpus pair: ``Scheme.bits_for``, or for a
+    hierarchical micromap (``succinctL``, ``csmL``) the exact size of its encoding of ``m``."""
+    bits = scheme.bits_for(width, height)
+    if bits is None:
+        bits = _hierarchical(scheme, m)[1]
+    return int(bits)
 
 
 def scheme_savings(scheme: Scheme, grid, m: np.ndarray) -> float:
@@ -106,7 +139,8 @@ def evaluate_texture(texture, schemes, config: EvalConfig = EvalConfig(),
     -------
     TextureResult
         ``savings[name]`` (the fraction of uniformly spread hits that land in T or O regions)
-        and ``bits[name]`` per scheme.
+        and ``bits[name]`` per scheme (for ``succinctL`` and ``csmL`` the exact size of this
+        texture's pair, which varies with its states).
 
     Examples
     --------
@@ -116,6 +150,9 @@ def evaluate_texture(texture, schemes, config: EvalConfig = EvalConfig(),
     >>> r = evaluate_texture(disc, "sq16,tri3")
     >>> r.savings, r.bits
     ({'sq16': 0.890625, 'tri3': 0.734375}, {'sq16': 512, 'tri3': 256})
+    >>> r = evaluate_texture(disc, "tri5,succinct5,csm5")   # lossless: tri5's savings, fewer bits
+    >>> r.savings["succinct5"] == r.savings["csm5"] == r.savings["tri5"], r.bits
+    (True, {'tri5': 4096, 'succinct5': 996, 'csm5': 2230})
     """
     if not isinstance(texture, AlphaTexture):  # (an AlphaTexture was read with its channel already)
         texture = as_texture(texture, channel=config.channel)
@@ -127,7 +164,7 @@ def evaluate_texture(texture, schemes, config: EvalConfig = EvalConfig(),
     for s in schemes:
         m = scheme_map(s, grid)
         savings[s.name] = scheme_savings(s, grid, m)
-        bits[s.name] = int(s.bits_for(texture.width, texture.height))
+        bits[s.name] = scheme_bits(s, texture.width, texture.height, m)
         if keep_maps:
             kept[s.name] = m
     return TextureResult(texture.name, texture.width, texture.height, savings, bits, kept,

@@ -1,0 +1,245 @@
+"""Common-subtree-merged micromaps (``csmL``): the level-L micromaps of a whole set (a scene's
+triangles, a texture's pair) as one directed acyclic graph of distinct subtrees, read by descent.
+
+Each micromap is its pruned 4-way tree over the bird curve's hierarchy (``codecs.succinct``): a
+node whose micro-triangles all have one state is that state, any other node has 4 children
+(micro-triangles 4p .. 4p + 3 of the next level). Nodes are hash-consed bottom-up over the whole
+set: a node is a *reference* -- a uniform subtree is the reference 0, 1 or 2 (its state, T, O,
+C), a mixed one 3 + the index of its entry in the node array, which holds its 4 children's
+references -- and two subtrees with equal children are stored once, whatever their level or
+micromap. A blob (docs/FORMAT.md, "Hierarchical micromaps"), W = ``ref_bits(N)``:
+
+=================  ===========================================================================
+field              bits
+=================  ===========================================================================
+``N``              32: the distinct mixed nodes
+node array         4 · W per node, node i at 32 + 4 W i: its children c = 0..3, W bits each
+roots              W per micromap, micromap t at 32 + 4 W N + W t: its root's reference
+=================  ===========================================================================
+
+``lookup`` starts at micromap t's root and follows child ``(k >> 2 (L - 1 - d)) & 3`` of
+micro-triangle k at each level d until a reference below 3: at most L reads of W bits.
+
+Example::
+
+    >>> import numpy as np
+    >>> from omaps.codecs import csm_encode, csm_decode, csm_lookup
+    >>> a = np.zeros(16, np.uint8); a[9] = 2; b = np.ones(16, np.uint8); b[9] = 2
+    >>> blob, nodes = csm_encode(np.stack([a, b]), 2)
+    >>> nodes, len(blob)           # 4 mixed nodes; W = 3 bits per reference: 32 + 3 * (16 + 2) bits
+    (4, 11)
+    >>> bool((csm_decode(blob, 2, 2) == np.stack([a, b])).all()), int(csm_lookup(np.frombuffer(blob, np.uint8), 2, 1, 9))
+    (True, 2)
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+from ..birdcurve import MAX_LEVEL
+from ..errors import InputError
+from .bits import get_bits
+
+__all__ = ["ref_bits", "build", "encode", "decode", "lookup", "blob_bits", "HEADER_BITS", "csm_build", "csm_encode",
+           "csm_decode", "csm_lookup", "csm_bits"]
+
+HEADER_BITS = 32
+
+
+def ref_bits(n_nodes: int) -> int:
+    """Width W of a reference in a set of ``n_nodes`` distinct mixed nodes: enough for 2 + N."""
+    return int(n_nodes + 2).bit_length()
+
+
+def blob_bits(n_nodes: int, n_maps: int) -> int:
+    """Exact size in bits of a set's blob: 32 + W · (4 N + P)."""
+    return HEADER_BITS + ref_bits(n_nodes) * (4 * int(n_nodes) + int(n_maps))
+
+
+@njit(cache=True, inline="always")
+def _ref_bits(n_nodes):
+    n = n_nodes + 2
+    w = 0
+    while n > 0:
+        w += 1
+        n >>= 1
+    return w
+
+
+@njit(cache=True, inline="always")
+def _hash(a, b, c, d):
+    h = (a * 0x1E3779B97F4A7C15) ^ (b * 0x7F4A7C159E3779B9) ^ (c * 0x14D049BB133111EB) ^ (d * 0x3F58476D1CE4E5B9)
+    h ^= h >> 29
+    return h
+
+
+@njit(cache=True)
+def _build(maps, level):
+    """Hash-consing over every map, bottom-up: (node array (N, 4) int64, roots (P,) int64)."""
+    cap = 1 << 10
+    nodes = np.empty((cap, 4), np.int64)
+    n = 0
+    slots = np.full(2 * cap, -1, np.int64)  # open addressing: node index or -1
+    refs = np.empty(maps.shape[1], np.int64)
+    roots = np.empty(maps.shape[0], np.int64)
+    for t in range(maps.shape[0]):
+        size = maps.shape[1]
+        for p in range(size):
+            refs[p] = maps[t, p]
+        for lv in range(level - 1, -1, -1):
+            size >>= 2
+            for p in range(size):
+                a = refs[4 * p]
+                b = refs[4 * p + 1]
+                c = refs[4 * p + 2]
+                d = refs[4 * p + 3]
+                if a < 3 and a == b and a == c and a == d:
+                    refs[p] = a
+                    continue
+                mask = slots.shape[0] - 1
+                h = _hash(a, b, c, d) & mask
+                while True:
+                    i = slots[h]
+                    if i < 0:
+                        if n == nodes.shape[0]:  # grow the node array and the table, rehash
+                            bigger = np.empty((2 * nodes.shape[0], 4), np.int64)
+                            bigger[:n] = nodes[:n]
+                            nodes = bigger
+                            slots = np.full(2 * nodes.shape[0], -1, np.int64)
+                            mask = slots.shape[0] - 1
+                            for j in range(n):
+                                g = _hash(nodes[j, 0], nodes[j, 1], nodes[j, 2], nodes[j, 3]) & mask
+                                while slots[g] >= 0:
+                                    g = (g + 1) & mask
+                                slots[g] = j
+                            h = _hash(a, b, c, d) & mask
+                            continue
+                        nodes[n, 0] = a
+                        nodes[n, 1] = b
+                        nodes[n, 2] = c
+                        nodes[n, 3] = d
+                        slots[h] = n
+                        i = n
+                        n += 1
+                        break
+                    if nodes[i, 0] == a and nodes[i, 1] == b and nodes[i, 2] == c and nodes[i, 3] == d:
+                        break
+                    h = (h + 1) & mask
+                refs[p] = 3 + i
+        roots[t] = refs[0]
+    return nodes[:n].copy(), roots
+
+
+def _check(maps, level: int) -> np.ndarray:
+    if not isinstance(level, (int, np.integer)) or not 0 <= level <= MAX_LEVEL:
+        raise InputError(f"a csm micromap's level is an integer in 0..{MAX_LEVEL}, got {level!r}")
+    a = np.ascontiguousarray(maps, dtype=np.uint8)
+    if a.ndim != 2 or a.shape[1] != 4 ** level or (a.size and a.max() > 2):
+        raise InputError(f"csm stores level-{level} micromaps (P, {4 ** level}) of states 0..2, got shape {a.shape}")
+    return a
+
+
+def build(maps, level: int) -> tuple[np.ndarray, np.ndarray]:
+    """The merged DAG of micromaps (P, 4^L): (nodes (N, 4) int64: each distinct mixed node's
+    children's references, roots (P,) int64: each micromap's root reference); a reference is a
+    state 0..2 (a uniform subtree) or 3 + a node's index.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> nodes, roots = build(np.array([[0, 1, 1, 1], [1, 1, 1, 1], [0, 1, 1, 1]]), 1)
+    >>> nodes.tolist(), roots.tolist()
+    ([[0, 1, 1, 1]], [3, 1, 3])
+    """
+    return _build(_check(maps, level), int(level))
+
+
+@njit(cache=True)
+def _pack(nodes, roots, w, out):
+    n = nodes.shape[0]
+    for j in range(32):
+        if (n >> j) & 1:
+            out[j >> 3] |= np.uint8(1 << (j & 7))
+    pos = 32
+    for i in range(n):
+        for c in range(4):
+            v = nodes[i, c]
+            for b in range(w):
+                if (v >> b) & 1:
+                    out[(pos + b) >> 3] |= np.uint8(1 << ((pos + b) & 7))
+            pos += w
+    for t in range(roots.shape[0]):
+        v = roots[t]
+        for b in range(w):
+            if (v >> b) & 1:
+                out[(pos + b) >> 3] |= np.uint8(1 << ((pos + b) & 7))
+        pos += w
+
+
+def encode(maps, level: int) -> tuple[bytes, int]:
+    """A set of micromaps (P, 4^L) -> (its blob, ``ceil(blob_bits / 8)`` bytes; the number N of
+    distinct mixed nodes)."""
+    nodes, roots = build(maps, level)
+    if len(nodes) >= 1 << 32:
+        raise InputError("a csm set holds fewer than 2^32 mixed nodes")
+    out = np.zeros(-(-blob_bits(len(nodes), len(roots)) // 8), np.uint8)
+    _pack(nodes, roots, ref_bits(len(nodes)), out)
+    return out.tobytes(), len(nodes)
+
+
+@njit(cache=True)
+def lookup(data, level, t, k):
+    """State of micro-triangle ``k`` of micromap ``t`` of the level-``level`` set whose blob is
+    the uint8 array ``data``: from the root, one W-bit reference read per level.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> blob, _ = encode(np.repeat(np.array([[0, 1, 2, 1]], np.uint8), 4, axis=1), 2)
+    >>> [int(lookup(np.frombuffer(blob, np.uint8), 2, 0, k)) for k in (0, 5, 10, 15)]
+    [0, 1, 2, 1]
+    """
+    n = get_bits(data, 0, 32)
+    w = _ref_bits(n)
+    ref = get_bits(data, HEADER_BITS + w * (4 * n + t), w)
+    for d in range(level):
+        if ref < 3:
+            return ref
+        ref = get_bits(data, HEADER_BITS + w * (4 * (ref - 3) + ((k >> (2 * (level - 1 - d))) & 3)), w)
+    return ref
+
+
+@njit(cache=True)
+def _decode(data, level, n_maps):
+    n = get_bits(data, 0, 32)
+    w = _ref_bits(n)
+    out = np.empty((n_maps, np.int64(1) << (2 * level)), np.uint8)
+    for t in range(n_maps):
+        cur = np.empty(1, np.int64)
+        cur[0] = get_bits(data, HEADER_BITS + w * (4 * n + t), w)
+        for lv in range(level):
+            nxt = np.empty(4 * cur.shape[0], np.int64)
+            for p in range(cur.shape[0]):
+                r = cur[p]
+                for c in range(4):
+                    nxt[4 * p + c] = r if r < 3 else get_bits(data, HEADER_BITS + w * (4 * (r - 3) + c), w)
+            cur = nxt
+        for p in range(cur.shape[0]):
+            out[t, p] = cur[p]
+    return out
+
+
+def decode(data, level: int, n_maps: int) -> np.ndarray:
+    """The ``n_maps`` micromaps (n_maps, 4^L) of a set's blob (bytes or uint8 array)."""
+    if not isinstance(level, (int, np.integer)) or not 0 <= level <= MAX_LEVEL:
+        raise InputError(f"a csm micromap's level is an integer in 0..{MAX_LEVEL}, got {level!r}")
+    buf = np.frombuffer(bytes(data), np.uint8) if not isinstance(data, np.ndarray) else data
+    out = _decode(buf, int(level), int(n_maps))
+    if out.size and out.max() > 2:
+        raise InputError("a csm blob whose descent ends on a mixed node at the last level is corrupt")
+    return out
+
+
+# the package API's names (``omaps.codecs``)
+csm_build, csm_encode, csm_decode, csm_lookup, csm_bits = build, encode, decode, lookup, blob_bits

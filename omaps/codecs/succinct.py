@@ -1,0 +1,334 @@
+"""Succinct micromaps (``succinctL``): a level-L micromap as its pruned 4-way subdivision tree,
+stored as bit sequences with a rank directory, read without decompressing.
+
+The tree is the bird curve's hierarchy: the root is the whole triangle, and the children of
+micro-triangle p at level l are 4p .. 4p + 3 at level l + 1 (``omaps.birdcurve``). A node whose
+micro-triangles all have one state is a leaf holding that state; any other node is internal and
+has 4 children. Nodes at level L are always leaves. The nodes are numbered in level order (the
+root 0; the children of the r-th internal node, counted from 0 in that order, are
+1 + 4r + c, c = 0..3) and stored as (docs/FORMAT.md, "Hierarchical micromaps"):
+
+==========================  =====================================================================
+field                       bits
+==========================  =====================================================================
+``n_T``                     ``w`` = ``header_bits(L)``: the nodes above level L
+``T``                       ``n_T``: per node above level L, in level order, 1 internal, 0 leaf
+rank directory              ``w`` each, ``n_T // 64`` entries: entry j-1 = the ones of T[0, 64 j)
+leaf states                 2 each (T 0, O 1, C 2), every leaf (level L included) in level order
+==========================  =====================================================================
+
+Bit k of a blob is bit (k mod 8) of byte k div 8 (``codecs.bits``). ``lookup`` descends from the
+root along micro-triangle k's base-4 digits with one rank query per level (the directory entry of
+the 64-bit word, plus the popcount of the part of the word before the position): O(L) reads.
+
+Example::
+
+    >>> import numpy as np
+    >>> from omaps.codecs import succinct_encode, succinct_decode, succinct_lookup, succinct_bits
+    >>> m = np.zeros(16, np.uint8); m[4:8] = 1; m[9] = 2     # level 2: child 1 all O, child 2 mixed
+    >>> blob = succinct_encode(m, 2)
+    >>> succinct_bits(m, 2), len(blob)         # w = 3, n_T = 5 T bits, 7 leaves of 2 bits
+    (22, 3)
+    >>> bool((succinct_decode(blob, 2) == m).all()), int(succinct_lookup(np.frombuffer(blob, np.uint8), 0, 2, 9))
+    (True, 2)
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+from ..birdcurve import MAX_LEVEL
+from ..errors import InputError
+from .bits import get_bits
+
+__all__ = ["header_bits", "tree_counts", "encoded_bits", "encode", "encode_many", "decode", "lookup",
+           "uniform_levels", "succinct_encode", "succinct_encode_many", "succinct_decode", "succinct_lookup",
+           "succinct_bits"]
+
+
+def header_bits(level: int) -> int:
+    """Width w of the node count ``n_T`` and of each rank-directory entry: enough bits for the
+    most nodes a level-L tree can have above level L, (4^L - 1) / 3 (0 at level 0)."""
+    return int((4 ** int(level) - 1) // 3).bit_length()
+
+
+@njit(cache=True, inline="always")
+def _header_bits(level):
+    n = (np.int64(1) << (2 * level)) // 3  # (4^L - 1) / 3
+    w = 0
+    while n > 0:
+        w += 1
+        n >>= 1
+    return w
+
+
+@njit(cache=True, inline="always")
+def _popcount(x):
+    """Ones of a non-negative int64 below 2^63."""
+    x = x - ((x >> 1) & 0x5555555555555555)
+    x = (x & 0x3333333333333333) + ((x >> 2) & 0x3333333333333333)
+    x = (x + (x >> 4)) & 0x0F0F0F0F0F0F0F0F
+    return (x * 0x0101010101010101 >> 56) & 0xFF
+
+
+@njit(cache=True, inline="always")
+def _rank(data, t0, d0, w, i):
+    """Ones of T[0, i): the directory entry of i's 64-bit word plus the popcount of the word's
+    bits before i (read as two fields of at most 32 bits)."""
+    word = i >> 6
+    c = np.int64(0)
+    if word > 0:
+        c = get_bits(data, d0 + w * (word - 1), w)
+    rem = i & 63
+    base = t0 + (word << 6)
+    if rem > 32:
+        c += _popcount(get_bits(data, base, 32)) + _popcount(get_bits(data, base + 32, rem - 32))
+    elif rem > 0:
+        c += _popcount(get_bits(data, base, rem))
+    return c
+
+
+@njit(cache=True)
+def lookup(data, start, level, k):
+    """State of micro-triangle ``k`` of the level-``level`` succinct micromap whose blob starts at
+    bit ``start`` of the uint8 array ``data``: a descent from the root, one rank query per level.
+
+    Parameters
+    ----------
+    data : ndarray of uint8
+        The bytes holding the blob.
+    start : int
+        The blob's first bit.
+    level : int
+        The micromap's level L.
+    k : int
+        The micro-triangle, in bird-curve order (0 <= k < 4^L).
+
+    Returns
+    -------
+    int
+        0 (T), 1 (O) or 2 (C).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> m = np.repeat(np.array([0, 1, 2, 1], np.uint8), 4)
+    >>> data = np.frombuffer(encode(m, 2), np.uint8)
+    >>> [int(lookup(data, 0, 2, k)) for k in (0, 5, 10, 15)]
+    [0, 1, 2, 1]
+    """
+    w = _header_bits(level)
+    n_t = get_bits(data, start, w) if w > 0 else np.int64(0)
+    t0 = start + w
+    d0 = t0 + n_t
+    s0 = d0 + w * (n_t >> 6)
+    pos = np.int64(0)
+    for d in range(level):
+        if pos >= n_t or (data[(t0 + pos) >> 3] >> ((t0 + pos) & 7)) & 1 == 0:
+            break
+        pos = 1 + 4 * _rank(data, t0, d0, w, pos) + ((k >> (2 * (level - 1 - d))) & 3)
+    leaf = pos - _rank(data, t0, d0, w, min(pos, n_t))
+    return get_bits(data, s0 + 2 * leaf, 2)
+
+
+@njit(cache=True)
+def _uniform_levels(m, level, uni, off):
+    """Per node of every level l (at ``uni[off[l] + p]``): its state if its micro-triangles all
+    have it, else 3; bottom-up from the map itself at level L."""
+    n = m.shape[0]
+    for p in range(n):
+        uni[off[level] + p] = m[p]
+    for lv in range(level - 1, -1, -1):
+        for p in range(np.int64(1) << (2 * lv)):
+            c = off[lv + 1] + 4 * p
+            a = uni[c]
+            if a != 3 and uni[c + 1] == a and uni[c + 2] == a and uni[c + 3] == a:
+                uni[off[lv] + p] = a
+            else:
+                uni[off[lv] + p] = 3
+
+
+def _offsets(level: int) -> np.ndarray:
+    return np.array([(4 ** lv - 1) // 3 for lv in range(level + 2)], np.int64)
+
+
+def uniform_levels(m, level: int) -> list[np.ndarray]:
+    """The pruned tree of one micromap, level by level: entry l (4^l values) holds each level-l
+    node's state when its subtree is uniform, else 3.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> [u.tolist() for u in uniform_levels(np.array([1, 1, 1, 1], np.uint8), 1)]
+    [[1], [1, 1, 1, 1]]
+    """
+    m = _check(m, level)
+    off = _offsets(level)
+    uni = np.empty(off[-1], np.uint8)
+    _uniform_levels(m, level, uni, off)
+    return [uni[off[lv]:off[lv + 1]] for lv in range(level + 1)]
+
+
+@njit(cache=True, inline="always")
+def _counts(uni, off, level):
+    """(n_T, internal nodes) of a pruned tree."""
+    n_int = 0
+    n_int_above = 0  # internal nodes above level L - 1: each has 4 children above level L
+    for lv in range(level):
+        for p in range(off[lv], off[lv + 1]):
+            if uni[p] == 3:
+                n_int += 1
+                if lv < level - 1:
+                    n_int_above += 1
+    n_t = 1 + 4 * n_int_above if level > 0 else 0
+    return n_t, n_int
+
+
+@njit(cache=True, inline="always")
+def _size(n_t, n_int, w):
+    return w + n_t + w * (n_t >> 6) + 2 * (1 + 3 * n_int)
+
+
+@njit(cache=True, inline="always")
+def _put(out, pos, v, n):
+    for b in range(n):
+        if (v >> b) & 1:
+            out[(pos + b) >> 3] |= np.uint8(1 << ((pos + b) & 7))
+
+
+@njit(cache=True)
+def _sizes(maps, level, off):
+    w = _header_bits(level)
+    uni = np.empty(off[level + 1], np.uint8)
+    out = np.empty(maps.shape[0], np.int64)
+    for i in range(maps.shape[0]):
+        _uniform_levels(maps[i], level, uni, off)
+        n_t, n_int = _counts(uni, off, level)
+        out[i] = _size(n_t, n_int, w)
+    return out
+
+
+@njit(cache=True)
+def _write(maps, level, off, out, byte_start):
+    """Each map's blob into ``out`` (zeroed) from byte ``byte_start[i]``."""
+    w = _header_bits(level)
+    uni = np.empty(off[level + 1], np.uint8)
+    for i in range(maps.shape[0]):
+        _uniform_levels(maps[i], level, uni, off)
+        n_t, n_int = _counts(uni, off, level)
+        base = 8 * byte_start[i]
+        _put(out, base, n_t, w)
+        t0 = base + w
+        d0 = t0 + n_t
+        s0 = d0 + w * (n_t >> 6)
+        tp = 0
+        lp = 0
+        ones = 0
+        for lv in range(level + 1):
+            for p in range(np.int64(1) << (2 * lv)):
+                if lv > 0 and uni[off[lv - 1] + (p >> 2)] != 3:
+                    continue  # inside a uniform ancestor: no node
+                s = uni[off[lv] + p]
+                if lv < level:
+                    if tp > 0 and tp & 63 == 0:
+                        _put(out, d0 + w * ((tp >> 6) - 1), ones, w)
+                    if s == 3:
+                        _put(out, t0 + tp, 1, 1)
+                        ones += 1
+                    tp += 1
+                if s != 3:
+                    _put(out, s0 + 2 * lp, s, 2)
+                    lp += 1
+        if n_t > 0 and n_t & 63 == 0:
+            _put(out, d0 + w * ((n_t >> 6) - 1), ones, w)
+
+
+@njit(cache=True)
+def _decode(data, start, level):
+    w = _header_bits(level)
+    n_t = get_bits(data, start, w) if w > 0 else np.int64(0)
+    t0 = start + w
+    s0 = t0 + n_t + w * (n_t >> 6)
+    prev = np.zeros(1, np.uint8)
+    tp = 0
+    lp = 0
+    for lv in range(level + 1):
+        cur = np.empty(np.int64(1) << (2 * lv), np.uint8)
+        for p in range(cur.shape[0]):
+            if lv > 0 and prev[p >> 2] != 3:
+                cur[p] = prev[p >> 2]
+                continue
+            internal = False
+            if lv < level:
+                internal = tp < n_t and (data[(t0 + tp) >> 3] >> ((t0 + tp) & 7)) & 1 == 1
+                tp += 1
+            if internal:
+                cur[p] = 3
+            else:
+                cur[p] = get_bits(data, s0 + 2 * lp, 2)
+                lp += 1
+        prev = cur
+    return prev
+
+
+def _check(m, level: int, many: bool = False) -> np.ndarray:
+    if not isinstance(level, (int, np.integer)) or not 0 <= level <= MAX_LEVEL:
+        raise InputError(f"a succinct micromap's level is an integer in 0..{MAX_LEVEL}, got {level!r}")
+    a = np.ascontiguousarray(m, dtype=np.uint8)
+    shape = (a.shape[0], 4 ** level) if many and a.ndim == 2 else (4 ** level,)
+    if a.shape != shape or (a.size and a.max() > 2):
+        raise InputError(f"a level-{level} micromap holds {4 ** level} states 0..2, got shape {a.shape}")
+    return a
+
+
+def tree_counts(m, level: int) -> tuple[int, int]:
+    """(n_T, internal nodes) of one micromap's pruned tree: the nodes above level L and the
+    internal ones among them; it has 1 + 3 · internal leaves."""
+    uni = np.concatenate(uniform_levels(m, level))
+    n_t, n_int = _counts(uni, _offsets(level), level)
+    return int(n_t), int(n_int)
+
+
+def encoded_bits(maps, level: int) -> np.ndarray:
+    """Exact size in bits of each micromap's blob, (P, 4^L) -> (P,) int64:
+    w + n_T + w · (n_T div 64) + 2 · (1 + 3 · internal), w = ``header_bits(L)``."""
+    a = _check(np.atleast_2d(maps), level, many=True)
+    return _sizes(a, level, _offsets(level))
+
+
+def encode_many(maps, level: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Micromaps (P, 4^L) -> (data, byte offsets (P + 1,), bits (P,)): blob i is
+    ``data[offsets[i]:offsets[i + 1]]``, each starting on a byte, ``bits[i]`` of it used."""
+    a = _check(np.atleast_2d(maps), level, many=True)
+    off = _offsets(level)
+    bits = _sizes(a, level, off)
+    starts = np.zeros(len(a) + 1, np.int64)
+    np.cumsum((bits + 7) // 8, out=starts[1:])
+    data = np.zeros(int(starts[-1]), np.uint8)
+    _write(a, level, off, data, starts)
+    return data, starts, bits
+
+
+def encode(m, level: int) -> bytes:
+    """One micromap (4^L states in bird-curve order) -> its blob, ``ceil(bits / 8)`` bytes."""
+    data, _, _ = encode_many(_check(m, level)[None], level)
+    return data.tobytes()
+
+
+def decode(data, level: int, start: int = 0) -> np.ndarray:
+    """The micromap (4^L states) of the blob at bit ``start`` of ``data`` (bytes or uint8)."""
+    if not isinstance(level, (int, np.integer)) or not 0 <= level <= MAX_LEVEL:
+        raise InputError(f"a succinct micromap's level is an integer in 0..{MAX_LEVEL}, got {level!r}")
+    buf = np.frombuffer(bytes(data), np.uint8) if not isinstance(data, np.ndarray) else data
+    return _decode(np.concatenate([buf, np.zeros(8, np.uint8)]), int(start), int(level))
+
+
+def succinct_bits(maps, level: int):
+    """Exact size in bits of one micromap's blob (an int), or of each of many (P, 4^L) (an array)."""
+    bits = encoded_bits(maps, level)
+    return int(bits[0]) if np.ndim(maps) == 1 else bits
+
+
+# the package API's names (``omaps.codecs``)
+succinct_encode, succinct_encode_many, succinct_decode, succinct_lookup = encode, encode_many, decode, lookup

@@ -1,0 +1,206 @@
+"""The hierarchical micromaps (``succinctL``, ``csmL``): lossless, read by descent, and exactly the
+bits docs/FORMAT.md ("Hierarchical micromaps") states.
+
+Each codec is compared with an independent reference written here in plain Python: the pruned
+tree found by a recursive descent over the unpruned tree (a node is uniform when its slice of the
+micromap has one state), its bit sequences assembled field by field (succinct), and its distinct
+subtrees counted by a canonical string of each (csm).
+"""
+
+import numpy as np
+import pytest
+from hypothesis import given, settings, strategies as st
+
+from conftest import SCENES, needs_scenes
+
+from omaps import states
+from omaps.codecs import (csm_bits, csm_build, csm_decode, csm_encode, csm_lookup, succinct_bits, succinct_decode,
+                          succinct_encode, succinct_encode_many, succinct_lookup)
+from omaps.schemes import get_scheme
+
+
+# ---- the independent reference ---------------------------------------------------------------
+
+def uniform(m, level, lv, p):
+    """The state of node p at level lv when its micro-triangles all share it, else None."""
+    n = 4 ** (level - lv)
+    part = set(m[p * n:(p + 1) * n].tolist())
+    return part.pop() if len(part) == 1 else None
+
+
+def ref_state(m, level, k, lv=0, p=0):
+    """Micro-triangle k's state by a recursive descent of the unpruned tree: stop at the first
+    uniform node on k's path."""
+    s = uniform(m, level, lv, p)
+    if s is not None:
+        return s
+    return ref_state(m, level, k, lv + 1, 4 * p + ((k >> (2 * (level - 1 - lv))) & 3))
+
+
+def ref_succinct_bits(m, level):
+    """The succinct blob as a list of bits, built field by field in level order."""
+    queue, t_bits, leaves = [(0, 0)], [], []
+    for lv, p in queue:  # the queue grows while it is read: breadth first
+        s = uniform(m, level, lv, p)
+        if lv < level:
+            t_bits.append(0 if s is not None else 1)
+        if s is not None:
+            leaves.append(s)
+        else:
+            queue += [(lv + 1, 4 * p + c) for c in range(4)]
+    w = ((4 ** level - 1) // 3).bit_length()
+
+    def field(v, n):
+        return [(v >> b) & 1 for b in range(n)]
+
+    out = field(len(t_bits), w) + t_bits
+    for j in range(1, len(t_bits) // 64 + 1):
+        out += field(sum(t_bits[:64 * j]), w)
+    for s in leaves:
+        out += field(s, 2)
+    return out
+
+
+def pack_bits(bits):
+    out = bytearray((len(bits) + 7) // 8)
+    for i, b in enumerate(bits):
+        out[i >> 3] |= b << (i & 7)
+    return bytes(out)
+
+
+def canonical(m, level, lv, p):
+    """A uniform subtree's state, or a mixed one's canonical string of its children."""
+    s = uniform(m, level, lv, p)
+    if s is not None:
+        return str(s)
+    return "(" + ",".join(canonical(m, level, lv + 1, 4 * p + c) for c in range(4)) + ")"
+
+
+def mixed_subtrees(m, level, lv=0, p=0, out=None):
+    """Canonical strings of every mixed subtree of a micromap."""
+    out = set() if out is None else out
+    key = canonical(m, level, lv, p)
+    if key.startswith("("):
+        out.add(key)
+        for c in range(4):
+            mixed_subtrees(m, level, lv + 1, 4 * p + c, out)
+    return out
+
+
+# ---- micromaps with structure: uniform regions at random levels, then a few single states ----
+
+@st.composite
+def micromaps(draw, max_level=5, count=1):
+    level = draw(st.integers(0, max_level))
+    rng = np.random.default_rng(draw(st.integers(0, 2 ** 32 - 1)))
+    out = []
+    for _ in range(count):
+        coarse = int(rng.integers(0, level + 1))
+        m = np.repeat(rng.integers(0, 3, 4 ** coarse), 4 ** (level - coarse)).astype(np.uint8)
+        flips = rng.integers(0, 4 ** level, int(rng.integers(0, 1 + 4 ** level // 4)))
+        m[flips] = rng.integers(0, 3, len(flips))
+        out.append(m)
+    return level, np.stack(out)
+
+
+@settings(max_examples=60)
+@given(micromaps())
+def test_succinct_lossless_and_exact_layout(case):
+    level, maps = case
+    m = maps[0]
+    blob = succinct_encode(m, level)
+    data = np.frombuffer(blob, np.uint8)
+    bits = ref_succinct_bits(m, level)
+    assert blob == pack_bits(bits)  # every field where docs/FORMAT.md puts it
+    assert succinct_bits(m, level) == len(bits)
+    np.testing.assert_array_equal(succinct_decode(blob, level), m)
+    for k in range(4 ** level):
+        assert succinct_lookup(data, 0, level, k) == m[k] == ref_state(m, level, k)
+
+
+@settings(max_examples=40)
+@given(micromaps(max_level=4, count=3))
+def test_csm_lossless_and_merged(case):
+    level, maps = case
+    blob, n_nodes = csm_encode(maps, level)
+    data = np.frombuffer(blob, np.uint8)
+    assert len(blob) * 8 - 8 < csm_bits(n_nodes, len(maps)) <= len(blob) * 8
+    distinct = set().union(*(mixed_subtrees(m, level) for m in maps))
+    assert n_nodes == len(distinct)  # each distinct mixed subtree once, at whatever level
+    np.testing.assert_array_equal(csm_decode(blob, level, len(maps)), maps)
+    for t, m in enumerate(maps):
+        for k in range(4 ** level):
+            assert csm_lookup(data, level, t, k) == m[k] == ref_state(m, level, k)
+
+
+def test_csm_layout_fields():
+    """Header N, then 4 W-bit children per node, then a W-bit root per micromap."""
+    a = np.zeros(16, np.uint8)
+    a[9] = 2
+    maps = np.stack([a, a, np.ones(16, np.uint8)])
+    nodes, roots = csm_build(maps, 2)
+    blob, n = csm_encode(maps, 2)
+    w = (n + 2).bit_length()
+    fields = list(nodes.ravel()) + list(roots)
+    bits = [(n >> b) & 1 for b in range(32)] + [(int(v) >> b) & 1 for v in fields for b in range(w)]
+    assert blob == pack_bits(bits)
+    assert roots.tolist() == [3 + 1, 3 + 1, 1]  # equal micromaps share their root; a uniform one is its state
+    assert nodes.tolist() == [[0, 2, 0, 0], [0, 0, 3, 0]]
+
+
+def test_rank_directory_crossed():
+    """Level-6 maps of random states: n_T = 1365 T bits, 21 directory entries read on the way down."""
+    rng = np.random.default_rng(5)
+    maps = rng.integers(0, 3, (3, 4 ** 6)).astype(np.uint8)
+    data, starts, bits = succinct_encode_many(maps, 6)
+    for i, m in enumerate(maps):
+        assert bits[i] == len(ref_succinct_bits(m, 6))
+        for k in range(0, 4 ** 6, 7):
+            assert succinct_lookup(data, 8 * starts[i], 6, k) == m[k]
+
+
+def test_uniform_and_level_zero():
+    for level in (0, 1, 3):
+        for s in (states.T, states.O, states.C):
+            m = np.full(4 ** level, s, np.uint8)
+            assert succinct_bits(m, level) == ((4 ** level - 1) // 3).bit_length() + (1 if level else 0) + 2
+            blob, n = csm_encode(m[None], level)
+            assert n == 0 and csm_bits(0, 1) == 32 + 2
+            assert csm_lookup(np.frombuffer(blob, np.uint8), level, 0, 0) == s
+
+
+def test_schemes_share_the_grammar():
+    for name, level, rep in (("tri4", 4, "raw"), ("succinct4", 4, "succinct"), ("csm12", 12, "csm")):
+        s = get_scheme(name)
+        assert (s.kind, s.level, s.representation) == ("micromap", level, rep)
+    assert get_scheme("succinct5").bits_for(64, 64) is None and get_scheme("tri5").bits_for(64, 64) == 4096
+    with pytest.raises(Exception, match="succinctL level"):
+        get_scheme("succinct13")
+
+
+@needs_scenes
+def test_palm_level6_every_triangle():
+    """Every distinct alpha triangle of palm.glb at level 6, through both codecs and the
+    reference descent."""
+    from omaps.scene import load_scene
+    from omaps.scene.alpha import alpha_triangles
+    from omaps.trace.maps import micromap_states
+
+    scene = load_scene(SCENES / "palm.glb")
+    at = alpha_triangles(scene)
+    tests = {int(m): scene.alpha_test(int(m)) for m in np.unique(at.material)}
+    maps, _ = micromap_states(at, tests, 6)
+    data, starts, bits = succinct_encode_many(maps, 6)
+    blob, n_nodes = csm_encode(maps, 6)
+    cdata = np.frombuffer(blob, np.uint8)
+    np.testing.assert_array_equal(csm_decode(blob, 6, len(maps)), maps)
+    rng = np.random.default_rng(0)
+    for i, m in enumerate(maps):
+        np.testing.assert_array_equal(succinct_decode(data[starts[i]:starts[i + 1]], 6), m)
+        ks = rng.integers(0, 4 ** 6, 64)
+        for k in ks:
+            assert succinct_lookup(data, 8 * starts[i], 6, k) == csm_lookup(cdata, 6, i, k) == m[k]
+        if i % 16 == 0:
+            assert bits[i] == len(ref_succinct_bits(m, 6))
+            assert all(ref_state(m, 6, k) == m[k] for k in ks)
+    assert bits.sum() < maps.size * 2 and csm_bits(n_nodes, len(maps)) < maps.size * 2
