@@ -133,7 +133,7 @@ def test_adopt_stays_within_the_bytes_it_stores(n_items, n_levels, budget, seed)
         for c in np.unique(ids[:, lvl][ids[:, lvl] >= 0]):
             nbytes[ids[:, lvl] == c, lvl] = nbytes[ids[:, lvl] == c, lvl].max()
     gid, gbytes = omm_budget._groups(nbytes, ids)
-    level, stored = omm_budget._adopt(value, gid, gbytes, budget)
+    level, stored, _ = omm_budget._adopt(value, gid, gbytes, budget)
     held = {(int(lvl), int(ids[i, lvl])): int(nbytes[i, lvl]) for i, lvl in enumerate(level) if nbytes[i, lvl] > 0}
     assert stored == sum(held.values()) <= budget
     # nothing free is left: every option whose micromap is already stored (or costs nothing) and

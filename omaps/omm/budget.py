@@ -123,6 +123,27 @@ def _labels(k: int, merges: np.ndarray, clusters: int) -> np.ndarray:
     return np.unique(parent, return_inverse=True)[1].ravel()
 
 
+def _unique_rows(rows: np.ndarray) -> tuple[int, np.ndarray]:
+    """``np.unique(rows, axis=0, return_inverse=True)`` of uint8 rows (n, m), labels in the same
+    (lexicographic) order, fast: rows are grouped by two 64-bit hashes, every row checked equal
+    to its group's first, and only the distinct rows sorted. Returns (count, label per row)."""
+    n = len(rows)
+    if n == 0:
+        return 0, np.zeros(0, np.int64)
+    rows = np.ascontiguousarray(rows, dtype=np.uint8)
+    rng = np.random.default_rng(0x0A11CE)
+    w = rng.integers(1, np.iinfo(np.int64).max, (rows.shape[1], 2), dtype=np.int64).astype(np.uint64) | np.uint64(1)
+    h = rows.astype(np.uint64) @ w  # wraps modulo 2**64
+    _, first, inv = np.unique(h.view(np.dtype((np.void, 16))).ravel(), return_index=True, return_inverse=True)
+    inv = inv.ravel()
+    if not (rows == rows[first[inv]]).all():  # a hash collision: the slow way
+        _, inv = np.unique(rows, axis=0, return_inverse=True)
+        inv = inv.ravel()
+        return int(inv.max()) + 1, inv
+    _, rank = np.unique(rows[first].view(np.dtype((np.void, rows.shape[1]))).ravel(), return_inverse=True)
+    return len(first), rank.ravel()[inv]
+
+
 def _items(g, settings) -> tuple:
     """A geometry's triangles, their unknown flags and weights, its items (distinct UV triangles:
     representatives ``reps``, item of each triangle ``inv``) and the finest level each item is
@@ -138,16 +159,38 @@ def _items(g, settings) -> tuple:
 
 
 def _priced_levels(budget: int, max_level: int) -> list[int]:
-    """The levels whose micromaps are offered: those of which one fits the budget."""
-    record = omm_format.TRIANGLE_RECORD.itemsize
-    return [lvl for lvl in range(max_level + 1)
-            if omm_format.micromap_bytes(lvl, omm_format.FORMAT_2_STATE) + record <= budget]
+    """The levels whose micromaps are offered: those of which one fits the budget (0, 1, ... up
+    to the last that fits)."""
+    return [lvl for lvl in range(max_level + 1) if _min_bytes(lvl) <= budget]
+
+
+def _min_bytes(lvl: int) -> int:
+    """The fewest bytes a stored level-``lvl`` micromap takes: 2-state, with its record."""
+    return omm_format.micromap_bytes(lvl, omm_format.FORMAT_2_STATE) + omm_format.TRIANGLE_RECORD.itemsize
+
+
+def _base_level(budget: int, max_level: int) -> int:
+    """The finest level priced for every item (-1: none fits): the merged variants' finest, or
+    the finest offered when that is coarser. Finer levels are priced on demand (``_Pricing``)."""
+    levels = _priced_levels(budget, max_level)
+    return min(levels[-1], MERGE_MAX_LEVEL) if levels else -1
 
 
 def _pricing_work(items, settings, budget: int) -> int:
-    """Micro-triangles ``_options`` bakes for a geometry's items (the pricing's progress)."""
+    """Micro-triangles the first pricing bakes for a geometry's items: each item once, at the
+    base level or its own finest if coarser (``_Pricing``)."""
     cap = items[5]
-    return sum(int(np.count_nonzero(cap >= lvl)) << (2 * lvl) for lvl in _priced_levels(budget, settings.max_level))
+    base = _base_level(budget, settings.max_level)
+    return int(np.sum(np.left_shift(1, 2 * np.minimum(cap, base)))) if base >= 0 else 0
+
+
+def _meet(rows: np.ndarray) -> np.ndarray:
+    """T/O/C rows (n, 4**L) one level coarser, (n, 4**(L-1)): a micro-triangle's four children
+    (4k .. 4k+3 in the bird-curve order) tile it, so its state is their meet: T where all four
+    are T, O where all four are O, else C -- what the baker gives the coarse micro-triangle, its
+    region being the union of theirs (its flag the OR of their flags)."""
+    q = rows.reshape(len(rows), -1, 4)
+    return np.where((q == q[:, :, :1]).all(axis=2), q[:, :, 0], np.uint8(states.C)).astype(np.uint8)
 
 
 def _bake_counted(grid, tris, lvl, sat, progress):
@@ -166,95 +209,170 @@ def _bake_counted(grid, tris, lvl, sat, progress):
     return np.concatenate(parts), np.arange(len(tris) + 1, dtype=np.int64) << (2 * lvl)
 
 
-def _options(g, items, settings, budget: int, progress=None):
-    """Per triangle its item (its distinct UV triangle); per item and option column (level L
+def _rows_down(grid, sat, tris, target, low, progress) -> dict:
+    """T/O/C rows of items at every level ``low`` .. ``target[i]`` (at least ``low`` each): each item
+    baked once, at its ``target``, the coarser levels its meets (``_meet``). Returns {level:
+    (item positions, rows)}, positions into ``target``, ascending."""
+    out = {}
+    for top in np.unique(target):
+        who = np.flatnonzero(target == top)
+        s3, _ = _bake_counted(grid, tris[who], int(top), sat, progress)
+        rows = s3.reshape(len(who), -1)
+        for lvl in range(int(top), low - 1, -1):
+            out.setdefault(lvl, []).append((who, rows))
+            if lvl > low:
+                rows = _meet(rows)
+    res = {}
+    for lvl, parts in out.items():
+        who = np.concatenate([w for w, _ in parts])
+        rows = np.concatenate([r for _, r in parts])
+        order = np.argsort(who, kind="stable")
+        res[lvl] = (who[order], rows[order])
+    return res
+
+
+class _Pricing:
+    """One geometry's options: per item (its distinct UV triangle) and option column (level L
     exact, then L's merged variants, ``VARIANTS`` columns a level) the bytes, the value, the
-    content id of the stored micromap (-1 for none; ids are per level) and the level; the total
-    weight; per column the merge, None or (cluster per item (-1: exact), meets, stored rows)."""
-    max_level, special = settings.max_level, settings.special
-    tris, unknown, weight, reps, inv, cap = items
-    n = len(tris)
-    ni = len(reps)
-    wsum = np.bincount(inv, weights=np.nan_to_num(weight), minlength=ni)
-    record = omm_format.TRIANGLE_RECORD.itemsize
-    cols = (max_level + 1) * VARIANTS
-    nbytes = np.zeros((ni, cols), np.int64)
-    ids = np.full((ni, cols), -1, np.int64)
-    eff = np.zeros((ni, cols), np.int64)  # the level an option really bakes
-    value = np.zeros((ni, cols))
-    merge = [None] * cols
-    hits = np.asarray(g.hits, np.int64) if g.hits is not None and len(g.hits) else np.zeros((0, 2), np.int64)
-    h_item = inv[hits[:, 0]]
-    grid = g.test.grid()
-    sat = flag_table(grid)
+    content id of the stored micromap (-1 for none; ids are per level) and the level it bakes
+    (``eff``); per column the merge, None or (cluster per item (-1: exact), meets, stored rows).
 
-    def price(rows3, stored, lvl):
-        """bytes, known count, and the known hits per row of T/O/C rows and their stored rows."""
-        known = (rows3 != states.C).sum(axis=1)
-        uniform = (stored == stored[:, :1]).all(axis=1)
-        fmt = np.where(known == 4 ** lvl, omm_format.FORMAT_2_STATE, omm_format.FORMAT_4_STATE)
-        b = np.where(fmt == omm_format.FORMAT_2_STATE, omm_format.micromap_bytes(lvl, omm_format.FORMAT_2_STATE),
-                     omm_format.micromap_bytes(lvl, omm_format.FORMAT_4_STATE)) + record
-        return np.where(uniform & special, 0, b), known
+    Levels up to the base level (``_base_level``) are priced for every item, from one bake each
+    at its finest such level (the coarser ones its meets). A finer level is priced only for the
+    *classes* asked for (``price``): a class is the items of one base-level content; an item's
+    finer contents meet down to its class's, so a finer micromap is shared only within a class,
+    and an item not priced at a level keeps the level below's option there (as an item whose
+    level is capped). ``_adopt``'s certificate says which classes must be priced for its choice
+    to be the one every level priced would give."""
 
-    for lvl in range(max_level + 1):
+    def __init__(self, g, items, settings, budget: int, progress=None):
+        self.g, self.settings, self.items = g, settings, items
+        tris, unknown, weight, reps, inv, cap = items
+        self.special = settings.special
+        self.max_level = settings.max_level
+        n, ni = len(tris), len(reps)
+        self.ni = ni
+        self.wsum = np.bincount(inv, weights=np.nan_to_num(weight), minlength=ni)
+        cols = (self.max_level + 1) * VARIANTS
+        self.nbytes = np.zeros((ni, cols), np.int64)
+        self.ids = np.full((ni, cols), -1, np.int64)
+        self.eff = np.zeros((ni, cols), np.int64)  # the level an option really bakes
+        self.value = np.zeros((ni, cols))
+        self.merge = [None] * cols
+        hits = np.asarray(g.hits, np.int64) if g.hits is not None and len(g.hits) else np.zeros((0, 2), np.int64)
+        self.hits = hits
+        self.h_item = inv[hits[:, 0]]
+        self.n_hits = np.bincount(self.h_item, minlength=ni)
+        self.total = float(self.wsum.sum()) + len(hits)
+        self.grid = g.test.grid()
+        self.sat = flag_table(self.grid)
+        self.utris = tris[reps]
+        self.unknown_item = unknown[reps]
+        levels = _priced_levels(budget, self.max_level)
+        if not levels and not self.special and n:
+            raise InputError(f"the budget of {budget} bytes is below one level-0 micromap ({_min_bytes(0)} bytes "
+                             f"with its record), and without special indices every triangle stores one")
+        self.base = _base_level(budget, self.max_level)
+        self.fine_levels = [lvl for lvl in levels if lvl > self.base]
+        self.fine = {}  # fine level -> (items, rows3, stored), items ascending
+        self.priced_to = np.minimum(cap, self.base)  # the finest level priced per item
+        self.klass = np.full(ni, -1, np.int64)
+        self.n_classes = 0
+        self.class_mixed = np.zeros(0, bool)  # per class: not all C (its finer contents are never uniform)
+        if self.base < 0:  # a budget below one level-0 micromap: uniform, so a special index
+            for lvl in range(self.max_level + 1):
+                self._fill_fine(lvl)
+            return
+        rows = _rows_down(self.grid, self.sat, self.utris, np.minimum(cap, self.base), 0, progress)
+        for lvl in range(self.base + 1):
+            sel, r3 = rows.get(lvl, (np.zeros(0, np.int64), np.zeros((0, 4 ** lvl), np.uint8)))
+            self._fill(lvl, sel, self._unknown_c(sel, r3), None)
+        # classes: items offered finer levels whose base content is not uniform T or O (a uniform
+        # T or O content stays so at every finer level: nothing to gain, and the base's is as free)
+        sel, r3 = rows.get(self.base, (np.zeros(0, np.int64), np.zeros((0, 4 ** self.base), np.uint8)))
+        r3 = self._unknown_c(sel, r3)
+        known_uniform = (r3 == r3[:, :1]).all(axis=1) & (r3[:, 0] != states.C)
+        ok = (cap[sel] > self.base) & ~known_uniform
+        if ok.any():
+            self.n_classes, cls = _unique_rows(r3[ok])
+            self.klass[sel[ok]] = cls
+            first = np.zeros(self.n_classes, np.int64)
+            first[cls[::-1]] = np.arange(len(cls))[::-1]
+            self.class_mixed = ~(r3[ok][first] == states.C).all(axis=1)
+        for lvl in range(self.base + 1, self.max_level + 1):
+            self._fill_fine(lvl)
+
+    def _unknown_c(self, sel, r3):
+        if self.g.unknown is not None:
+            r3 = r3.copy()
+            r3[self.unknown_item[sel]] = states.C
+        return r3
+
+    def lower_bound_bytes(self, lvl: int) -> int:
+        """Fewest bytes every item offered level ``lvl`` at it stores: one micromap per class of
+        mixed content (T and O, or a known state and C) -- its finer contents are never uniform,
+        and two classes' never equal."""
+        if not self.n_classes:
+            return 0
+        cap = self.items[5]
+        has = np.zeros(self.n_classes, bool)
+        m = (self.klass >= 0) & (cap >= lvl)
+        has[self.klass[m]] = True
+        return int(np.count_nonzero(has & self.class_mixed)) * _min_bytes(lvl)
+
+    def unpriced(self, lvl: int):
+        """Items offered level ``lvl`` but not priced there, and their classes."""
+        who = np.flatnonzero((self.klass >= 0) & (self.items[5] >= lvl) & (self.priced_to < lvl))
+        return who, self.klass[who]
+
+    def price(self, lvl: int, classes, progress=None) -> int:
+        """Price level ``lvl`` (and the levels between) for every item of ``classes``; returns the
+        micro-triangles baked."""
+        cap = self.items[5]
+        want = np.isin(self.klass, np.asarray(list(classes), np.int64)) & (self.klass >= 0)
+        target = np.where(want, np.minimum(cap, lvl), self.priced_to)
+        who = np.flatnonzero(target > self.priced_to)
+        if not len(who):
+            return 0
+        work = int(np.sum(np.left_shift(1, 2 * target[who])))
+        # each item baked at its target, meets down to its first unpriced level
+        for low in np.unique(self.priced_to[who] + 1):
+            part = who[self.priced_to[who] + 1 == low]
+            rows = _rows_down(self.grid, self.sat, self.utris[part], target[part], int(low), progress)
+            for L, (pos, r3) in rows.items():
+                sel = part[pos]
+                r3 = self._unknown_c(sel, r3)
+                stored = self._resolve(sel, r3, L)
+                old = self.fine.get(L)
+                if old is not None:
+                    sel, r3, stored = (np.concatenate([old[0], sel]), np.concatenate([old[1], r3]),
+                                       np.concatenate([old[2], stored]))
+                order = np.argsort(sel, kind="stable")
+                self.fine[L] = (sel[order], r3[order], stored[order])
+        first = int(self.priced_to[who].min()) + 1
+        self.priced_to[who] = target[who]
+        for L in range(first, self.max_level + 1):
+            self._fill_fine(L)
+        return work
+
+    def _resolve(self, sel, r3, lvl):
+        s = self.settings
+        nc = 4 ** lvl
+        return resolve(np.ascontiguousarray(r3).ravel(), np.arange(len(sel) + 1, dtype=np.int64) * nc, lvl,
+                       self.g.test, self.utris[sel], s.format_code, s.promotion, s.seed).reshape(len(sel), nc)
+
+    def _fill_fine(self, lvl):
+        sel, r3, stored = self.fine.get(lvl, (np.zeros(0, np.int64), np.zeros((0, 4 ** lvl), np.uint8), None))
+        self._fill(lvl, sel, r3, stored)
+
+    def _fill(self, lvl, sel, rows3, stored):
+        """Level ``lvl``'s columns: the items ``sel`` (ascending) priced from their T/O/C rows (and
+        stored rows, resolved here when None); the others keep the level below's option."""
+        settings, special, record = self.settings, self.special, omm_format.TRIANGLE_RECORD.itemsize
+        g, ni, wsum = self.g, self.ni, self.wsum
+        nbytes, value, ids, eff, merge = self.nbytes, self.value, self.ids, self.eff, self.merge
         c0 = lvl * VARIANTS
-        sel = np.flatnonzero(cap >= lvl)
-        if omm_format.micromap_bytes(lvl, omm_format.FORMAT_2_STATE) + record > budget:
-            if lvl == 0 and not special and n:
-                raise InputError(f"the budget of {budget} bytes is below one level-0 micromap "
-                                 f"({omm_format.micromap_bytes(0, omm_format.FORMAT_2_STATE) + record} bytes with its "
-                                 f"record), and without special indices every triangle stores one")
-            sel = sel[:0]  # no micromap of this level fits the budget
-        if len(sel):
-            nc = 4 ** lvl
-            s3, starts = _bake_counted(grid, tris[reps[sel]], lvl, sat, progress)
-            if g.unknown is not None:
-                s3.reshape(len(sel), -1)[unknown[reps[sel]]] = states.C
-            rows3 = s3.reshape(len(sel), nc)
-            stored = resolve(s3, starts, lvl, g.test, tris[reps[sel]], settings.format_code, settings.promotion,
-                             settings.seed).reshape(len(sel), nc)  # what the packer stores
-            row = np.full(ni, -1, np.int64)
-            row[sel] = np.arange(len(sel))
-            hr = row[h_item]
-            hok = hr >= 0
-            h_sel, h_cell = hr[hok], hits[hok, 1] >> (2 * (HIT_LEVEL - lvl))
-
-            def values(states_of_sel):  # value of every selected item with these T/O/C rows
-                known = states_of_sel != states.C
-                v = wsum[sel] * known.sum(axis=1) / nc
-                return v + np.bincount(h_sel[known[h_sel, h_cell]], minlength=len(sel))
-
-            b, _ = price(rows3, stored, lvl)
-            nbytes[sel, c0] = b
-            value[sel, c0] = values(rows3)
-            eff[sel, c0:c0 + VARIANTS] = lvl
-            all_rows = [stored]
-            variants = _merged(rows3, stored, b, wsum[sel], h_sel, h_cell, lvl) if 1 <= lvl <= MERGE_MAX_LEVEL else []
-            for v in range(1, VARIANTS):
-                c = c0 + v
-                if v - 1 >= len(variants):
-                    nbytes[sel, c], value[sel, c] = nbytes[sel, c0], value[sel, c0]
-                    continue
-                label, meets = variants[v - 1]
-                rep = np.zeros(len(meets), np.int64)
-                rep[label[label >= 0][::-1]] = np.flatnonzero(label >= 0)[::-1]  # a member of each cluster
-                flat = np.ascontiguousarray(meets).ravel()
-                mrows = resolve(flat, np.arange(len(meets) + 1) * nc, lvl, g.test, tris[reps[sel[rep]]],
-                                settings.format_code, settings.promotion, settings.seed).reshape(len(meets), nc)
-                st3 = np.where(label[:, None] >= 0, meets[np.maximum(label, 0)], rows3)
-                st = np.where(label[:, None] >= 0, mrows[np.maximum(label, 0)], stored)
-                nbytes[sel, c], _ = price(st3, st, lvl)
-                value[sel, c] = values(st3)
-                all_rows.append(st)
-                merge[c] = (np.where(row >= 0, label[np.maximum(row, 0)], -1), meets, mrows)
-            allr = np.concatenate(all_rows)
-            _, content = np.unique(np.ascontiguousarray(allr).view(np.dtype((np.void, nc))).ravel(),
-                                   return_inverse=True)
-            content = content.ravel().reshape(len(all_rows), len(sel))
-            for v in range(VARIANTS):
-                src = v if v < len(all_rows) else 0
-                ids[sel, c0 + v] = np.where(nbytes[sel, c0 + v] > 0, content[src], -1)
+        nc = 4 ** lvl
         rest = np.setdiff1d(np.arange(ni), sel)  # not offered: as the level below
         if lvl and len(rest):
             prev = c0 - VARIANTS  # the level below's exact column
@@ -263,9 +381,61 @@ def _options(g, items, settings, budget: int, progress=None):
             ids[rest, c0:c0 + VARIANTS] = ids[rest, prev][:, None]
             eff[rest, c0:c0 + VARIANTS] = eff[rest, prev][:, None]
         elif len(rest):
-            nbytes[rest, :VARIANTS] = 0  # a budget below one level-0 micromap: uniform, so a special index
-    total = float(wsum.sum()) + len(hits)
-    return inv, nbytes, value, total, ids, eff, merge
+            nbytes[rest, :VARIANTS] = 0
+        if not len(sel):
+            return
+
+        def price(rows3, stored):
+            """bytes of T/O/C rows and their stored rows."""
+            known = (rows3 != states.C).sum(axis=1)
+            uniform = (stored == stored[:, :1]).all(axis=1)
+            b = np.where(known == nc, omm_format.micromap_bytes(lvl, omm_format.FORMAT_2_STATE),
+                         omm_format.micromap_bytes(lvl, omm_format.FORMAT_4_STATE)) + record
+            return np.where(uniform & special, 0, b)
+
+        if stored is None:
+            stored = self._resolve(sel, rows3, lvl)  # what the packer stores
+        row = np.full(ni, -1, np.int64)
+        row[sel] = np.arange(len(sel))
+        hr = row[self.h_item]
+        hok = hr >= 0
+        h_sel, h_cell = hr[hok], self.hits[hok, 1] >> (2 * (HIT_LEVEL - lvl))
+
+        def values(states_of_sel):  # value of every selected item with these T/O/C rows
+            known = states_of_sel != states.C
+            v = wsum[sel] * known.sum(axis=1) / nc
+            return v + np.bincount(h_sel[known[h_sel, h_cell]], minlength=len(sel))
+
+        b = price(rows3, stored)
+        nbytes[sel, c0] = b
+        value[sel, c0] = values(rows3)
+        eff[sel, c0:c0 + VARIANTS] = lvl
+        all_rows = [stored]
+        variants = _merged(rows3, stored, b, wsum[sel], h_sel, h_cell, lvl) if 1 <= lvl <= MERGE_MAX_LEVEL else []
+        for v in range(1, VARIANTS):
+            c = c0 + v
+            if v - 1 >= len(variants):
+                nbytes[sel, c], value[sel, c] = nbytes[sel, c0], value[sel, c0]
+                continue
+            label, meets = variants[v - 1]
+            rep = np.zeros(len(meets), np.int64)
+            rep[label[label >= 0][::-1]] = np.flatnonzero(label >= 0)[::-1]  # a member of each cluster
+            flat = np.ascontiguousarray(meets).ravel()
+            mrows = resolve(flat, np.arange(len(meets) + 1) * nc, lvl, g.test, self.utris[sel[rep]],
+                            settings.format_code, settings.promotion, settings.seed).reshape(len(meets), nc)
+            st3 = np.where(label[:, None] >= 0, meets[np.maximum(label, 0)], rows3)
+            st = np.where(label[:, None] >= 0, mrows[np.maximum(label, 0)], stored)
+            nbytes[sel, c] = price(st3, st)
+            value[sel, c] = values(st3)
+            all_rows.append(st)
+            merge[c] = (np.where(row >= 0, label[np.maximum(row, 0)], -1), meets, mrows)
+        allr = np.concatenate(all_rows)
+        _, content = np.unique(np.ascontiguousarray(allr).view(np.dtype((np.void, nc))).ravel(),
+                               return_inverse=True)
+        content = content.ravel().reshape(len(all_rows), len(sel))
+        for v in range(VARIANTS):
+            src = v if v < len(all_rows) else 0
+            ids[sel, c0 + v] = np.where(nbytes[sel, c0 + v] > 0, content[src], -1)
 
 
 def _merged(rows3, stored, nbytes, w, h_row, h_cell, lvl) -> list:
@@ -277,9 +447,9 @@ def _merged(rows3, stored, nbytes, w, h_row, h_cell, lvl) -> list:
     paid = np.flatnonzero(nbytes > 0)
     if len(paid) < 4:
         return []
-    cont, cinv = np.unique(rows3[paid], axis=0, return_inverse=True)
-    cinv = cinv.ravel()
-    k = len(cont)
+    k, cinv = _unique_rows(rows3[paid])
+    cont = np.empty((k, nc), np.uint8)
+    cont[cinv] = rows3[paid]
     if k < 4 or float(k) * k * nc > MERGE_MAX_WORK:
         return []
     cw = np.zeros((k, nc))
@@ -311,8 +481,9 @@ def _groups(nbytes, ids, eff=None) -> tuple[np.ndarray, np.ndarray]:
     indices) -- with each group's bytes."""
     n_items, n_levels = nbytes.shape
     lv = np.broadcast_to(np.arange(n_levels), nbytes.shape) if eff is None else eff
-    key = np.stack([lv.ravel(), np.where(nbytes > 0, ids, -1).ravel()], axis=1)
-    keys, gid = np.unique(key, axis=0, return_inverse=True)
+    idv = np.where(nbytes > 0, ids, -1).ravel() + 1
+    key = np.asarray(lv, np.int64).ravel() * (int(idv.max(initial=0)) + 1) + idv  # (level, id) in that order
+    keys, gid = np.unique(key, return_inverse=True)
     gid = gid.reshape(n_items, n_levels)
     gbytes = np.zeros(len(keys), np.int64)
     gbytes[gid.ravel()] = nbytes.ravel()
@@ -324,11 +495,18 @@ def _stored(gid, gbytes, level) -> int:
     return int(gbytes[ref > 0].sum())
 
 
-def _adopt(value, gid, gbytes, budget: int, start=None) -> tuple[np.ndarray, int]:
+def _adopt(value, gid, gbytes, budget: int, start=None, watch=()) -> tuple[np.ndarray, int, dict]:
     """Greedy over groups: repeatedly move every item that gains by it to the group with the most
     value per new byte (a group already stored, or free, first), while the bytes stored -- each
     group with a member once -- stay within the budget. Items only ever gain. (An item's options
-    in one group store the same micromap, so they are worth the same: one of them counts.)"""
+    in one group store the same micromap, so they are worth the same: one of them counts.)
+
+    ``watch``: options not priced, as (key, fewest bytes, items, their classes, best value per
+    item): a class's options at the key's level are one new micromap each (at least those
+    bytes), worth at most its items' best values. Returns the levels, the bytes stored and the
+    certificate's answer: per key the classes whose bound reached a step's chosen value per
+    byte, or stayed affordable when the greedy ended (the choice may then differ from the one
+    with them priced), empty when the choice is the same."""
     n_items, n_cols = value.shape
     level = np.zeros(n_items, np.int64) if start is None else np.array(start, np.int64)
     rows = np.arange(n_items)
@@ -338,6 +516,20 @@ def _adopt(value, gid, gbytes, budget: int, start=None) -> tuple[np.ndarray, int
     first[:, 1:] = srt[:, 1:] != srt[:, :-1]
     keep = np.zeros(gid.shape, bool)
     np.put_along_axis(keep, order, first, axis=1)
+    doubt: dict = {}
+
+    def check(room, rate):  # classes whose best case reaches ``rate`` per byte within ``room`` bytes
+        if not watch:
+            return
+        cur = value[rows, level]
+        for key, least, who, cls, best in watch:
+            if least > room or not len(who):
+                continue
+            bound = np.bincount(cls, np.maximum(best - cur[who], 0.0))
+            bad = np.flatnonzero((bound > 0) & (bound >= rate * least * (1 - 1e-9)))
+            if len(bad):
+                doubt.setdefault(key, set()).update(bad.tolist())
+
     while True:
         ref = np.bincount(gid[rows, level], minlength=len(gbytes))
         stored = int(gbytes[ref > 0].sum())
@@ -347,64 +539,112 @@ def _adopt(value, gid, gbytes, budget: int, start=None) -> tuple[np.ndarray, int
         cost = np.where(ref > 0, 0, gbytes)
         ok = (gsum > 0) & (cost <= budget - stored)
         if not ok.any():
-            return level, stored
+            check(budget - stored, 0.0)
+            return level, stored, doubt
         free = ok & (cost == 0)
         score = np.where(free, gsum, -np.inf) if free.any() else np.where(ok, gsum / np.maximum(cost, 1), -np.inf)
-        movers = up & (gid == int(np.argmax(score)))
+        chosen = int(np.argmax(score))
+        if not free.any():
+            check(budget - stored, float(score[chosen]))
+        movers = up & (gid == chosen)
         moved = movers.any(axis=1)
         level[moved] = np.argmax(movers[moved], axis=1)  # its one option in the group
+
+
+def _choose(pricings, budget: int) -> tuple:
+    """The greedy's choice over every geometry's options (``_adopt``, from nothing and from the two
+    most valuable uniform columns that fit), pricing finer levels for the classes its certificate
+    names until it names none: the choice is then the one with every level priced."""
+    while True:
+        nbytes = np.concatenate([p.nbytes for p in pricings])
+        value = np.concatenate([p.value for p in pricings])
+        ids, off = [], 0  # content ids are per geometry (its own texture and promotion): never shared across
+        for p in pricings:
+            ids.append(np.where(p.ids >= 0, p.ids + off, -1))
+            off += int(p.ids.max(initial=-1)) + 1
+        eff = np.concatenate([p.eff for p in pricings])
+        gid, gbytes = _groups(nbytes, np.concatenate(ids), eff)
+        rows = np.arange(len(value))
+        watch, base = [], 0
+        for gi, p in enumerate(pricings):
+            best = p.wsum + p.n_hits
+            for lvl in p.fine_levels:
+                who, cls = p.unpriced(lvl)
+                watch.append(((gi, lvl), _min_bytes(lvl), who + base, cls, best[who]))
+            base += p.ni
+        # a uniform column at a level is a start only where every item there fits: a level whose
+        # classes alone need more than the budget is out (its unpriced items could only add bytes)
+        out_levels = set()
+        for lvl in range(max((p.max_level for p in pricings), default=-1) + 1):
+            if sum(p.lower_bound_bytes(lvl) for p in pricings if lvl in p.fine_levels) > budget:
+                out_levels.add(lvl)
+        need = {(gi, lvl): set(range(p.n_classes)) for gi, p in enumerate(pricings) for lvl in p.fine_levels
+                if lvl not in out_levels and len(p.unpriced(lvl)[0])}
+        if not need:
+            best, stored, doubt = _adopt(value, gid, gbytes, budget, watch=watch)
+            fits = [c for c in range(value.shape[1]) if c // VARIANTS not in out_levels
+                    and _stored(gid, gbytes, np.full(len(value), c)) <= budget]
+            for c in sorted(fits, key=lambda c: -value[:, c].sum())[:2]:
+                c2, s2, d2 = _adopt(value, gid, gbytes, budget, np.full(len(value), c), watch)
+                for k, v in d2.items():
+                    doubt.setdefault(k, set()).update(v)
+                if value[rows, c2].sum() > value[rows, best].sum():
+                    best, stored = c2, s2
+            need = doubt
+        if not need:
+            return nbytes, value, best, stored
+        finest: dict = {}  # (geometry, class) -> the finest level asked: one bake prices it and the levels between
+        for (gi, lvl), classes in need.items():
+            for c in classes:
+                finest[gi, c] = max(finest.get((gi, c), lvl), lvl)
+        jobs = {}
+        for (gi, c), lvl in finest.items():
+            jobs.setdefault((gi, lvl), set()).add(c)
+        jobs = [(gi, lvl, classes) for (gi, lvl), classes in sorted(jobs.items())]
+        for gi, lvl, classes in jobs:  # (not counted by the progress: its total is known before the first)
+            pricings[gi].price(lvl, classes)
 
 
 def budget_levels(geometries, settings, budget: int, progress=None) -> tuple[list[tuple[np.ndarray, dict]], dict]:
     """Per geometry the level of each triangle and the merged micromaps it stores ({triangle:
     (T/O/C meet, stored row)}), and a report (bytes stored, expected savings). ``progress``
     (``pipeline.Progress``): its stage "pricing" counts the micro-triangles baked to price the
-    options, its total known before the first.
+    options, its total known before the first (the levels finer than the base level that the
+    certificate asks for are not counted).
 
     Items that store the same micromap at a level share its bytes, so the choice is made per
-    group of such items (``_adopt``); the bytes counted are exactly those the packer stores."""
+    group of such items (``_adopt``); the bytes counted are exactly those the packer stores.
+    Levels up to the base level are priced for every item from one bake each; a finer level
+    only for the classes whose best case could change the choice (``_choose``)."""
     items = [_items(g, settings) for g in geometries]
+    budget = int(budget)
     if progress is not None:
         progress.stage("pricing", sum(_pricing_work(it, settings, budget) for it in items), "micro-triangles")
-    parts = [_options(g, it, settings, budget, progress) for g, it in zip(geometries, items)]
-    if not parts:
-        return [], {"budget_bytes": int(budget), "stored_bytes": 0, "items": 0}
-    nbytes = np.concatenate([p[1] for p in parts])
-    value = np.concatenate([p[2] for p in parts])
-    ids, off = [], 0  # content ids are per geometry (its own texture and promotion): never shared across
-    for p in parts:
-        ids.append(np.where(p[4] >= 0, p[4] + off, -1))
-        off += int(p[4].max(initial=-1)) + 1
-    eff = np.concatenate([p[5] for p in parts])
-    gid, gbytes = _groups(nbytes, np.concatenate(ids), eff)
+    pricings = [_Pricing(g, it, settings, budget, progress) for g, it in zip(geometries, items)]
+    if not pricings:
+        return [], {"budget_bytes": budget, "stored_bytes": 0, "items": 0}
+    nbytes, value, best, stored = _choose(pricings, budget)
     rows = np.arange(len(value))
-    best, stored = _adopt(value, gid, gbytes, int(budget))
-    # also from the uniform columns that fit, the two most valuable: the greedy never ends below them
-    fits = [c for c in range(value.shape[1]) if _stored(gid, gbytes, np.full(len(value), c)) <= budget]
-    for c in sorted(fits, key=lambda c: -value[:, c].sum())[:2]:
-        c2, s2 = _adopt(value, gid, gbytes, int(budget), np.full(len(value), c))
-        if value[rows, c2].sum() > value[rows, best].sum():
-            best, stored = c2, s2
     if stored > budget:  # without special indices even the coarsest micromaps may not fit
         raise InputError(f"the budget of {budget} bytes is below the {stored} bytes the coarsest micromaps need "
                          f"(without special indices every triangle stores one)")
     out, k = [], 0
     merged = 0
-    for g, p in zip(geometries, parts):
-        inv, choice = p[0], best[k:k + len(p[1])]
-        level = p[5][np.arange(len(choice)), choice]
+    for p in pricings:
+        inv, choice = p.items[4], best[k:k + p.ni]
+        level = p.eff[np.arange(len(choice)), choice]
         over = {}
         for c in np.unique(choice):
-            if p[6][c] is None:
+            if p.merge[c] is None:
                 continue
-            label, meets, mrows = p[6][c]
-            items = np.flatnonzero((choice == c) & (label >= 0))
-            for t in np.flatnonzero(np.isin(inv, items)):
+            label, meets, mrows = p.merge[c]
+            sel = np.flatnonzero((choice == c) & (label >= 0))
+            for t in np.flatnonzero(np.isin(inv, sel)):
                 over[int(t)] = (meets[label[inv[t]]], mrows[label[inv[t]]])
-            merged += len(items)
+            merged += len(sel)
         out.append((level[inv].astype(np.int64), over))
-        k += len(p[1])
-    total = float(sum(p[3] for p in parts))
-    return out, {"budget_bytes": int(budget), "stored_bytes": stored, "items": int(len(best)),
+        k += p.ni
+    total = float(sum(p.total for p in pricings))
+    return out, {"budget_bytes": budget, "stored_bytes": stored, "items": int(len(best)),
                  "merged_items": merged,
                  "expected_tests_saved_fraction": float(value[rows, best].sum()) / total if total > 0 else 0.0}

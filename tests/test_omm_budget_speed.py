@@ -1,0 +1,105 @@
+"""The budget's pricing: coarse levels as meets of the finest baked, finer levels priced only where
+the greedy's certificate asks, and the plan the same as pricing every level for every item."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+from hypothesis import given, settings, strategies as st
+
+from omaps.alpha_test import StateRule
+from omaps.bake import GROW_TEXEL, bake_micromaps
+from omaps.omm import budget as omm_budget
+from omaps.omm.pipeline import Geometry, OmmSettings, build
+from omaps.texture import load_alpha
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "bench"))
+import omm_budget_reference as reference  # noqa: E402  (every level priced for every item)
+
+
+def _test(alpha, filt="nearest"):
+    return StateRule("cutoff").alpha_test(load_alpha(alpha), filt, "wrap")
+
+
+def _tris(rng, n, spread=1.0):
+    c = rng.random((n, 1, 2)) * spread
+    return c + (rng.random((n, 3, 2)) - 0.5) * rng.uniform(0.05, 0.6, (n, 1, 1))
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.integers(0, 2 ** 31 - 1), st.sampled_from(["nearest", "linear"]), st.integers(2, 5),
+       st.sampled_from([4, 8, 16, 32]))
+def test_meet_of_the_finer_level_is_the_bake(seed, filt, level, size):
+    rng = np.random.default_rng(seed)
+    alpha = (rng.random((size, size)) < rng.uniform(0.1, 0.9)).astype(np.uint8) * 255
+    if rng.random() < 0.5:  # smooth alpha: mixed bilinear cells
+        alpha = rng.integers(0, 256, (size, size), dtype=np.uint8)
+    test = _test(alpha, filt)
+    grid = test.grid()
+    tris = _tris(rng, 12, 2.0)
+    fine, _ = bake_micromaps(grid, tris, level, GROW_TEXEL)
+    coarse, _ = bake_micromaps(grid, tris, level - 1, GROW_TEXEL)
+    np.testing.assert_array_equal(omm_budget._meet(fine.reshape(len(tris), -1)), coarse.reshape(len(tris), -1))
+
+
+@settings(max_examples=30, deadline=None)
+@given(st.lists(st.binary(min_size=1, max_size=6), min_size=0, max_size=40))
+def test_unique_rows_is_numpys(rows):
+    m = np.array([list(r.ljust(6, b"\0")) for r in rows], np.uint8).reshape(-1, 6)
+    k, inv = omm_budget._unique_rows(m)
+    if len(m):
+        u, ref = np.unique(m, axis=0, return_inverse=True)
+        assert k == len(u)
+        np.testing.assert_array_equal(inv, ref.ravel())
+
+
+def _geometry(seed, n=60, size=64):
+    rng = np.random.default_rng(seed)
+    yy, xx = np.mgrid[:size, :size]
+    alpha = ((np.sin(xx / rng.uniform(2, 6)) + np.cos(yy / rng.uniform(2, 6)) + rng.normal(0, 0.3, (size, size)))
+             > 0).astype(np.uint8) * 255
+    tris = _tris(rng, n)
+    tris = np.concatenate([tris, tris[:n // 4]])  # repeated UVs: items standing for several triangles
+    return Geometry("g", _test(alpha), tris)
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+@pytest.mark.parametrize("fraction", [0.02, 0.1, 0.5])
+def test_plan_is_every_level_priced_plan(seed, fraction):
+    g = [_geometry(seed), _geometry(seed + 10, 30)]
+    full = sum(len(x.tris_uv) for x in g) * (4 ** 6 // 4 + 8)
+    budget = max(int(full * fraction), 64)
+    s = OmmSettings(budget=budget, max_level=7)
+    plan, rep = omm_budget.budget_levels(g, s, budget)
+    plan_ref, rep_ref = reference.budget_levels(g, s, budget)
+    assert rep == rep_ref
+    assert rep["stored_bytes"] <= budget
+    for (lv, over), (lv_ref, over_ref) in zip(plan, plan_ref):
+        np.testing.assert_array_equal(lv, lv_ref)
+        assert over.keys() == over_ref.keys()
+        for t in over:
+            np.testing.assert_array_equal(over[t][0], over_ref[t][0])
+            np.testing.assert_array_equal(over[t][1], over_ref[t][1])
+
+
+@pytest.mark.parametrize("seed", [3, 4])
+def test_budgeted_bake_states_are_the_bakers_at_each_level(seed):
+    g = _geometry(seed, 80)
+    budget = 3000
+    s = OmmSettings(budget=budget, max_level=7)
+    res = build([g], s)
+    summary = res.summary
+    assert summary["budget"]["stored_bytes"] <= budget
+    assert summary["statistics"]["data_and_record_bytes"] == summary["budget"]["stored_bytes"]
+    plan, _ = omm_budget.budget_levels([g], s, budget)
+    levels, merged = plan[0]
+    grid = g.test.grid()
+    for t in range(len(g.tris_uv)):
+        if t in merged:
+            continue  # a merged micromap stores its cluster's meet (checked in test_budget_scene)
+        s3, _ = bake_micromaps(grid, g.tris_uv[t:t + 1], int(levels[t]), GROW_TEXEL)
+        got = np.asarray(res.triangle_states(t))  # OMM states: 2 and 3 are the two unknowns
+        np.testing.assert_array_equal(np.minimum(got, 2), s3)
