@@ -204,3 +204,28 @@ def test_palm_level6_every_triangle():
             assert bits[i] == len(ref_succinct_bits(m, 6))
             assert all(ref_state(m, 6, k) == m[k] for k in ks)
     assert bits.sum() < maps.size * 2 and csm_bits(n_nodes, len(maps)) < maps.size * 2
+
+
+@needs_scenes
+def test_palm_trace_equals_tri():
+    """Traced through palm's crown, succinct5 and csm5 make exactly tri5's alpha tests, ray by
+    ray, in fewer map bytes."""
+    from omaps import trace
+    from omaps.scene import load_scene
+    from omaps.schemes import parse_schemes
+
+    scene = load_scene(SCENES / "palm.glb")
+    names = ["none", "tri5", "succinct5", "csm5"]
+    prep = trace.prepare(scene, parse_schemes(names))
+    w, h = 48, 32
+    cam = trace.Camera(np.array([-70.0, 130.0, -70.0]), np.array([0.0, 175.0, 0.0]), 70.0).basis(w, h)
+    light = np.array([0.3, 0.9, 0.3]) / np.linalg.norm([0.3, 0.9, 0.3])
+    runs = {n: trace.trace_scheme(prep, n, cam, w, h, light, 1e-3, deferred=True) for n in names}
+    tri = runs["tri5"]
+    assert tri.primary.tests.sum() < runs["none"].primary.tests.sum()
+    for n in ("succinct5", "csm5"):
+        np.testing.assert_array_equal(runs[n].primary.tests, tri.primary.tests)
+        np.testing.assert_array_equal(runs[n].primary.candidates, tri.primary.candidates)
+        np.testing.assert_array_equal(runs[n].shadow.tests, tri.shadow.tests)
+        np.testing.assert_array_equal(runs[n].deferred.tests, tri.deferred.tests)
+        assert prep.maps[n].map_bytes < prep.maps["tri5"].map_bytes

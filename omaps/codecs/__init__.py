@@ -14,7 +14,7 @@ _RAW = ["pack_states", "unpack_states", "row_bytes", "read_state"]  # the one 2-
 # hierarchical micromaps (schemes succinctL, csmL): one triangle's pruned tree with rank support,
 # and a set's merged subtrees
 _SUCCINCT = ["succinct_encode", "succinct_encode_many", "succinct_decode", "succinct_lookup", "succinct_bits"]
-_CSM = ["csm_build", "csm_encode", "csm_decode", "csm_lookup", "csm_bits"]
+_CSM = ["csm_build", "csm_pack", "csm_encode", "csm_decode", "csm_lookup", "csm_bits"]
 __all__ = _REGISTRY + _RAW + _SUCCINCT + _CSM + ["block_state", "MAX_BLOCK_BYTES"]
 
 # each name from its module on first use: the OMM format reads the raw layout alone

@@ -41,8 +41,8 @@ from ..birdcurve import MAX_LEVEL
 from ..errors import InputError
 from .bits import get_bits
 
-__all__ = ["ref_bits", "build", "encode", "decode", "lookup", "blob_bits", "HEADER_BITS", "csm_build", "csm_encode",
-           "csm_decode", "csm_lookup", "csm_bits"]
+__all__ = ["ref_bits", "build", "pack", "encode", "decode", "lookup", "blob_bits", "HEADER_BITS", "csm_build", "csm_encode",
+           "csm_decode", "csm_lookup", "csm_bits", "csm_pack"]
 
 HEADER_BITS = 32
 
@@ -177,15 +177,23 @@ def _pack(nodes, roots, w, out):
         pos += w
 
 
-def encode(maps, level: int) -> tuple[bytes, int]:
-    """A set of micromaps (P, 4^L) -> (its blob, ``ceil(blob_bits / 8)`` bytes; the number N of
-    distinct mixed nodes)."""
-    nodes, roots = build(maps, level)
+def pack(nodes, roots) -> bytes:
+    """The blob of a merged DAG (``build``'s nodes and any roots: a micromap's root may be listed
+    for each triangle that uses it), ``ceil(blob_bits / 8)`` bytes."""
+    nodes = np.ascontiguousarray(nodes, dtype=np.int64).reshape(-1, 4)
+    roots = np.ascontiguousarray(roots, dtype=np.int64).ravel()
     if len(nodes) >= 1 << 32:
         raise InputError("a csm set holds fewer than 2^32 mixed nodes")
     out = np.zeros(-(-blob_bits(len(nodes), len(roots)) // 8), np.uint8)
     _pack(nodes, roots, ref_bits(len(nodes)), out)
-    return out.tobytes(), len(nodes)
+    return out.tobytes()
+
+
+def encode(maps, level: int) -> tuple[bytes, int]:
+    """A set of micromaps (P, 4^L) -> (its blob, ``ceil(blob_bits / 8)`` bytes; the number N of
+    distinct mixed nodes)."""
+    nodes, roots = build(maps, level)
+    return pack(nodes, roots), len(nodes)
 
 
 @njit(cache=True)
@@ -242,4 +250,4 @@ def decode(data, level: int, n_maps: int) -> np.ndarray:
 
 
 # the package API's names (``omaps.codecs``)
-csm_build, csm_encode, csm_decode, csm_lookup, csm_bits = build, encode, decode, lookup, blob_bits
+csm_build, csm_pack, csm_encode, csm_decode, csm_lookup, csm_bits = build, pack, encode, decode, lookup, blob_bits

@@ -9,7 +9,7 @@ mode (deferred shadow rays) C candidates are recorded untested instead.
 numba's on-disk cache keys a kernel on its own file only: these filters compile the state
 functions of ``lookups`` and the codecs' ``block_state`` (format codes from the codec registry)
 into themselves, so a change there needs this file touched too (a change to the format codes
-did).
+did, and the hierarchical micromaps' state functions).
 """
 
 from __future__ import annotations
@@ -102,6 +102,14 @@ def _filter_stored_micromap(args):
     _filter(args, lookups.stored_micromap_state)
 
 
+def _filter_succinct(args):
+    _filter(args, lookups.succinct_map_state)
+
+
+def _filter_csm(args):
+    _filter(args, lookups.csm_map_state)
+
+
 def _filter_counting(args):
     _filter(args, lookups.counting_state)
 
@@ -116,6 +124,7 @@ def _filter_pair_map(args):
 
 _CACHED = {lookups.no_map_state: _filter_none, lookups.micro_map_state: _filter_micromap,
            lookups.stored_micromap_state: _filter_stored_micromap, lookups.counting_state: _filter_counting,
+           lookups.succinct_map_state: _filter_succinct, lookups.csm_map_state: _filter_csm,
            lookups.mixed_map_state: _filter_mixed, lookups.pair_map_state: _filter_pair_map}
 _FILTERS: dict = {}
 _SIG = types.void(types.CPointer(types.int64))

@@ -1,7 +1,9 @@
 """Hit -> region state, and the any-hit shader itself, as numba functions a filter calls.
 
 A state function ``(table, tri, b1, b2) -> T/O/C`` reads one scheme's *stored* data: nothing
-(``none``: always C), a per-triangle 2-bit micromap through the bird curve, or a pair's square
+(``none``: always C), a per-triangle 2-bit micromap through the bird curve, a hierarchical
+micromap by descent from its root (``succinctL``: rank queries on the triangle's tree;
+``csmL``: references of the scene's merged DAG), or a pair's square
 map through its codec's random-access ``lookup`` (the raw ``sqN`` map included), chosen by
 its codec's format code (``codecs.block_state``, built from the codec registry). The shader is
 ``alpha_test.sample_passes`` on the material's texture values -- the same numbers and comparison
@@ -15,7 +17,7 @@ from numba import carray, njit
 
 from .. import birdcurve, pair, states
 from ..budget import HIT_LEVEL
-from ..codecs import MAX_BLOCK_BYTES, block_state, read_state
+from ..codecs import MAX_BLOCK_BYTES, block_state, csm_lookup, read_state, succinct_lookup
 from ..alpha_test import passes
 from ..sampling import sample_texture
 from .embree import f64_ptr, i8_ptr, i32_ptr, i64_ptr, u8_ptr, u16_ptr
@@ -24,7 +26,7 @@ from .tables import (T_COUNT, T_MAP_CODEC, T_MAP_DATA, T_MAP_FORMAT, T_MAP_LEVEL
                      T_TRI_MAT, T_TRI_UV, T_TRI_VALPHA)
 
 __all__ = ["clamp_bary", "shader_alpha_test", "no_map_state", "micro_map_state", "mixed_map_state", "pair_map_state",
-           "state_function"]
+           "succinct_map_state", "csm_map_state", "state_function"]
 
 
 @njit(cache=True, inline="always")
@@ -86,6 +88,28 @@ def stored_micromap_state(table, tri, b1, b2):
 
 
 @njit(cache=True)
+def succinct_map_state(table, tri, b1, b2):
+    """A succinct micromap (scheme ``succinctL``): the triangle's row has the byte offset of its
+    blob (``T_MAP_OFFSET``); micro-triangle from the bird curve, read by descent with rank
+    queries (``codecs.succinct``). ``T_MAP_ROW_BYTES``: the data's length."""
+    row = np.int64(i32_ptr(table[T_MAP_ROW])[tri])
+    level = table[T_MAP_PARAM]
+    k = birdcurve.bary_to_index(b1, b2, level)
+    data = carray(u8_ptr(table[T_MAP_DATA]), table[T_MAP_ROW_BYTES])
+    return succinct_lookup(data, 8 * i64_ptr(table[T_MAP_OFFSET])[row], level, k)
+
+
+@njit(cache=True)
+def csm_map_state(table, tri, b1, b2):
+    """The scene's merged micromaps (scheme ``csmL``): from the root of the triangle's row, one
+    reference per level until a uniform subtree (``codecs.csm``)."""
+    row = np.int64(i32_ptr(table[T_MAP_ROW])[tri])
+    level = table[T_MAP_PARAM]
+    k = birdcurve.bary_to_index(b1, b2, level)
+    return csm_lookup(carray(u8_ptr(table[T_MAP_DATA]), table[T_MAP_ROW_BYTES]), level, row, k)
+
+
+@njit(cache=True)
 def counting_state(table, tri, b1, b2):
     """No map (every candidate C), counting each triangle's candidate hits and recording where
     they fall: the view weights (``trace.view``). The int64 words: triangles n, record capacity,
@@ -136,6 +160,10 @@ def state_function(sm):
         return micro_map_state
     if sm.kind == "stored_micromap":
         return stored_micromap_state
+    if sm.kind == "succinct":
+        return succinct_map_state
+    if sm.kind == "csm":
+        return csm_map_state
     if sm.kind == "count":
         return counting_state
     if sm.kind == "mixed":

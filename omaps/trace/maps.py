@@ -3,7 +3,9 @@ triangle with the core bakers, deduplicated, and stored through the scheme's cod
 
 Square schemes bake each distinct pair (corner UVs, B or not, material) at the finest size asked
 for, with growth ``bake.GROW_TEXEL``; coarser sizes are OR-downsampled, which is exact. Micromap
-schemes bake each distinct triangle with the micromap baker. Triangles the scene reader marks
+schemes bake each distinct triangle with the micromap baker; ``succinctL`` stores each distinct
+micromap as its succinct tree (a byte offset per row), ``csmL`` the scene's micromaps as one
+merged DAG with a root per alpha triangle (``hierarchical_maps``). Triangles the scene reader marks
 unknown get all-C maps (a pair with one such triangle is all C). Work is done per prototype and
 shared by its instances, as a BLAS shares it.
 """
@@ -25,9 +27,11 @@ from ..codecs import pack_states
 from ..rows import unique_rows
 from ..scene.alpha import AlphaTriangles, distinct_rows, pair_corner_uvs
 from ..workers import encode_maps as parallel_encode
-from .tables import SchemeMaps
+from .tables import T_MAP_OFFSET, SchemeMaps
 
-__all__ = ["SchemeMaps", "build_scheme_maps", "encode_cached", "default_jobs", "dedupe_maps"]
+__all__ = ["SchemeMaps", "build_scheme_maps", "encode_cached", "default_jobs", "dedupe_maps", "hierarchical_maps"]
+
+OFFSET_BYTES = 4  # a succinct micromap's byte offset per triangle, counted in its map bytes
 
 
 def default_jobs(jobs: int | None) -> int:
@@ -94,6 +98,32 @@ def micromap_states(at: AlphaTriangles, tests: dict, level: int):
     return out, inverse
 
 
+def hierarchical_maps(scheme, st: np.ndarray, inv_t: np.ndarray, known: float) -> SchemeMaps:
+    """A ``succinctL`` or ``csmL`` scheme's maps from the distinct triangles' micromaps ``st``
+    (D, 4**L) and every alpha triangle's distinct index ``inv_t``.
+
+    ``succinct``: the distinct micromaps' blobs, byte-aligned, each row's byte offset in the table
+    word ``T_MAP_OFFSET``; map bytes: each triangle's blob plus a 32-bit offset. ``csm``: one blob,
+    the distinct micromaps' merged DAG with a root per alpha triangle (``T_MAP_ROW`` is the
+    triangle's own index); map bytes: the blob. ``T_MAP_ROW_BYTES`` holds the data's length."""
+    from ..codecs import csm_build, csm_pack, succinct_encode_many
+
+    uniq, inv_u = dedupe_maps(st)
+    rows = inv_u[inv_t]
+    level = scheme.level
+    if scheme.representation == "succinct":
+        data, starts, _ = succinct_encode_many(uniq, level)
+        sizes = np.diff(starts)
+        map_bytes = int(sizes[rows].sum()) + OFFSET_BYTES * len(rows)
+        return SchemeMaps(scheme.name, "succinct", level, rows.astype(np.int32), np.append(data, np.uint8(0)),
+                          len(data) + 1, map_bytes, len(uniq), known, None, scheme,
+                          {T_MAP_OFFSET: np.ascontiguousarray(starts[:-1], dtype=np.int64)})
+    nodes, roots = csm_build(uniq, level)
+    data = np.frombuffer(csm_pack(nodes, roots[rows]), np.uint8).copy()
+    return SchemeMaps(scheme.name, "csm", level, np.arange(len(rows), dtype=np.int32), data, len(data), len(data),
+                      len(uniq), known, None, scheme, info={"csm_nodes": int(len(nodes))})
+
+
 def pair_square_states(at: AlphaTriangles, tests: dict, sizes, cache: dict | None = None) -> tuple[dict, np.ndarray]:
     """States of the distinct pairs' square maps at each size, and every pair's distinct index.
     ``cache``: a run's dict (``Prepared.cache``) keeping the baked flags for later schemes."""
@@ -136,12 +166,19 @@ def build_scheme_maps(at: AlphaTriangles, tests: dict, schemes, jobs: int = 1,
         if any(s.kind == "budget" for s in all_schemes):  # bake once at the budget's finest size too
             sizes |= {get_codec(o).map_size for o in PAIR_OPTIONS if o != "none"}
         pair_states, pair_inverse = pair_square_states(at, tests, sizes, cache)
+    baked: dict[int, tuple] = {}  # level -> micromap_states: triL, succinctL and csmL of one level bake once
     for s in schemes:
         if s.kind == "none":
             out[s.name] = SchemeMaps(s.name, "none", 0, np.zeros(at.count, np.int32), np.zeros(1, np.uint8), 1, 0, 0,
                                      0.0, None, s)
         elif s.kind == "micromap":
-            st, inv_t = micromap_states(at, tests, s.level)
+            if s.level not in baked:
+                baked[s.level] = micromap_states(at, tests, s.level)
+            st, inv_t = baked[s.level]
+            if s.representation != "raw":
+                known = float(np.mean((st != states.C).mean(axis=1)[inv_t]))
+                out[s.name] = hierarchical_maps(s, st, inv_t, known)
+                continue
             uniq, inv_u = dedupe_maps(st)
             data = pack_states(uniq)
             known = float(np.mean((st != states.C).mean(axis=1)[inv_t]))

@@ -120,7 +120,9 @@ class SchemeMaps:
     """One scheme's maps as the tracer reads them: alpha triangle t uses row ``rows[t]`` of
     ``data`` (``row_bytes`` each). kind: "none" (no maps), "micromap" (raw 2-bit micromap per
     triangle, param L), "square" (a pair's stored square map through ``codec``, param N), "mixed"
-    (a budget: per row a format code and byte offset, ``trace.budget``)."""
+    (a budget: per row a format code and byte offset, ``trace.budget``), "succinct" (per row the
+    byte offset of a succinct micromap, param L) or "csm" (one merged DAG, a root per triangle,
+    param L); for the last two ``row_bytes`` is the data's length (``trace.maps.hierarchical_maps``)."""
 
     name: str
     kind: str
