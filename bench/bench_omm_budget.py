@@ -8,7 +8,7 @@ For each scene: the uniform ``--level 4`` bake's data + record bytes are the bud
 turns (best of N each, so that load from other work hits them alike), and the ratio is printed.
 The plan: expected alpha tests saved (omm.json's "budget" value, a fraction of the candidate
 hits) and bytes stored, for the current pricing and for the reference one that bakes every
-level up to --max-level for every item (``omm_budget_reference.py``, in-process, one run); the
+level up to --max-level for every item (``tests/reference_budget.py``, the pricing before the certificate, in-process, one run); the
 two plans are compared triangle by triangle. With ``--trace``: alpha tests per ray of both bakes
 (``omaps trace OUT.glb --schemes none,omm --size 128``).
 
@@ -59,8 +59,8 @@ def trace(out: Path) -> dict:
 
 def reference_plan(scene: Path, budget: int):
     """The reference pricing's plan (every level baked), and its time (in-process, one run)."""
-    sys.path.insert(0, str(Path(__file__).resolve().parent))
-    import omm_budget_reference as ref
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
+    import reference_budget as ref
     from omaps.omm import budget as cur
     from omaps.omm.inputs import gltf_spec, load_geometries
     from omaps.omm.pipeline import OmmSettings

@@ -3,9 +3,6 @@ the greedy's certificate asks, and the plan the same as pricing every level for 
 
 from __future__ import annotations
 
-import sys
-from pathlib import Path
-
 import numpy as np
 import pytest
 from hypothesis import given, settings, strategies as st
@@ -16,8 +13,7 @@ from omaps.omm import budget as omm_budget
 from omaps.omm.pipeline import Geometry, OmmSettings, build
 from omaps.texture import load_alpha
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "bench"))
-import omm_budget_reference as reference  # noqa: E402  (every level priced for every item)
+import reference_budget as reference  # noqa: E402  (the pricing before the certificate: every level baked)
 
 
 def _test(alpha, filt="nearest"):

@@ -1,5 +1,6 @@
-"""The budget pricing as it was before the certificate: every level up to --max-level baked for every
-item (kept for bench/bench_omm_budget.py and tests/test_omm_budget_speed.py to compare plans with).
+"""The reference budget pricing: every level up to --max-level baked by the micromap baker for every
+item, independent of the meets and of the certificate that ``omaps.omm.budget`` prices with
+(tests/test_omm_budget_speed.py compares their plans; bench/bench_omm_budget.py times both).
 
 ``omaps omm --budget BYTES``: per triangle the subdivision level (and 2- or 4-state format)
 that saves the most expected any-hit calls for the micromap bytes, every geometry together
