@@ -10,7 +10,8 @@ import os
 
 from ..atomic import check_file
 from ..errors import InputError
-from .common import add_material_options, check_jobs, material_rules, parse_size, show_progress
+from .common import (add_asset_options, add_material_options, asset_options, check_jobs, material_rules, parse_size,
+                     show_progress)
 
 
 def add_parser(sub) -> None:
@@ -41,6 +42,7 @@ def add_parser(sub) -> None:
     r.add_argument("--jobs", type=int, default=None, metavar="N", help="processes (default: all cores)")
     r.add_argument("--quiet", action="store_true", help="no progress bars")
     add_material_options(r)
+    add_asset_options(r)
     r.set_defaults(func=cmd_report)
 
 
@@ -62,7 +64,7 @@ def cmd_report(a) -> int:
                             filter=a.filter or "nearest", wrap=a.wrap or "clamp")
     res = build_report(a.input, a.output, a.schemes, size=size, shadows=a.shadows, camera=a.camera, jobs=a.jobs,
                        rules=rules, min_size=a.min_size, config=config, view=not a.no_3d,
-                       progress=show_progress(a.quiet))
+                       progress=show_progress(a.quiet), **asset_options(a))
     t = res.timings
     steps = ", ".join(f"{k[:-2]} {v:.1f} s" for k, v in t.items() if k != "total_s")
     print(f"omaps report: {a.output}: {res.kind} report, {res.bytes / 2**20:.2f} MiB, {t['total_s']:.1f} s ({steps})")

@@ -59,7 +59,7 @@ def _check_output(output) -> str:
 
 def build_report(input, output, schemes: str | None = None, *, size=512, shadows: bool = False, camera=None,
                  jobs: int | None = None, rules=None, min_size: int = 0, config=None, view: bool = True,
-                 progress: bool = False) -> ReportResult:
+                 progress: bool = False, root=None, allow_outside: bool = False) -> ReportResult:
     """Write one self-contained HTML report (no network: scripts, styles and images inside) of a
     glTF scene or of a texture corpus.
 
@@ -92,6 +92,8 @@ def build_report(input, output, schemes: str | None = None, *, size=512, shadows
         Draw a scene's 3D view (False: tables and pictures only).
     progress : bool
         Progress bars on stderr.
+    root, allow_outside : optional
+        Where the files a scene names may lie (``omaps.load_scene``'s URI policy).
 
     Returns
     -------
@@ -125,7 +127,8 @@ def build_report(input, output, schemes: str | None = None, *, size=512, shadows
     if os.path.exists(out) and os.path.exists(src) and os.path.samefile(out, src):
         raise InputError("is also the input", os.fspath(output))
     if kind == "scene":
-        text, numbers, timings, info = _scene_page(src, schemes, size, shadows, camera, jobs, rules, view, progress)
+        text, numbers, timings, info = _scene_page(src, schemes, size, shadows, camera, jobs, rules, view, progress,
+                                                   {"root": root, "allow_outside": allow_outside})
     else:
         from .corpus import corpus_page
 
@@ -184,7 +187,7 @@ def _scene_table(report: dict, names: list) -> str:
                     "them (omaps trace --json with the settings above).")
 
 
-def _scene_page(src, schemes, size, shadows, camera, jobs, rules, view, progress):
+def _scene_page(src, schemes, size, shadows, camera, jobs, rules, view, progress, assets):
     from .. import __version__
     from ..trace import DEFAULT_SCHEMES, trace_scene
     from .view3d import scene_view
@@ -192,8 +195,7 @@ def _scene_page(src, schemes, size, shadows, camera, jobs, rules, view, progress
     timings = {}
     t = time.perf_counter()
     res = trace_scene(src, schemes or DEFAULT_SCHEMES, size=size, shadows=shadows, camera=camera, jobs=jobs,
-                      rules=rules,
-                      progress=progress)
+                      rules=rules, progress=progress, **assets)
     timings["trace_s"] = time.perf_counter() - t
     report = res.report
     names = list(res.names)
