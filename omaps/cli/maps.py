@@ -31,7 +31,8 @@ def add_eval_parser(sub) -> None:
                                    "procedural corpus.")
     e.add_argument("paths", nargs="*", metavar="PATH", help="image files or folders (searched recursively)")
     e.add_argument("--schemes", default=",".join(DEFAULT_SCHEMES),
-                   help="comma-separated: sqN (N = 1..128, power of two), triL (L = 0..12), texel, vq2, vq4, "
+                   help="comma-separated: sqN (N = 1..128, power of two), triL (L = 0..12; succinctL and csmL: the same "
+                        "micromaps as lossless trees, their bits per texture), texel, vq2, vq4, "
                         "vq4x64, vq4-synth, wavelet3, each codec also with -fast, -medium or -thorough, the vq "
                         "codecs also -paper (default: %(default)s)")
     e.add_argument("--min-size", type=int, default=0, metavar="PX",

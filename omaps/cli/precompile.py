@@ -100,7 +100,7 @@ def _scheme_families(text) -> list[str]:
         except InputError:
             continue
         if s.kind == "micromap":
-            out.append("micromap")
+            out += ["micromap"] + (["hierarchical"] if s.representation != "raw" else [])
         elif s.kind == "square":
             out += list(entry(s.codec.name).families)
         elif s.kind == "budget":
@@ -376,6 +376,7 @@ def warm(families, report=None) -> None:
                     tr("none,omm", path=os.path.join(tmp, "omm.glb"))],
             "synth": [ev("vq4-synth"), tr("none,vq4-synth")],
             "wavelet": [ev("wavelet3,wavelet3-fast"), tr("none,wavelet3-fast")],
+            "hierarchical": [ev("succinct3,csm3"), tr("none,succinct3,csm3")],
             "budget": [omm("omm_budget", budget=200), tr("none,budget:1KiB"),
                        omm("omm_view", budget=200, weights="view", size=(16, 16)),
                        # enough distinct micromaps for the budget's merged options (omaps.omm.budget's kernels)

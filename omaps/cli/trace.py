@@ -47,7 +47,7 @@ def add_parser(sub) -> None:
                        formatter_class=argparse.RawDescriptionHelpFormatter)
     t.add_argument("scene", metavar="SCENE", help=".gltf or .glb file")
     t.add_argument("--schemes", default=DEFAULT_SCHEMES,
-                   help="comma-separated: none, triL, sqN, or a codec (vq2, vq4, vq4x64, vq4-synth, wavelet3, "
+                   help="comma-separated: none, triL (or succinctL, csmL: the same micromaps as lossless trees), sqN, or a codec (vq2, vq4, vq4x64, vq4-synth, wavelet3, "
                         "also with -paper, -fast, -medium or -thorough), omm or file:CODEC (the maps the traced file stores), or "
                         "budget:BYTES (per pair the map -- none, sqN up to 64, vq2, vq4 or vq4x64 -- that saves the "
                         "most alpha tests per byte, every pair together within BYTES: 1263936, 1.2MiB, 800KiB) "

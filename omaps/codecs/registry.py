@@ -236,6 +236,8 @@ COMPILE_FAMILIES = {
     "synth": (("omaps.codecs.vq4_synth_encode", "omaps.codecs.vq4_synth_block"), 12),
     "wavelet": (("omaps.codecs.wavelet3_encode", "omaps.codecs.wavelet3_block", "omaps.codecs.vec4_search",
                  "omaps.allocate"), 19),
+    # the micromaps' lossless tree representations (``succinctL``, ``csmL``; not square codecs)
+    "hierarchical": (("omaps.codecs.succinct", "omaps.codecs.csm"), 8),
 }
 
 
