@@ -384,6 +384,8 @@ def _stop_quietly(stack: contextlib.ExitStack, before: set, clusters: set) -> No
             for c in clusters:
                 with contextlib.suppress(BaseException):
                     c.close(timeout=2)
+                if "_cluster_info" not in vars(c):  # interrupted inside its constructor: no name, which
+                    c._cluster_info = {"name": f"interrupted-{id(c)}"}  # Dask's equality (and so discard) reads
                 type(c)._instances.discard(c)  # (else Dask's exit handler closes it again, for 10 s)
             with contextlib.suppress(BaseException):
                 stack.close()

@@ -120,3 +120,25 @@ resource_tracker.register("/omaps-test-leak", "semaphore")  # as a worker stoppe
     r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120, env=env)
     assert r.returncode == 0, r.stderr
     assert "leaked semaphore" not in r.stderr and "resource_tracker" not in r.stderr, r.stderr
+
+
+def test_a_cluster_interrupted_in_its_constructor_is_dropped_quietly():
+    """Ctrl-C inside ``LocalCluster.__init__`` leaves a registered cluster without its name
+    (``_cluster_info``), which Dask's equality reads: the batch's quiet stop must still drop it
+    (it once raised AttributeError, and the batch exited 1 instead of 130)."""
+    import contextlib
+
+    from distributed import LocalCluster
+    from distributed.deploy.spec import SpecCluster
+
+    from omaps.batch import _children, _stop_quietly
+
+    c = object.__new__(LocalCluster)  # as the interrupt leaves it: registered, never named
+    SpecCluster._instances.add(c)
+    try:
+        _stop_quietly(contextlib.ExitStack(), _children(), {c})
+        assert all(r() is not c for r in list(SpecCluster._instances.data))
+    finally:
+        for r in list(SpecCluster._instances.data):
+            if r() is c:
+                SpecCluster._instances.data.discard(r)
