@@ -40,7 +40,7 @@ import traceback
 import warnings
 
 from . import atomic
-from .errors import InputError
+from .errors import InputError, check_count
 from .text import plural as count  # "1 input", "2 inputs"
 
 __all__ = ["run_batch", "plan_batch", "run_plan", "BatchPlan", "BatchResult", "COMMANDS", "library_call", "run_one",
@@ -550,8 +550,7 @@ def precheck(command: str, options: dict) -> None:
     from .schemes import EVAL_KINDS, TRACE_KINDS, parse_schemes
 
     jobs = options.get("jobs")
-    if jobs is not None and jobs < 1:
-        raise InputError(f"--jobs must be >= 1, got {jobs}")
+    check_count(jobs)
     if command == "eval":
         from .corpus import EvalConfig
 

@@ -11,3 +11,16 @@ class InputError(ValueError):
 
     def __reduce__(self):  # survive the trip back from a worker process
         return (type(self), (self.problem, self.path))
+
+
+def check_count(value, option: str = "--jobs") -> None:
+    """Raise :class:`InputError` unless ``value`` (a worker or thread count) is None or >= 1.
+
+    >>> check_count(2)
+    >>> check_count(0, "--threads")
+    Traceback (most recent call last):
+    ...
+    omaps.errors.InputError: --threads must be >= 1, got 0
+    """
+    if value is not None and value < 1:
+        raise InputError(f"{option} must be >= 1, got {value}")

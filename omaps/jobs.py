@@ -28,7 +28,7 @@ import os
 import time
 from dataclasses import dataclass, field
 
-from .errors import InputError
+from .errors import InputError, check_count
 from .text import plural
 
 __all__ = ["bake_omms", "OmmBake", "omm_settings", "omm_input_spec", "verify_omms", "OmmCheck", "expand_omms",
@@ -131,8 +131,7 @@ def _numba_threads(threads: int | None):
         return
     import numba
 
-    if threads < 1:
-        raise InputError(f"--threads must be >= 1, got {threads}")
+    check_count(threads, "--threads")
     before = numba.get_num_threads()
     numba.set_num_threads(min(threads, numba.config.NUMBA_NUM_THREADS))
     try:
@@ -154,8 +153,7 @@ def omm_settings(*, level=None, dynamic=None, max_level: int = 8, budget=None, f
         from .budget import parse_bytes
 
         budget = parse_bytes(budget)
-    if jobs is not None and jobs < 1:
-        raise InputError(f"--jobs must be >= 1, got {jobs}")
+    check_count(jobs)
     if level is not None and source != "texture":
         raise InputError("--from fixes the level to log2 N of the square map; drop --level")
     return OmmSettings(format=format, level=4 if level is None else level, dynamic_scale=dynamic,

@@ -123,11 +123,6 @@ def parse_size(text: str) -> tuple[int, int]:
     return w, h
 
 
-def check_jobs(jobs) -> None:
-    if jobs is not None and jobs < 1:
-        raise InputError(f"--jobs must be >= 1, got {jobs}")
-
-
 def print_table(header: list, rows: list) -> None:
     print(format_table(header, rows))
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import sys
 
-from ..errors import InputError
+from ..errors import InputError, check_count
 from ..names import BUDGET_WEIGHTS, OMM_FORMATS, PROMOTIONS
 from .common import (add_asset_options, add_codec_options, add_material_options, asset_options, material_rules, parse_size, plural,
                      show_progress)
@@ -76,8 +76,7 @@ def cmd_omm(a) -> int:
     # the library is imported here, not at the top: parsing (and --help) loads no numba kernel
     from ..jobs import bake_omms
 
-    if a.threads is not None and a.threads < 1:
-        raise InputError(f"--threads must be >= 1, got {a.threads}")
+    check_count(a.threads, "--threads")
     if a.verify:
         if a.inputs or a.output:
             raise InputError("--verify DIR takes no inputs and no -o")

@@ -9,8 +9,8 @@ import argparse
 import os
 
 from ..atomic import check_file
-from ..errors import InputError
-from .common import (add_asset_options, add_material_options, asset_options, check_jobs, material_rules, parse_size,
+from ..errors import InputError, check_count
+from .common import (add_asset_options, add_material_options, asset_options, material_rules, parse_size,
                      show_progress)
 
 
@@ -49,7 +49,7 @@ def add_parser(sub) -> None:
 def cmd_report(a) -> int:
     from ..report import build_report
 
-    check_jobs(a.jobs)
+    check_count(a.jobs)
     check_file(a.output, "-o", (".html",), inputs=[a.input])
     if not os.path.exists(a.input):
         raise InputError("no such file or folder", a.input)

@@ -12,7 +12,7 @@ import sys
 
 from ..atomic import Outputs
 from ..names import BUDGET_WEIGHTS
-from .common import (add_asset_options, add_codec_options, add_material_options, asset_options, check_jobs,
+from .common import (add_asset_options, add_codec_options, add_material_options, asset_options,
                      material_rules, parse_size, show_progress)
 
 from ..trace.camera import DEFAULT_LIGHT
@@ -113,17 +113,15 @@ def bind_camera_value(argv: list[str]) -> list[str]:
 
 
 def cmd_trace(a) -> int:
-    from ..trace import parse_camera, trace_scene
+    from ..trace import trace_scene
 
-    camera = parse_camera(a.camera) if a.camera else None  # bad options before any output is touched
-    size = parse_size(a.size)
-    check_jobs(a.jobs)
+    options = trace_options(a)  # the library checks them all before any work
     outputs = Outputs(inputs=[a.scene])
     outputs.file(a.json, "--json")
     outputs.file(a.heatmap, "--heatmap", (".png",))
     outputs.file(a.render, "--render", (".png",))
     outputs.file(a.plot_budget, "--plot-budget", (".png",))
-    res = trace_scene(a.scene, **{**trace_options(a), "size": size, "camera": camera}, progress=show_progress(a.quiet))
+    res = trace_scene(a.scene, **options, progress=show_progress(a.quiet))
     print(res.table())
     # a failed check still writes every output asked for, complete, and says so (then exit 1)
     with outputs.writing():  # all renamed into place together at the end

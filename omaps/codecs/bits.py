@@ -35,6 +35,16 @@ def get_bits(block, pos, n):
     return v & ((np.int64(1) << n) - 1)
 
 
+@njit(cache=True, inline="always")
+def bit_length(n):
+    """Bits needed to write the non-negative integer ``n`` (0 for 0), as Python's ``int.bit_length``."""
+    w = 0
+    while n > 0:
+        w += 1
+        n >>= 1
+    return w
+
+
 def check_fields(values, width) -> np.ndarray:
     """``values`` (n, F) as int64, ValueError unless every field fits its width (0 <= v < 2**w)."""
     v = np.ascontiguousarray(values, dtype=np.int64)

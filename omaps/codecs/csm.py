@@ -39,7 +39,7 @@ from numba import njit
 
 from ..birdcurve import MAX_LEVEL
 from ..errors import InputError
-from .bits import get_bits
+from .bits import bit_length, get_bits
 
 __all__ = ["ref_bits", "build", "pack", "encode", "decode", "lookup", "blob_bits", "HEADER_BITS", "csm_build", "csm_encode",
            "csm_decode", "csm_lookup", "csm_bits", "csm_pack"]
@@ -59,12 +59,7 @@ def blob_bits(n_nodes: int, n_maps: int) -> int:
 
 @njit(cache=True, inline="always")
 def _ref_bits(n_nodes):
-    n = n_nodes + 2
-    w = 0
-    while n > 0:
-        w += 1
-        n >>= 1
-    return w
+    return bit_length(n_nodes + 2)
 
 
 @njit(cache=True, inline="always")

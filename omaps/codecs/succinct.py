@@ -40,7 +40,7 @@ from numba import njit
 
 from ..birdcurve import MAX_LEVEL
 from ..errors import InputError
-from .bits import get_bits
+from .bits import bit_length, get_bits
 
 __all__ = ["header_bits", "tree_counts", "encoded_bits", "encode", "encode_many", "decode", "lookup",
            "uniform_levels", "succinct_encode", "succinct_encode_many", "succinct_decode", "succinct_lookup",
@@ -55,12 +55,7 @@ def header_bits(level: int) -> int:
 
 @njit(cache=True, inline="always")
 def _header_bits(level):
-    n = (np.int64(1) << (2 * level)) // 3  # (4^L - 1) / 3
-    w = 0
-    while n > 0:
-        w += 1
-        n >>= 1
-    return w
+    return bit_length((np.int64(1) << (2 * level)) // 3)  # (4^L - 1) / 3
 
 
 @njit(cache=True, inline="always")

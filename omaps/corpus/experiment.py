@@ -8,7 +8,7 @@ import os
 import time
 from dataclasses import dataclass, field
 
-from ..errors import InputError
+from ..errors import InputError, check_count
 from ..schemes import DEFAULT_SCHEMES, EVAL_KINDS, parse_schemes
 from ..text import format_table, plural
 from .evaluate import EvalConfig, evaluate_many, mean_results
@@ -148,8 +148,7 @@ def evaluate_corpus(paths=None, schemes=None, *, config: EvalConfig | None = Non
     names = [s.name for s in schemes]
     if min_size < 0:
         raise InputError(f"--min-size must be >= 0, got {min_size}")
-    if jobs is not None and jobs < 1:
-        raise InputError(f"--jobs must be >= 1, got {jobs}")
+    check_count(jobs)
     paths = [os.fspath(p) for p in paths or []]
     skipped_other: list = []
     named: set = set()

@@ -17,7 +17,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..alpha_test import MaterialRules
-from ..errors import InputError
+from ..errors import InputError, check_count
 from ..names import BUDGET_WEIGHTS
 from ..schemes import TRACE_KINDS, parse_schemes
 from ..text import count, format_table, plural
@@ -177,8 +177,7 @@ def trace_scene(scene, schemes=DEFAULT_SCHEMES, *, size=512, camera=None, shadow
     names = [s.name for s in schemes]
     modes = parse_modes(two_state)
     w, h = _size(size)
-    if jobs is not None and jobs < 1:
-        raise InputError(f"--jobs must be >= 1, got {jobs}")
+    check_count(jobs)
     if weights not in BUDGET_WEIGHTS:
         raise InputError(f"unknown weights {weights!r} (choose from {', '.join(BUDGET_WEIGHTS)})")
     rules = MaterialRules() if rules is None else rules
