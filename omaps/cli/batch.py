@@ -14,7 +14,7 @@ from .common import show_progress
 # writes one output per input itself); hidden from the batch's help, as is eval's and trace's --json
 INPUT_DEST = {"omm": "inputs", "eval": "paths", "trace": "scene"}
 REFUSED = {"eval": ("csv", "plot", "show", "per_texture"), "omm": ("verify", "expand"),
-           "trace": ("heatmap", "render", "plot_budget")}
+           "trace": ("heatmap", "render", "plot_budget", "plot_frontier")}
 
 
 NAMING = ("Output names: an input's path relative to the folder given, extension dropped; a file named (or "

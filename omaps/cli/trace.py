@@ -35,6 +35,14 @@ the printed table, one row per scheme (every figure is also in --json):
   x opaque      Mrays/s relative to an opaque-only traversal of the same scene (no any-hit filter);
                 above 1 (marked *) is timing noise, as every scheme does more work
   map KiB       storage of the scheme's maps over every prototype pair (or triangle), in KiB
+with --memory, a second table: what each lookup of the primary pass reads (docs/FORMAT.md, "What a
+lookup reads"), per scheme in two layouts: own (each pair's or triangle's map stored with it, as
+map KiB counts) and shared (identical maps stored once behind a 32-bit index per pair or triangle;
+for triL the standard OMMs omaps omm writes: index buffer, records, data, special indices):
+  KiB           the layout's map bytes, in KiB
+  reads         dependent reads per lookup (map_reads_per_lookup)
+  lines         distinct 64-byte lines of map data per primary ray (map_lines_per_ray)
+  misses        with --cache-kib K: misses per primary ray of a K KiB LRU cache shared by 8x8 pixels
 """
 
 
@@ -58,6 +66,15 @@ def add_parser(sub) -> None:
                         "this view at half the resolution (view) (default: %(default)s)")
     t.add_argument("--plot-budget", metavar="FILE.png",
                    help="alpha tests per primary ray against map bytes, every traced scheme on one chart")
+    t.add_argument("--memory", action="store_true",
+                   help="also model the map data each lookup reads: dependent reads per lookup and 64-byte lines "
+                        "per primary ray, per scheme in its own and its shared (indexed) layout")
+    t.add_argument("--cache-kib", type=float, default=None, metavar="K",
+                   help="with --memory: also the misses per primary ray of a K KiB LRU cache (64-byte lines) "
+                        "shared by each 8x8 tile of pixels, empty at each tile")
+    t.add_argument("--plot-frontier", metavar="FILE.png",
+                   help="alpha tests per primary ray against map bytes (and, with --memory, against lines read "
+                        "per ray), every traced scheme, the Pareto front marked")
     t.add_argument("--camera", metavar="X,Y,Z:TX,TY,TZ:FOV[:UX,UY,UZ] | gltf[:N]",
                    help="eye, target, vertical field of view in degrees and optionally the up direction "
                         "(default +Y); or 'gltf:N', the file's camera N (default 0) placed by its node, with "
@@ -121,6 +138,7 @@ def cmd_trace(a) -> int:
     outputs.file(a.heatmap, "--heatmap", (".png",))
     outputs.file(a.render, "--render", (".png",))
     outputs.file(a.plot_budget, "--plot-budget", (".png",))
+    outputs.file(a.plot_frontier, "--plot-frontier", (".png",))
     res = trace_scene(a.scene, **options, progress=show_progress(a.quiet))
     print(res.table())
     # a failed check still writes every output asked for, complete, and says so (then exit 1)
@@ -133,6 +151,8 @@ def cmd_trace(a) -> int:
             res.render(outputs.path(a.render))
         if a.plot_budget:
             res.plot_budget(outputs.path(a.plot_budget))
+        if a.plot_frontier:
+            res.plot_frontier(outputs.path(a.plot_frontier))
     for m in res.messages():
         print(m, file=sys.stderr)
     return 0 if res.passed else 1
@@ -142,4 +162,4 @@ def trace_options(a) -> dict:
     """``trace_scene``'s keyword arguments from the command line (``omaps batch trace`` too)."""
     return dict(schemes=a.schemes, size=parse_size(a.size), camera=a.camera, shadows=a.shadows, light=a.light,
                 weights=a.weights, two_state=a.two_state, rules=material_rules(a), jobs=a.jobs, encoder=a.encoder,
-                effort=a.effort, **asset_options(a))
+                effort=a.effort, memory=a.memory, cache_kib=a.cache_kib, **asset_options(a))

@@ -25,7 +25,7 @@ from .camera import Camera, choose_default_camera, gltf_camera, light_direction,
 from .timing import TIMING_ROUNDS, time_side_by_side
 from .two_state import parse_modes
 
-__all__ = ["DEFAULT_SCHEMES", "trace_scene", "TraceResult", "format_report"]
+__all__ = ["DEFAULT_SCHEMES", "trace_scene", "TraceResult", "format_report", "format_memory"]
 
 DEFAULT_SCHEMES = "none,tri3,sq16,vq2,vq4,vq4x64"
 
@@ -107,11 +107,18 @@ class TraceResult:
 
         budget_plot(path, self.report)
 
+    def plot_frontier(self, path) -> None:
+        """Alpha tests per primary ray against map bytes and (with ``memory``) lines read per ray,
+        every traced scheme, the Pareto front marked (PNG)."""
+        from .pictures import frontier_plot
+
+        frontier_plot(path, self.report)
+
 
 def trace_scene(scene, schemes=DEFAULT_SCHEMES, *, size=512, camera=None, shadows: bool = False, light=None,
                 weights: str = "area", two_state=None, rules: MaterialRules | None = None, jobs: int | None = None,
                 encoder: str | None = None, effort: str | None = None, progress: bool = False, root=None,
-                allow_outside: bool = False) -> TraceResult:
+                allow_outside: bool = False, memory: bool = False, cache_kib: float | None = None) -> TraceResult:
     """Trace primary (and shadow) rays through a scene with each scheme's maps read in the
     any-hit filter, and compare every scheme's visible result with ``none``'s.
 
@@ -148,6 +155,13 @@ def trace_scene(scene, schemes=DEFAULT_SCHEMES, *, size=512, camera=None, shadow
         (default: its own folder).
     allow_outside : bool
         Read the files a scene names wherever they are (a scene you trust).
+    memory : bool
+        Also model the map data each lookup of the primary pass reads (``trace.memory``): per
+        scheme ``memory`` in the report, with dependent reads per lookup and 64-byte lines per
+        primary ray in its ``own`` and ``shared`` layouts (docs/FORMAT.md, "What a lookup reads").
+    cache_kib : float, optional
+        With ``memory``: also the misses per primary ray of an LRU cache of this many KiB shared
+        by each 8 x 8 tile of pixels.
 
     Returns
     -------
@@ -178,6 +192,11 @@ def trace_scene(scene, schemes=DEFAULT_SCHEMES, *, size=512, camera=None, shadow
     modes = parse_modes(two_state)
     w, h = _size(size)
     check_count(jobs)
+    if cache_kib is not None:
+        if not memory:
+            raise InputError("a cache size measures what a ray reads: it needs --memory")
+        if not (isinstance(cache_kib, (int, float, np.integer, np.floating)) and 1 / 16 <= cache_kib <= 1 << 20):
+            raise InputError(f"the cache size is a number of KiB from 1/16 to 1048576, got {cache_kib!r}")
     if weights not in BUDGET_WEIGHTS:
         raise InputError(f"unknown weights {weights!r} (choose from {', '.join(BUDGET_WEIGHTS)})")
     rules = MaterialRules() if rules is None else rules
@@ -251,6 +270,18 @@ def trace_scene(scene, schemes=DEFAULT_SCHEMES, *, size=512, camera=None, shadow
                                             if r["rays_per_second"] else None)
     bad = {n: r["differing_pixels"] + r.get("differing_shadow_rays", 0) + r.get("deferred_differing_shadow_rays", 0)
            for n, r in report["schemes"].items()}
+    if memory:
+        from .memory import scheme_memory
+
+        t0 = time.perf_counter()
+        for n in tqdm(names, desc="memory", unit="scheme", disable=not progress, leave=False):
+            mem = scheme_memory(prep, n, runs[n], cam, w, h, cache_kib)
+            report["schemes"][n]["memory"] = mem
+            if mem is not None:
+                report["schemes"][n]["map_reads_per_lookup"] = mem["own"]["map_reads_per_lookup"]
+                report["schemes"][n]["map_lines_per_ray"] = mem["own"]["map_lines_per_ray"]
+        report["timings"]["memory_s"] = time.perf_counter() - t0
+        report["timings"]["total_s"] = time.perf_counter() - t_start
     report["passed"] = not any(bad.values())
     report["changed_visible_result"] = {n: v for n, v in bad.items() if v}
     return TraceResult(report, names, runs, prep, camera, cam, light, bool(shadows))
@@ -316,6 +347,31 @@ def _over_opaque(ratio) -> str:
     return f"{ratio:.2f}" + ("*" if ratio > 1 else "")
 
 
+def format_memory(report: dict, names: list) -> str:
+    """``--memory``'s table: per scheme its lookups per primary ray and, in its own and shared
+    layouts, map KiB, dependent reads per lookup, 64-byte lines per primary ray (and cache misses
+    per ray)."""
+    mems = {n: report["schemes"][n].get("memory") for n in names}
+    cache = next((m["cache_kib"] for m in mems.values() if m and m.get("cache_kib") is not None), None)
+    fields = [("KiB", "map_bytes", lambda v: f"{v / 1024:.1f}"), ("reads", "map_reads_per_lookup", lambda v: f"{v:.2f}"),
+              ("lines", "map_lines_per_ray", lambda v: f"{v:.3f}")]
+    if cache is not None:
+        fields.append(("misses", "cache_misses_per_ray", lambda v: f"{v:.3f}"))
+    cols = ["scheme", "lookups/ray"] + [f"{lay} {f[0]}" for lay in ("own", "shared") for f in fields]
+    rows = []
+    for n, m in mems.items():
+        if not m:
+            rows.append([n, "-"] + ["-"] * (2 * len(fields)))
+            continue
+        rows.append([n, f"{m['lookups_per_primary_ray']:.3f}"]
+                    + [fmt(m[lay][key]) for lay in ("own", "shared") for _, key, fmt in fields])
+    head = ("what a lookup reads (primary rays; own: each pair's or triangle's map with it; shared: identical maps "
+            "once, behind a 32-bit index; triL shared = standard OMMs)")
+    if cache is not None:
+        head += f"; misses: a {cache:g} KiB LRU cache per 8x8 pixel tile"
+    return head + "\n" + format_table(cols, rows)
+
+
 def format_report(report: dict, names: list, shadows: bool) -> str:
     """A trace report (``TraceResult.report``) as ``omaps trace`` prints it: a heading line, one
     row per scheme, the opaque traversal and timings, and the 2-state errors when traced."""
@@ -351,6 +407,8 @@ def format_report(report: dict, names: list, shadows: bool) -> str:
     lines.append(f"opaque-only traversal: {o['rays_per_second'] / 1e6:.2f} Mrays/s; total {t['total_s']:.1f} s "
                  f"(load {t['load_s']:.1f}, pair {t['pair_s']:.1f}, bake+encode {t['bake_encode_s']:.1f}, "
                  f"BVH {t['bvh_s']:.1f})")
+    if any(report["schemes"][n].get("memory") for n in names):
+        lines.append(format_memory(report, names))
     if report.get("two_state"):
         lines.append("2-state (C cells resolved, no alpha tests): pixels whose visible hit differs from 'none' "
                      "(stopped early / passed through)")

@@ -18,13 +18,14 @@ import numpy as np
 from numba import cfunc, njit, types
 
 from .. import states
-from .embree import f32_ptr, f64_ptr, i32_ptr, i64_ptr, u32_ptr
+from .embree import f32_ptr, f64_ptr, i32_ptr, i64_ptr, u8_ptr, u32_ptr
 from . import lookups
 from .lookups import clamp_bary, shader_alpha_test
 from .tables import (C_CALLS, C_CAND, C_MODE, C_REC_BARY, C_REC_CAP, C_REC_N, C_REC_TRI, C_SET_FULL, C_SET_KEYS,
-                     C_SET_STAMPS, C_STAMP, C_TABLE, C_TESTS, MODE_RECORD, SET_SIZE, T_ALPHA_BASE, T_PROTO_OF_INST)
+                     C_SET_STAMPS, C_STAMP, C_TABLE, C_TESTS, MODE_RECORD, SET_SIZE, T_ALPHA_BASE, T_PROTO_OF_INST,
+                     T_REC_BARY, T_REC_COUNT, T_REC_START, T_REC_STATE, T_REC_TRI)
 
-__all__ = ["make_filter"]
+__all__ = ["make_filter", "make_recording_filter", "record_lookup"]
 
 
 @njit(cache=True, inline="always")
@@ -47,8 +48,35 @@ def _seen_before(ctx, key):
 
 
 @njit(cache=True, inline="always")
+def _no_hook(ctx, table, tri, b1, b2, state):
+    """The hook of the traced filters: nothing (compiled away)."""
+
+
+@njit(cache=True, inline="always")
+def record_lookup(ctx, table, tri, b1, b2, state):
+    """The hook of ``trace --memory``'s recording filters: the lookup (triangle, barycentrics,
+    state) into its pixel's slots (``tables.T_REC_*``; the pixel is the ray's stamp, ``y * w + x``
+    in the primary pass). A pixel's lookups past its slots are counted, not stored."""
+    pix = ctx[C_STAMP]
+    count = i64_ptr(table[T_REC_COUNT])
+    k = i64_ptr(table[T_REC_START])[pix] + count[pix]
+    if k < i64_ptr(table[T_REC_START])[pix + 1]:
+        i64_ptr(table[T_REC_TRI])[k] = tri
+        f64_ptr(table[T_REC_BARY])[2 * k] = b1
+        f64_ptr(table[T_REC_BARY])[2 * k + 1] = b2
+        u8_ptr(table[T_REC_STATE])[k] = state
+    count[pix] += 1
+
+
+@njit(cache=True, inline="always")
 def _filter(args, state_fn):
-    """The body of every filter: ``args`` is Embree's RTCFilterFunctionNArguments (int64 words)."""
+    """The body of every traced filter: ``args`` is Embree's RTCFilterFunctionNArguments (int64 words)."""
+    _filter_hooked(args, state_fn, _no_hook)
+
+
+@njit(cache=True, inline="always")
+def _filter_hooked(args, state_fn, hook):
+    """The filter's body with ``hook(ctx, table, tri, b1, b2, state)`` called after every lookup."""
     valid = i32_ptr(args[0])
     ctx = i64_ptr(args[2])
     hitf = f32_ptr(args[4])
@@ -69,6 +97,7 @@ def _filter(args, state_fn):
         if not repeat:
             ctx[C_CAND] += 1
         state = state_fn(table, tri, b1, b2)
+        hook(ctx, table, tri, b1, b2, state)
         if state == states.C:
             if ctx[C_MODE] == MODE_RECORD:
                 if not repeat:
@@ -143,3 +172,40 @@ def make_filter(state_fn):
             _filter(args, state_fn)
     _FILTERS[state_fn] = filt
     return filt
+
+
+# ``trace --memory``: the same filters recording every lookup, module-level so numba caches them
+def _record_micromap(args):
+    _filter_hooked(args, lookups.micro_map_state, record_lookup)
+
+
+def _record_succinct(args):
+    _filter_hooked(args, lookups.succinct_map_state, record_lookup)
+
+
+def _record_csm(args):
+    _filter_hooked(args, lookups.csm_map_state, record_lookup)
+
+
+def _record_pair_map(args):
+    _filter_hooked(args, lookups.pair_map_state, record_lookup)
+
+
+_CACHED_RECORDING = {lookups.micro_map_state: _record_micromap, lookups.succinct_map_state: _record_succinct,
+                     lookups.csm_map_state: _record_csm, lookups.pair_map_state: _record_pair_map}
+_RECORDING: dict = {}
+
+
+def make_recording_filter(state_fn):
+    """``make_filter``'s filter that also records every lookup (``record_lookup``) for
+    ``trace --memory``: the same lookups, states and counts (the traced filters stay free of the
+    hook)."""
+    if state_fn not in _RECORDING:
+        if state_fn in _CACHED_RECORDING:
+            filt = cfunc(_SIG, cache=True)(_CACHED_RECORDING[state_fn])
+        else:
+            @cfunc(_SIG)
+            def filt(args):
+                _filter_hooked(args, state_fn, record_lookup)
+        _RECORDING[state_fn] = filt
+    return _RECORDING[state_fn]

@@ -9,7 +9,7 @@ import numpy as np
 
 from ..atomic import atomic_path
 
-__all__ = ["heatmap", "render", "budget_plot"]
+__all__ = ["heatmap", "render", "budget_plot", "frontier_plot"]
 
 
 def _tests_image(run, shadows: bool) -> np.ndarray:
@@ -127,7 +127,9 @@ def render(path: str, prep, run, cam: np.ndarray, light) -> None:
 def _plot_family(name: str, settings: dict) -> str:
     kind = settings.get("kind")
     if kind == "micromap":
-        return "triL (per-triangle micromaps)"
+        rep = settings.get("representation", "raw")
+        return {"succinct": "succinctL (succinct trees)", "csm": "csmL (merged subtrees)"}.get(
+            rep, "triL (per-triangle micromaps)")
     if kind == "square" and settings.get("codec", "").startswith("sq"):
         return "sqN (raw square maps)"
     if kind == "budget":
@@ -217,6 +219,88 @@ def budget_plot(path: str, report: dict) -> None:
             line.set_xdata(new_x[i:i + len(pts)])
             i += len(pts)
         place_labels(ax, new_x, ys, [p[2] for _, pts in drawn for p in pts], fontsize=7.5, marker_px=marker_px)
+    with atomic_path(path, suffix=".png") as tmp:
+        fig.savefig(tmp, dpi=dpi, format="png")
+    plt.close(fig)
+
+
+def _frontier_points(report: dict) -> list[tuple]:
+    """(family, label, map bytes, lines per ray or None, tests per ray) of every traced scheme
+    but ``none``: its own layout and, where ``--memory`` measured it and its bytes differ, its
+    shared one (``triL``'s: the standard OMMs, labelled OMM)."""
+    out = []
+    for n, r in report["schemes"].items():
+        if n == "none" or not r.get("map_bytes"):
+            continue
+        settings = report["settings"]["schemes"].get(n, {})
+        fam = _plot_family(n, settings)
+        mem = r.get("memory")
+        tests = r["alpha_tests_per_primary_ray"]
+        out.append((fam, n, r["map_bytes"], mem["own"]["map_lines_per_ray"] if mem else None, tests))
+        if mem and mem["shared"]["map_bytes"] != mem["own"]["map_bytes"]:
+            tag = "OMM" if settings.get("kind") == "micromap" and settings.get("representation", "raw") == "raw" \
+                else "shared"
+            out.append((fam, f"{n} {tag}", mem["shared"]["map_bytes"], mem["shared"]["map_lines_per_ray"], tests))
+    return out
+
+
+def frontier_plot(path: str, report: dict) -> None:
+    """Alpha tests per primary ray against map bytes (log x) and, when ``--memory`` measured it,
+    against 64-byte lines of map data per primary ray: every traced scheme (its own layout and
+    its shared one), the Pareto front marked (``omaps.frontier``), dominated points lighter,
+    'none' as a level; a colour per family."""
+    import os
+
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from ..frontier import front_panel, label_panel
+
+    pts = _frontier_points(report)
+    memory = bool(pts) and all(p[3] is not None for p in pts)
+    dpi = 110
+    fig, axes = plt.subplots(1, 2 if memory else 1, figsize=(13.5 if memory else 7.5, 5.6), dpi=dpi,
+                             squeeze=False)
+    axes = axes[0]
+    fams = list(dict.fromkeys(p[0] for p in pts))
+    colours = [f"C{fams.index(p[0]) % 10}" for p in pts]
+    none = report["schemes"].get("none")
+    top = max([p[4] for p in pts] + [none["alpha_tests_per_primary_ray"] if none else 0.0] + [1e-9])
+    cam = report["camera"]
+    scene = os.path.basename(report["scene"]["file"])
+    panels = [(axes[0], [p[2] for p in pts], "map bytes")]
+    if memory:
+        panels.append((axes[1], [p[3] for p in pts], "64-byte lines of map data per primary ray (own or shared layout)"))
+    unit = 1024.0
+    for k, (ax, xs, what) in enumerate(panels):
+        if k == 0 and pts:
+            unit = _bytes_axis(ax, xs)
+            xs = [x / unit for x in xs]
+            panels[0] = (ax, xs, what)
+        elif pts:
+            hi = max(xs)
+            ax.set_xlim(0, hi * 1.12 + 1e-9)
+            ax.set_xlabel(what)
+        if pts:
+            front_panel(ax, xs, [p[4] for p in pts], colours=colours, marker_pt=MARKER_PT)
+        if none is not None:
+            ax.axhline(none["alpha_tests_per_primary_ray"], color="grey", ls="--", lw=1,
+                       label=f"none, no maps ({none['alpha_tests_per_primary_ray']:.2f})")
+        for f in fams:
+            ax.plot([], [], "o", color=f"C{fams.index(f) % 10}", ls="none", label=f)
+        ax.set_ylabel("alpha tests per primary ray")
+        ax.set_ylim(0, top * 1.15)
+        ax.grid(True, which="both", alpha=0.3)
+        ax.set_title(("Alpha tests per primary ray against map bytes" if k == 0 else
+                      "Alpha tests per primary ray against lines read per ray") + "\n"
+                     + f"{scene}, {cam['width']}x{cam['height']}; Pareto front: fewer is better on both axes",
+                     fontsize=9.5)
+        ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.13), ncol=3, fontsize=7.5, frameon=False)
+    fig.tight_layout()
+    for ax, xs, _ in panels:
+        if pts:
+            label_panel(ax, xs, [p[4] for p in pts], [p[1] for p in pts], marker_pt=MARKER_PT)
     with atomic_path(path, suffix=".png") as tmp:
         fig.savefig(tmp, dpi=dpi, format="png")
     plt.close(fig)

@@ -24,7 +24,11 @@ T_MAP_LEVEL, T_MAP_OFFSET = 19, 20  # stored micromaps (scheme omm): per row its
 T_MAP_FORMAT = 21  # a budget's maps: per row its codec's format code (int32, 0 no map); offsets in T_MAP_OFFSET
 T_COUNT = 22  # view weights: candidate hits per alpha triangle (int64), counted by lookups.counting_state
 T_MAP_CODEC = 23  # square maps of one codec: its format code (``Codec.code``; lookups.pair_map_state)
-TABLE_WORDS = 24
+# ``trace --memory``: every lookup of the primary pass recorded per pixel (``filter.make_recording_filter``):
+# per pixel its first slot (int64, pixels + 1) and lookups so far (int64); per slot the triangle (int64),
+# barycentrics (float64, 2 each) and the state read (uint8)
+T_REC_START, T_REC_COUNT, T_REC_TRI, T_REC_BARY, T_REC_STATE = 24, 25, 26, 27, 28
+TABLE_WORDS = 29
 
 # ---- a query context: Embree's part, then ours (int64 words) -----------------------------------
 C0 = CONTEXT_BYTES // 8
