@@ -15,6 +15,9 @@
                          CODEC the codec they were stored with (sqN, vq2, vq4, vq4x64)
     budget:BYTES         (trace) per pair the option (none, sqN up to 64, vq2, vq4, vq4x64) that saves
                          the most alpha tests per byte, all pairs within BYTES (1263936, 1.2MiB, 800KiB)
+    budget:BYTES:OPTS    the same with the options OPTS, '+'-separated: budget options (those above,
+                         succinctL: the pair's two level-L micromaps as succinct trees, bytes per
+                         pair) or ``default`` (the options above): budget:120KiB:default+succinct6
 
 A ``Scheme`` says what is stored (its ``kind``: none, texel, micromap -- with its
 ``representation``: raw, succinct or csm -- or square with its ``codec``) and what it costs
@@ -33,7 +36,7 @@ from __future__ import annotations
 import re
 from dataclasses import dataclass
 
-from .codecs.registry import EFFORTS, Codec, check_choice, codec_names, get_codec
+from .codecs.registry import EFFORTS, Codec, budget_options, check_choice, codec_names, get_codec
 from .errors import InputError
 
 __all__ = ["Scheme", "get_scheme", "parse_schemes", "square_scheme_choices", "DEFAULT_SCHEMES", "KINDS", "EVAL_KINDS",
@@ -58,6 +61,7 @@ class Scheme:
     encoder: str | None = None
     effort: str | None = None
     budget: int | None = None  # budget: the scene's map bytes
+    options: tuple[str, ...] | None = None  # budget: the pair options (none first); None: the default
     representation: str = "raw"  # micromap: raw (2 bits per micro-triangle), succinct or csm (lossless trees)
 
     @property
@@ -98,6 +102,8 @@ class Scheme:
             out["representation"] = self.representation
         if self.budget is not None:
             out.update(budget_bytes=self.budget, encoder=self.encoder, effort=self.effort)
+            if self.options is not None:
+                out["options"] = list(self.options)
         if self.codec is not None:
             out.update(codec=self.codec.name, map_size=self.codec.map_size, bits=self.codec.bits)
             if self.codec.compressed:
@@ -122,6 +128,27 @@ def square_scheme_choices() -> str:
     return f"sqN, N = {', '.join(sizes[:-1])} or {sizes[-1]}; " + ", ".join(codecs)
 
 
+def _budget_options(name: str, text: str) -> tuple[str, ...]:
+    """The pair options of ``budget:BYTES:OPTS``: ``none`` then the named ones, in the order
+    given, without repeats; ``default`` stands for the default options (``budget.PAIR_OPTIONS``)."""
+    from .budget import PAIR_OPTIONS
+
+    known = ("none",) + budget_options(variable=True)
+    out = ["none"]
+    for o in text.split("+"):
+        o = o.strip()
+        for x in (PAIR_OPTIONS if o == "default" else (o,)):
+            if x not in known:
+                why = (": csmL shares subtrees across the whole scene, so its bytes are not a pair's"
+                       if _TRI.fullmatch(x) and x.startswith("csm") else "")
+                raise InputError(f"unknown budget option {x!r} in scheme {name!r}{why} (choose from default, "
+                                 f"{', '.join(k for k in known if not k.startswith('succinct'))}, "
+                                 f"succinctL with L = 0..12)")
+            if x not in out:
+                out.append(x)
+    return tuple(out)
+
+
 def get_scheme(name: str, encoder: str | None = None, effort: str | None = None) -> Scheme:
     """A scheme by name; ``encoder`` / ``effort`` apply to a codec named without a variant."""
     check_choice("encoder", encoder, ("paper", "best"))
@@ -134,9 +161,12 @@ def get_scheme(name: str, encoder: str | None = None, effort: str | None = None)
     if key.startswith("budget:"):
         from .budget import parse_bytes
 
-        nbytes = parse_bytes(key[len("budget:"):])
+        size, _, opts = key[len("budget:"):].partition(":")
+        nbytes = parse_bytes(size)
         enc, eff = get_codec("vq4").options(encoder, effort)  # the codecs' options (every codec shares them)
-        return Scheme(f"budget:{nbytes}", "budget", encoder=enc, effort=eff, budget=nbytes)
+        options = _budget_options(name, opts) if opts else None
+        suffix = ":" + "+".join(t.strip() for t in opts.split("+")) if opts else ""  # as written
+        return Scheme(f"budget:{nbytes}{suffix}", "budget", encoder=enc, effort=eff, budget=nbytes, options=options)
     if key.startswith("file:"):
         codec_name = key[len("file:"):]
         if not (_SQ.fullmatch(codec_name) or codec_name in codec_names()):

@@ -8,16 +8,16 @@ the hierarchical micromaps (``succinct_*``: one triangle's pruned tree with rank
 
 from ..lazy import exports
 
-_REGISTRY = ["Codec", "CodecEntry", "ENTRIES", "get_codec", "codec_names", "entry", "budget_options", "format_names",
+_REGISTRY = ["Codec", "CodecEntry", "PairMicromaps", "ENTRIES", "get_codec", "codec_names", "entry", "budget_options", "format_names",
              "COMPILE_FAMILIES", "ENCODERS", "EFFORTS"]
 _RAW = ["pack_states", "unpack_states", "row_bytes", "read_state"]  # the one 2-bit layout of every raw map
 # hierarchical micromaps (schemes succinctL, csmL): one triangle's pruned tree with rank support,
 # and a set's merged subtrees
 _SUCCINCT = ["succinct_encode", "succinct_encode_many", "succinct_decode", "succinct_lookup", "succinct_bits"]
 _CSM = ["csm_build", "csm_pack", "csm_encode", "csm_decode", "csm_lookup", "csm_bits"]
-__all__ = _REGISTRY + _RAW + _SUCCINCT + _CSM + ["block_state", "MAX_BLOCK_BYTES"]
+__all__ = _REGISTRY + _RAW + _SUCCINCT + _CSM + ["block_state", "pair_block_state", "MAX_BLOCK_BYTES"]
 
 # each name from its module on first use: the OMM format reads the raw layout alone
 __getattr__, __dir__ = exports(__name__, {**dict.fromkeys(_REGISTRY, "registry"), **dict.fromkeys(_RAW, "raw"),
-                                          "block_state": "dispatch", "MAX_BLOCK_BYTES": "dispatch",
+                                          "block_state": "dispatch", "pair_block_state": "dispatch", "MAX_BLOCK_BYTES": "dispatch",
                                           **dict.fromkeys(_SUCCINCT, "succinct"), **dict.fromkeys(_CSM, "csm")})

@@ -5,7 +5,9 @@ This module is the one list of codecs: each declares itself once in ``ENTRIES`` 
 whether a byte budget may choose it, and the compile families of its kernels). The tracer's
 dispatch (``codecs.dispatch``), the budget's options (``budget_options``), ``omm --from``, the
 scheme grammar's messages and the compile-ahead families are derived from it; adding a codec is
-its own modules plus one entry.
+its own modules plus one entry. Besides the square codecs, the entries ``succinct0`` ..
+``succinct12`` are byte-budget options of variable size: a pair's two triangles' level-L
+micromaps as succinct trees (``PairMicromaps``), their bytes those of the pair's trees.
 
 A ``Codec`` stores one N x N map in a fixed number of bytes: ``encode`` (map -> bytes, the same
 kind of object for every codec), ``decode`` (bytes -> map) and a numba ``lookup(block, x, y)``
@@ -34,10 +36,11 @@ from typing import Callable
 import numpy as np
 
 from .. import states
+from ..birdcurve import MAX_LEVEL
 from ..errors import InputError
 from .options import EFFORTS, ENCODERS
 
-__all__ = ["Codec", "CodecEntry", "ENTRIES", "get_codec", "codec_names", "entry", "budget_options", "format_names",
+__all__ = ["Codec", "CodecEntry", "PairMicromaps", "ENTRIES", "get_codec", "codec_names", "entry", "budget_options", "format_names",
            "COMPILE_FAMILIES", "ENCODERS", "EFFORTS", "check_choice"]
 
 
@@ -183,16 +186,57 @@ class CodecEntry:
     codec's block module only and returns its numba ``(block, x, y) -> state``; ``make()`` builds the
     full ``Codec`` (encoders, decoders) on first use; ``families`` are the compile-ahead families
     (``COMPILE_FAMILIES`` and ``omaps.cli.precompile``) that baking and encoding its maps compile;
-    ``budget``: a byte budget may choose it for a pair."""
+    ``budget``: a byte budget may choose it for a pair.
+
+    ``level``: None for a square codec (a fixed ``block_bytes`` block over the pair's ``map_size``
+    square, read by cell); a micromap level L for an entry that stores the pair's two triangles'
+    level-L micromaps in a representation whose bytes depend on the maps (``map_size`` and
+    ``block_bytes`` 0; ``make()`` gives a ``PairMicromaps``): its ``lookup()`` is a numba
+    ``(block, level, second, k) -> state`` of micro-triangle k of the pair's first or second
+    triangle."""
 
     name: str
     code: int
     map_size: int
     block_bytes: int
     lookup: Callable[[], Callable]
-    make: Callable[[], Codec]
+    make: Callable[[], "Codec | PairMicromaps"]
     families: tuple[str, ...]
     budget: bool = False
+    level: int | None = None
+
+    @property
+    def variable(self) -> bool:
+        """Its bytes depend on the pair's maps (a budget option priced per pair)."""
+        return self.level is not None
+
+
+@dataclass(frozen=True)
+class PairMicromaps:
+    """A pair's two triangles' level-``level`` micromaps stored as one block of variable bytes:
+    the first triangle's tree, then the second's from the next byte (``codecs.succinct``'s
+    ``pair_encode``; a pair without a second triangle stores the first's alone).
+
+    Example::
+
+        >>> import numpy as np
+        >>> pm = entry("succinct1").make()
+        >>> data, starts = pm.encode_pairs(np.array([[0, 0, 0, 0], [0, 1, 2, 1]]), np.array([[1, 1, 1, 1], [0, 0, 0, 0]]),
+        ...                                np.array([True, False]))
+        >>> np.diff(starts).tolist()          # a uniform tree is 4 bits (1 byte), a mixed level-1 tree 10 (2)
+        [2, 2]
+    """
+
+    name: str
+    level: int
+    code: int
+    _encode: Callable
+
+    def encode_pairs(self, first, second, has_second) -> tuple[np.ndarray, np.ndarray]:
+        """Micromaps (P, 4^L) of each pair's first and second triangle (``second``'s row ignored
+        where ``has_second`` is False) -> (data uint8, byte offsets (P + 1,)): pair i's block is
+        ``data[starts[i]:starts[i + 1]]``, its bytes the option's cost."""
+        return self._encode(first, second, has_second, self.level)
 
 
 def _raw_lookup(n: int):
@@ -213,6 +257,15 @@ def _block_lookup(module: str, attr: str = "lookup"):
 
 _RAW_SIZES = tuple(1 << k for k in range(8))  # sq1 .. sq128 (``bake.square.MAX_SQUARE``)
 _RAW_BUDGET = 64  # a budget chooses raw maps up to sq64
+_FIRST_TREE_CODE = 14  # succinct0 .. succinct12: codes 14 .. 26
+
+
+def _pair_micromaps(level: int) -> PairMicromaps:
+    from .succinct import pair_encode
+
+    return PairMicromaps(f"succinct{level}", level, _FIRST_TREE_CODE + level, pair_encode)
+
+
 ENTRIES: tuple[CodecEntry, ...] = tuple(
     CodecEntry(f"sq{n}", 1 + k, n, max(1, n * n // 4), _raw_lookup(n), lambda n=n: _raw(n), ("square",),
                n <= _RAW_BUDGET) for k, n in enumerate(_RAW_SIZES)) + (
@@ -224,9 +277,11 @@ ENTRIES: tuple[CodecEntry, ...] = tuple(
                ("square", "vq4", "synth")),
     CodecEntry("wavelet3", 13, 64, 64, _block_lookup("wavelet3_block"), lambda: _synth("wavelet3"),
                ("square", "wavelet")),
-)
+) + tuple(  # a pair's two succinct micromaps (per-triangle trees); csmL shares subtrees across the scene: no pair cost
+    CodecEntry(f"succinct{lv}", _FIRST_TREE_CODE + lv, 0, 0, _block_lookup("succinct", "pair_lookup"),
+               lambda lv=lv: _pair_micromaps(lv), ("hierarchical",), True, lv) for lv in range(MAX_LEVEL + 1))
 _BY_NAME = {e.name: e for e in ENTRIES}
-_COMPRESSED = tuple(e.name for e in ENTRIES if not e.name.startswith("sq"))
+_COMPRESSED = tuple(e.name for e in ENTRIES if not e.name.startswith("sq") and not e.variable)
 
 # the compile-ahead families of the codecs' own kernels: (modules whose numba kernels they compile,
 # seconds to compile them with an empty cache on one core of the 2-core reference machine)
@@ -249,9 +304,11 @@ def entry(name: str) -> CodecEntry:
     return _BY_NAME[key]
 
 
-def budget_options() -> tuple[str, ...]:
-    """The codecs a byte budget may choose for a pair, in registry order."""
-    return tuple(e.name for e in ENTRIES if e.budget)
+def budget_options(variable: bool = False) -> tuple[str, ...]:
+    """The codecs a byte budget may choose for a pair, in registry order: those of fixed bytes (a
+    budget's default options) and, with ``variable``, also those whose bytes depend on the
+    pair's maps (``succinctL``)."""
+    return tuple(e.name for e in ENTRIES if e.budget and (variable or not e.variable))
 
 
 def format_names() -> tuple[str, ...]:
@@ -281,6 +338,9 @@ def get_codec(name: str) -> Codec:
 
             key = f"sq{check_square_size(int(m.group(1)))}"  # its own message for a size that is no codec
         e = entry(key)
+        if e.variable:
+            raise InputError(f"{e.name} stores a pair's micromaps as trees of variable bytes (a byte budget's "
+                             "option), not a square map")
         codec = e.make()
         _CACHE[key] = replace(codec, code=e.code)
     return _CACHE[key]

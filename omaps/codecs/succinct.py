@@ -42,7 +42,8 @@ from ..birdcurve import MAX_LEVEL
 from ..errors import InputError
 from .bits import bit_length, get_bits
 
-__all__ = ["header_bits", "tree_counts", "encoded_bits", "encode", "encode_many", "decode", "lookup",
+__all__ = ["header_bits", "tree_counts", "encoded_bits", "encode", "encode_many", "decode", "lookup", "blob_bits",
+           "pair_encode", "pair_lookup",
            "uniform_levels", "succinct_encode", "succinct_encode_many", "succinct_decode", "succinct_lookup",
            "succinct_bits"]
 
@@ -127,6 +128,32 @@ def lookup(data, start, level, k):
     return get_bits(data, s0 + 2 * leaf, 2)
 
 
+@njit(cache=True, inline="always")
+def _size(n_t, n_int, w):
+    return w + n_t + w * (n_t >> 6) + 2 * (1 + 3 * n_int)
+
+
+@njit(cache=True)
+def blob_bits(data, start, level):
+    """Size in bits of the level-``level`` blob at bit ``start`` of ``data``, read from its header
+    and one rank query: w + n_T + w · (n_T div 64) + 2 · (1 + 3 · ones of T)."""
+    w = _header_bits(level)
+    n_t = get_bits(data, start, w) if w > 0 else np.int64(0)
+    t0 = start + w
+    return _size(n_t, _rank(data, t0, t0 + n_t, w, n_t), w)
+
+
+@njit(cache=True)
+def pair_lookup(data, level, second, k):
+    """State of micro-triangle ``k`` of a pair's first (``second`` False) or second triangle in
+    the pair's block ``data`` (``pair_encode``): the second tree starts at the byte after the
+    first, whose size its header and one rank query give (``blob_bits``)."""
+    start = np.int64(0)
+    if second:
+        start = 8 * ((blob_bits(data, 0, level) + 7) >> 3)
+    return lookup(data, start, level, k)
+
+
 @njit(cache=True)
 def _uniform_levels(m, level, uni, off):
     """Per node of every level l (at ``uni[off[l] + p]``): its state if its micro-triangles all
@@ -178,11 +205,6 @@ def _counts(uni, off, level):
                     n_int_above += 1
     n_t = 1 + 4 * n_int_above if level > 0 else 0
     return n_t, n_int
-
-
-@njit(cache=True, inline="always")
-def _size(n_t, n_int, w):
-    return w + n_t + w * (n_t >> 6) + 2 * (1 + 3 * n_int)
 
 
 @njit(cache=True, inline="always")
@@ -303,6 +325,39 @@ def encode_many(maps, level: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     data = np.zeros(int(starts[-1]), np.uint8)
     _write(a, level, off, data, starts)
     return data, starts, bits
+
+
+def pair_encode(first, second, has_second, level: int) -> tuple[np.ndarray, np.ndarray]:
+    """Pairs' blocks: micromaps (P, 4^L) of each pair's first and second triangle -> (data, byte
+    offsets (P + 1,)): pair i's block ``data[starts[i]:starts[i + 1]]`` is the first triangle's
+    blob, then the second's from the next byte (none where ``has_second[i]`` is False), read by
+    ``pair_lookup``.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> a = np.array([[0, 1, 2, 1]], np.uint8); b = np.array([[1, 1, 1, 1]], np.uint8)
+    >>> data, starts = pair_encode(a, b, np.array([True]), 1)
+    >>> starts.tolist(), [int(pair_lookup(data, 1, s, 2)) for s in (False, True)]
+    ([0, 3], [2, 1])
+    """
+    a = _check(np.atleast_2d(first), level, many=True)
+    has = np.asarray(has_second, bool).ravel()
+    b = _check(np.atleast_2d(second), level, many=True)
+    if len(b) != len(a) or len(has) != len(a):
+        raise ValueError(f"pair_encode: {len(a)} first, {len(b)} second micromaps and {len(has)} flags")
+    if len(a) == 0:
+        return np.zeros(0, np.uint8), np.zeros(1, np.int64)
+    # blobs interleaved: first of pair 0, second of pair 0 (or nothing), first of pair 1, ...
+    both = np.empty((2 * len(a), a.shape[1]), np.uint8)
+    both[0::2], both[1::2] = a, b
+    keep = np.ones(2 * len(a), bool)
+    keep[1::2] = has
+    data, starts, _ = encode_many(both[keep], level)
+    owner = np.repeat(np.arange(len(a)), 1 + has.astype(np.int64))  # the pair of each kept blob
+    pair_starts = np.zeros(len(a) + 1, np.int64)
+    pair_starts[1:] = starts[1:][np.r_[owner[1:] != owner[:-1], True]]
+    return data, pair_starts
 
 
 def encode(m, level: int) -> bytes:

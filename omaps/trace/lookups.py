@@ -17,7 +17,7 @@ from numba import carray, njit
 
 from .. import birdcurve, pair, states
 from ..budget import HIT_LEVEL
-from ..codecs import MAX_BLOCK_BYTES, block_state, csm_lookup, read_state, succinct_lookup
+from ..codecs import MAX_BLOCK_BYTES, block_state, csm_lookup, pair_block_state, read_state, succinct_lookup
 from ..alpha_test import passes
 from ..sampling import sample_texture
 from .embree import f64_ptr, i8_ptr, i32_ptr, i64_ptr, u8_ptr, u16_ptr
@@ -139,9 +139,21 @@ def _pair_block_state(table, tri, b1, b2, fmt, off):
 @njit(cache=True)
 def mixed_map_state(table, tri, b1, b2):
     """A budget's maps (``trace.budget``): the pair's row has a format code (its codec's) and
-    the byte offset of its block; the hit's cell is read with that format's random-access lookup."""
+    the byte offset of its block; the hit's cell is read with that format's random-access lookup,
+    or, for a block of the pair's micromaps, the hit's micro-triangle in its own triangle's tree
+    (``codecs.pair_block_state``; the second triangle is the one with the square's corner (0, 1)).
+    ``T_MAP_ROW_BYTES``: the data's length."""
     row = np.int64(i32_ptr(table[T_MAP_ROW])[tri])
-    return _pair_block_state(table, tri, b1, b2, i32_ptr(table[T_MAP_FORMAT])[row], i64_ptr(table[T_MAP_OFFSET])[row])
+    fmt = i32_ptr(table[T_MAP_FORMAT])[row]
+    if fmt == 0:
+        return states.C
+    off = i64_ptr(table[T_MAP_OFFSET])[row]
+    corners = i8_ptr(table[T_TRI_CORNER])
+    s, t = pair.hit_st(corners, tri, b1, b2)
+    second = (corners[3 * tri] == pair.CORNER_01 or corners[3 * tri + 1] == pair.CORNER_01
+              or corners[3 * tri + 2] == pair.CORNER_01)
+    data = carray(u8_ptr(table[T_MAP_DATA] + off), table[T_MAP_ROW_BYTES] - off)
+    return pair_block_state(fmt, data, s, t, second, b1, b2)
 
 
 @njit(cache=True)
