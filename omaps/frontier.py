@@ -22,10 +22,10 @@ def front_mask(cost, value, larger_is_better: bool = False) -> np.ndarray:
 
     Examples
     --------
-    >>> front_mask([1, 1, 2], [0.5, 0.5, 0.9], larger_is_better=True).tolist()
-    [False, False, True]
-    >>> front_mask([1, 1, 2], [0.5, 0.5, 0.4]).tolist()
+    >>> front_mask([1, 1, 2], [0.5, 0.5, 0.4], larger_is_better=True).tolist()   # equal points both stay
     [True, True, False]
+    >>> front_mask([1, 2, 2], [0.5, 0.5, 0.4]).tolist()   # (2, 0.5) costs more for the same value
+    [True, False, True]
     """
     c = np.asarray(cost, float)
     v = np.asarray(value, float)

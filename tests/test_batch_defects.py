@@ -107,7 +107,7 @@ def test_batch_help_lists_only_what_batch_accepts(command, single):
     batch, alone = _help("batch", command), _help(single)
     refused = {"eval": {"--json", "--csv", "--plot", "--show", "--per-texture"},
                "omm": {"--verify", "--expand"},
-               "trace": {"--json", "--heatmap", "--render", "--plot-budget"}}[command]
+               "trace": {"--json", "--heatmap", "--render", "--plot-budget", "--plot-frontier"}}[command]
     assert not _options(batch) & refused, _options(batch) & refused
     # every other option of the single command is there, with the same help (one definition)
     shared = _options(alone) - refused - {"--help", "--output", "--quiet"}

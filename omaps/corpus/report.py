@@ -58,7 +58,9 @@ FAMILY_LABELS = {"sq": "square map per pair (sqN, 2 bits/cell)",
                  "vq4": "VQ4: 32x32 in 512 bits, 64x64 in 4 blocks (our encoder)",
                  "vq4-paper": "VQ4, the deck's top-down encoder",
                  "vq4-synth": "VQ4-synth: 32x32 in 512 bits, a synthesised 14th vector",
-                 "wavelet3": "wavelet3: 64x64 in 512 bits, three levels"}
+                 "wavelet3": "wavelet3: 64x64 in 512 bits, three levels",
+                 "succinct": "succinct micromap per triangle (succinctL, its exact bits)",
+                 "csm": "merged subtrees of a pair's micromaps (csmL, its exact bits)"}
 
 
 MARKER_PX = 7.0  # a chart marker's diameter, points
@@ -67,7 +69,9 @@ MARKER_PX = 7.0  # a chart marker's diameter, points
 def plot_savings(path, results, scheme_names, title="Shader invocation savings") -> None:
     """Mean savings against bits per pair, a line per family, like the deck's charts: every
     scheme named at its point (labels set apart, with a leader line when away from it), points
-    of equal bits that would cover each other set side by side, the families' key below."""
+    of equal bits that would cover each other set side by side, the families' key below. The
+    Pareto front (``omaps.frontier``: no other scheme saves more in as few bits) is the dark
+    line; dominated points are drawn lighter."""
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -98,18 +102,36 @@ def plot_savings(path, results, scheme_names, title="Shader invocation savings")
     ax.set_ylabel("mean fraction of hits without any-hit call")
     ax.set_ylim(0, 1)
     ax.grid(True, which="both", alpha=0.3)
-    ax.set_title(f"{title} ({len(results)} textures)")
+    ax.set_title(f"{title} ({len(results)} textures); the Pareto front marked")
+    ax.plot([], [], "-", color="0.1", lw=2.4, alpha=0.55, label="Pareto front: no scheme saves more in as few bits")
+    ax.plot([], [], "o", color="0.6", mfc="0.85", mec="0.75", ms=MARKER_PX, ls="none", label="dominated (lighter)")
     ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.11), ncol=2, fontsize=7, frameon=False)
     fig.tight_layout()
-    _label_points(ax, drawn, MARKER_PX * dpi / 72)
+    _label_points(ax, drawn, MARKER_PX * dpi / 72, front=True)
     fmt = os.path.splitext(os.fspath(path))[1][1:].lower() or "png"
     with atomic.atomic_path(path, suffix="." + fmt) as tmp:
         fig.savefig(tmp, format=fmt, dpi=dpi)
     plt.close(fig)
 
 
-def _label_points(ax, drawn, marker_px: float) -> None:
-    """Set the markers of every (line, [(x, y, label)]) apart, then name each at its point."""
+def _mark_front(ax, bits, xs, ys) -> None:
+    """The Pareto front of the points (``bits``, savings ``ys``; drawn at ``xs``) as a line behind
+    the markers through the non-dominated ones, and the dominated ones lightened."""
+    import numpy as np
+
+    from ..frontier import front_mask
+
+    front = front_mask(bits, ys, larger_is_better=True)
+    xs, ys = np.asarray(xs, float), np.asarray(ys, float)
+    order = np.flatnonzero(front)[np.argsort(np.asarray(bits, float)[front], kind="stable")]
+    ax.plot(xs[order], ys[order], "-", color="0.1", lw=2.4, alpha=0.55, zorder=1.5)
+    for i in np.flatnonzero(~front):
+        ax.plot([xs[i]], [ys[i]], "o", color="white", alpha=0.6, ms=MARKER_PX + 1, mec="none", zorder=2.5)
+
+
+def _label_points(ax, drawn, marker_px: float, front: bool = False) -> None:
+    """Set the markers of every (line, [(x, y, label)]) apart, mark the Pareto front
+    (``front``: ``_mark_front``), then name each point at its place."""
     xs = [p[0] for _, pts in drawn for p in pts]
     ys = [p[1] for _, pts in drawn for p in pts]
     labels = [p[2] for _, pts in drawn for p in pts]
@@ -120,6 +142,8 @@ def _label_points(ax, drawn, marker_px: float) -> None:
     for line, pts in drawn:
         line.set_xdata(new_x[i:i + len(pts)])
         i += len(pts)
+    if front:
+        _mark_front(ax, xs, new_x, ys)
     drawing.place_labels(ax, new_x, ys, labels, fontsize=7, marker_px=marker_px)
 
 

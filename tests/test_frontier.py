@@ -1,0 +1,111 @@
+"""The Pareto front (omaps.frontier), the frontier charts of trace and eval, and the frontier page."""
+
+import importlib.util
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from PIL import Image
+
+from omaps.frontier import front_mask
+
+DOCS = Path(__file__).resolve().parents[1] / "docs"
+
+
+def brute_front(cost, value, larger):
+    out = []
+    for i in range(len(cost)):
+        beaten = False
+        for j in range(len(cost)):
+            better = value[j] > value[i] if larger else value[j] < value[i]
+            no_worse = value[j] >= value[i] if larger else value[j] <= value[i]
+            if cost[j] <= cost[i] and no_worse and (cost[j] < cost[i] or better):
+                beaten = True
+        out.append(not beaten)
+    return out
+
+
+@settings(max_examples=200, deadline=None)
+@given(st.lists(st.tuples(st.integers(0, 6), st.integers(0, 6)), min_size=1, max_size=12), st.booleans())
+def test_front_mask_is_the_non_dominated_points(pts, larger):
+    cost, value = [p[0] for p in pts], [p[1] for p in pts]
+    mask = front_mask(cost, value, larger)
+    assert mask.tolist() == brute_front(cost, value, larger)
+    assert mask.any()  # the cheapest best point is never dominated
+    # along the front, more cost buys a strictly better value
+    f = sorted({(c, v) for c, v, m in zip(cost, value, mask) if m})
+    for (c0, v0), (c1, v1) in zip(f, f[1:]):
+        assert c1 > c0 and ((v1 > v0) if larger else (v1 < v0))
+
+
+def _report(memory: bool) -> dict:
+    schemes = {"none": {"alpha_tests_per_primary_ray": 1.0, "map_bytes": 0}}
+    settings_ = {"none": {"kind": "none"}}
+    for k, (n, b, t) in enumerate([("tri4", 240_000, 0.26), ("csm4", 9_000, 0.26), ("vq4", 120_000, 0.25),
+                                   ("vq4x64", 480_000, 0.17), ("sq16", 120_000, 0.29)]):
+        r = {"alpha_tests_per_primary_ray": t, "map_bytes": b}
+        if memory:
+            r["memory"] = {"own": {"map_bytes": b, "map_lines_per_ray": 0.3 + 0.1 * k},
+                           "shared": {"map_bytes": b // (2 if n != "csm4" else 1), "map_lines_per_ray": 0.5 + 0.1 * k}}
+        schemes[n] = r
+        settings_[n] = {"kind": "micromap", "level": 4} if n.startswith(("tri", "csm")) else {"kind": "square",
+                                                                                                "codec": n}
+    settings_["csm4"]["representation"] = "csm"
+    return {"schemes": schemes, "settings": {"schemes": settings_}, "camera": {"width": 64, "height": 64},
+            "scene": {"file": "palm.glb"}}
+
+
+@pytest.mark.parametrize("memory", [False, True])
+def test_frontier_plot(tmp_path, memory):
+    from omaps.trace.pictures import _frontier_points, frontier_plot
+
+    rep = _report(memory)
+    frontier_plot(str(tmp_path / "f.png"), rep)
+    w = Image.open(tmp_path / "f.png").size[0]
+    assert (w > 1200) == memory  # a second panel (lines per ray) only when memory was measured
+    labels = [p[1] for p in _frontier_points(rep)]
+    assert ("tri4 OMM" in labels) == memory and ("vq4 shared" in labels) == memory
+    assert "csm4 shared" not in labels  # the same bytes: one point
+
+
+def test_eval_plot_marks_the_front(tmp_path):
+    from omaps.corpus import report
+
+    class R:  # the fields mean_results reads
+        def __init__(self, bits, sav):
+            self.bits, self.savings, self.name, self.width, self.height = bits, sav, "t", 64, 64
+
+    results = [R({"sq16": 512, "vq4": 512, "tri3": 256}, {"sq16": 0.4, "vq4": 0.5, "tri3": 0.3})]
+    report.plot_savings(tmp_path / "p.png", results, ["sq16", "vq4", "tri3"])
+    assert Image.open(tmp_path / "p.png").size[0] > 500
+
+
+def _frontier_module():
+    spec = importlib.util.spec_from_file_location("docs_frontier", DOCS / "scripts" / "frontier.py")
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+@pytest.mark.skipif(not (DOCS / "scripts" / "frontier.json").is_file(), reason="no frontier run committed")
+def test_frontier_page_is_rendered():
+    """docs/frontier.md is what docs/scripts/frontier.py renders from its run's reports, every
+    scheme passed, and the hierarchical micromaps give their triL's alpha tests exactly."""
+    mod = _frontier_module()
+    data = json.loads((DOCS / "scripts" / "frontier.json").read_text(encoding="utf-8"))
+    assert (DOCS / "frontier.md").read_text(encoding="utf-8") == mod.render(data), \
+        "docs/frontier.md is stale: run python docs/scripts/frontier.py --render-only"
+    for scene, d in data["scenes"].items():
+        rep = d["report"]
+        assert rep["passed"], scene
+        sch = rep["schemes"]
+        for lv in (4, 6, 8):
+            if f"tri{lv}" in sch:
+                t = sch[f"tri{lv}"]["alpha_tests_per_primary_ray"]
+                assert sch[f"succinct{lv}"]["alpha_tests_per_primary_ray"] == t
+                assert sch[f"csm{lv}"]["alpha_tests_per_primary_ray"] == t
+                assert sch[f"csm{lv}"]["map_bytes"] < sch[f"tri{lv}"]["map_bytes"]
+        assert (DOCS / "img" / f"frontier_{scene}.png").is_file()
