@@ -11,6 +11,7 @@ from omaps.alpha_test import StateRule
 from omaps.bake import GROW_TEXEL, bake_micromaps
 from omaps.omm import budget as omm_budget
 from omaps.omm.pipeline import Geometry, OmmSettings, build
+from omaps.omm.resolve import resolve
 from omaps.texture import load_alpha
 
 import reference_budget as reference  # noqa: E402  (the pricing before the certificate: every level baked)
@@ -73,7 +74,8 @@ def test_plan_is_every_level_priced_plan(seed, fraction):
     plan_ref, rep_ref = reference.budget_levels(g, s, budget)
     assert rep == rep_ref
     assert rep["stored_bytes"] <= budget
-    for (lv, over), (lv_ref, over_ref) in zip(plan, plan_ref):
+    for p, (lv_ref, over_ref) in zip(plan, plan_ref):
+        lv, over = p.levels, p.merged
         np.testing.assert_array_equal(lv, lv_ref)
         assert over.keys() == over_ref.keys()
         for t in over:
@@ -81,17 +83,19 @@ def test_plan_is_every_level_priced_plan(seed, fraction):
             np.testing.assert_array_equal(over[t][1], over_ref[t][1])
 
 
-@pytest.mark.parametrize("seed", [3, 4])
-def test_budgeted_bake_states_are_the_bakers_at_each_level(seed):
+@pytest.mark.parametrize("seed,promotion", [(3, "nearest"), (4, "nearest"), (5, "hashed")])
+def test_budgeted_bake_states_are_the_bakers_at_each_level(seed, promotion):
+    """The build stores the pricing's own bake and resolve: each triangle's micromap must be what
+    the baker and the resolve give that triangle alone at its level."""
     g = _geometry(seed, 80)
     budget = 3000
-    s = OmmSettings(budget=budget, max_level=7)
+    s = OmmSettings(budget=budget, max_level=7, promotion=promotion, seed=seed)
     res = build([g], s)
     summary = res.summary
     assert summary["budget"]["stored_bytes"] <= budget
     assert summary["statistics"]["data_and_record_bytes"] == summary["budget"]["stored_bytes"]
     plan, _ = omm_budget.budget_levels([g], s, budget)
-    levels, merged = plan[0]
+    levels, merged = plan[0].levels, plan[0].merged
     grid = g.test.grid()
     for t in range(len(g.tris_uv)):
         if t in merged:
@@ -99,3 +103,6 @@ def test_budgeted_bake_states_are_the_bakers_at_each_level(seed):
         s3, _ = bake_micromaps(grid, g.tris_uv[t:t + 1], int(levels[t]), GROW_TEXEL)
         got = np.asarray(res.triangle_states(t))  # OMM states: 2 and 3 are the two unknowns
         np.testing.assert_array_equal(np.minimum(got, 2), s3)
+        hint = resolve(s3, np.array([0, len(s3)]), int(levels[t]), g.test, g.tris_uv[t:t + 1], s.format_code,
+                       promotion, seed)
+        np.testing.assert_array_equal(got, hint)

@@ -21,6 +21,8 @@ it counts are the packer's own. Levels are offered up to ``max_level`` and no fi
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 from numba import njit
 
@@ -33,7 +35,7 @@ from ..scene.alpha import distinct_rows
 from . import format as omm_format
 from .resolve import resolve
 
-__all__ = ["budget_levels", "FINEST_TEXELS"]
+__all__ = ["budget_levels", "GeometryBudget", "FINEST_TEXELS"]
 
 FINEST_TEXELS = 0.25
 
@@ -275,6 +277,7 @@ class _Pricing:
         self.base = _base_level(budget, self.max_level)
         self.fine_levels = [lvl for lvl in levels if lvl > self.base]
         self.fine = {}  # fine level -> (items, rows3, stored), items ascending
+        self.coarse = {}  # level <= base -> (items, rows3, stored), items ascending
         self.priced_to = np.minimum(cap, self.base)  # the finest level priced per item
         self.klass = np.full(ni, -1, np.int64)
         self.n_classes = 0
@@ -286,7 +289,8 @@ class _Pricing:
         rows = _rows_down(self.grid, self.sat, self.utris, np.minimum(cap, self.base), 0, progress)
         for lvl in range(self.base + 1):
             sel, r3 = rows.get(lvl, (np.zeros(0, np.int64), np.zeros((0, 4 ** lvl), np.uint8)))
-            self._fill(lvl, sel, self._unknown_c(sel, r3), None)
+            r3 = self._unknown_c(sel, r3)
+            self.coarse[lvl] = (sel, r3, self._fill(lvl, sel, r3, None))
         # classes: items offered finer levels whose base content is not uniform T or O (a uniform
         # T or O content stays so at every finer level: nothing to gain, and the base's is as free)
         sel, r3 = rows.get(self.base, (np.zeros(0, np.int64), np.zeros((0, 4 ** self.base), np.uint8)))
@@ -383,7 +387,7 @@ class _Pricing:
         elif len(rest):
             nbytes[rest, :VARIANTS] = 0
         if not len(sel):
-            return
+            return stored
 
         def price(rows3, stored):
             """bytes of T/O/C rows and their stored rows."""
@@ -436,6 +440,38 @@ class _Pricing:
         for v in range(VARIANTS):
             src = v if v < len(all_rows) else 0
             ids[sel, c0 + v] = np.where(nbytes[sel, c0 + v] > 0, content[src], -1)
+        return stored
+
+    def rows(self, choice: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """What every item stores under the option columns ``choice``: its T/O/C micromap and the
+        stored one (a merged option's meet and the cluster's row), flat, item after item, each at
+        its option's level (``eff``) -- the rows the pricing baked and resolved, so the build
+        bakes nothing again. None where a level was never baked (a budget below every stored
+        micromap: every item at level 0, for special indices)."""
+        level = self.eff[np.arange(self.ni), choice]
+        starts = np.zeros(self.ni + 1, np.int64)
+        np.cumsum(np.left_shift(np.int64(1), 2 * level), out=starts[1:])
+        s3 = np.empty(int(starts[-1]), np.uint8)
+        st = np.empty_like(s3)
+        for lvl in np.unique(level):
+            lvl = int(lvl)
+            sel, r3, stored = (self.coarse if lvl <= self.base else self.fine).get(lvl, (None, None, None))
+            if stored is None:  # nothing baked there (a budget below every stored micromap): the build bakes
+                return None
+            who = np.flatnonzero(level == lvl)
+            pos = np.searchsorted(sel, who)
+            if not (pos < len(sel)).all() or not np.array_equal(sel[np.minimum(pos, len(sel) - 1)], who):
+                raise AssertionError(f"level {lvl} was chosen for items the pricing did not bake there")
+            a, b = r3[pos], stored[pos]
+            for c in np.unique(choice[who]):  # merged options: the cluster's meet and stored row
+                if self.merge[c] is not None:
+                    label, meets, mrows = self.merge[c]
+                    m = (choice[who] == c) & (label[who] >= 0)  # (none where the option is the level below's)
+                    if m.any():
+                        a[m], b[m] = meets[label[who[m]]], mrows[label[who[m]]]
+            flat = starts[who][:, None] + np.arange(1 << (2 * lvl))
+            s3[flat], st[flat] = a, b
+        return s3, st, starts
 
 
 def _merged(rows3, stored, nbytes, w, h_row, h_cell, lvl) -> list:
@@ -605,9 +641,23 @@ def _choose(pricings, budget: int) -> tuple:
             pricings[gi].price(lvl, classes)
 
 
-def budget_levels(geometries, settings, budget: int, progress=None) -> tuple[list[tuple[np.ndarray, dict]], dict]:
-    """Per geometry the level of each triangle and the merged micromaps it stores ({triangle:
-    (T/O/C meet, stored row)}), and a report (bytes stored, expected savings). ``progress``
+class GeometryBudget(NamedTuple):
+    """The budget's plan for one geometry: each triangle's level, the merged micromaps it stores
+    ({triangle: (T/O/C meet, stored row)}), and every triangle's micromap as the pricing baked
+    and resolved it -- T/O/C states (``states3``) and OMM states (``stored``), flat, triangle
+    after triangle at its level (``bake.micro_starts(levels)``), merged ones included -- so the
+    build stage bakes nothing twice (None: not baked, the build bakes them)."""
+
+    levels: np.ndarray
+    merged: dict
+    states3: np.ndarray
+    stored: np.ndarray
+
+
+def budget_levels(geometries, settings, budget: int, progress=None) -> tuple[list[GeometryBudget], dict]:
+    """Per geometry its plan (``GeometryBudget``: the level of each triangle, the merged
+    micromaps it stores and every triangle's baked micromap), and a report (bytes stored,
+    expected savings). ``progress``
     (``pipeline.Progress``): its stage "pricing" counts the micro-triangles baked to price the
     options, its total known before the first (the levels finer than the base level that the
     certificate asks for are not counted).
@@ -642,7 +692,15 @@ def budget_levels(geometries, settings, budget: int, progress=None) -> tuple[lis
             for t in np.flatnonzero(np.isin(inv, sel)):
                 over[int(t)] = (meets[label[inv[t]]], mrows[label[inv[t]]])
             merged += len(sel)
-        out.append((level[inv].astype(np.int64), over))
+        baked = p.rows(choice)
+        s3 = st = None
+        if baked is not None:
+            n_micro = np.left_shift(np.int64(1), 2 * level[inv])
+            first = np.zeros(len(inv) + 1, np.int64)
+            np.cumsum(n_micro, out=first[1:])
+            src = np.repeat(baked[2][inv] - first[:-1], n_micro) + np.arange(int(first[-1]))  # item rows per triangle
+            s3, st = baked[0][src], baked[1][src]
+        out.append(GeometryBudget(level[inv].astype(np.int64), over, s3, st))
         k += p.ni
     total = float(sum(p.total for p in pricings))
     return out, {"budget_bytes": budget, "stored_bytes": stored, "items": int(len(best)),

@@ -346,7 +346,9 @@ class GeometryPlan:
     subdivision level, how many input triangles each stands for, their known-area weights, the
     triangles forced unknown, and which baked triangle each input triangle takes (``inverse``; None:
     one to one). ``merged``: with a budget, micromaps shared by merging (triangle -> (its 3-state
-    meet, its stored row))."""
+    meet, its stored row)); ``baked``: with a budget, every triangle's micromap as its pricing
+    baked and resolved it ((T/O/C states, OMM states), flat at ``micro_starts(levels)``), which the
+    bake and resolve stages then take as they are."""
 
     tris: np.ndarray
     levels: np.ndarray
@@ -356,17 +358,24 @@ class GeometryPlan:
     inverse: np.ndarray | None
     merged: dict
     n_input: int
+    baked: tuple | None = None
 
 
 def plan_geometry(g: Geometry, settings: OmmSettings, n_map: int | None = None, budget_plan=None) -> GeometryPlan:
     """The plan stage: check a geometry's UV triangles and choose each one's level (one level,
     ``dynamic_levels`` from its texel area, log2 N of a square source ``n_map``, or the budget's
-    ``budget_plan`` (levels, merged) from ``omm.budget.budget_levels``); with ``dedup`` (and neither
+    ``budget_plan`` (levels, merged[, states3, stored]): a ``omm.budget.GeometryBudget``); with ``dedup`` (and neither
     a square source nor a budget), identical triangles -- the same UVs, level and unknown flag --
     are planned once."""
     tris = check_uv_triangles(g.tris_uv) if len(g.tris_uv) else np.zeros((0, 3, 2))
     n_tris = len(tris)
-    levels, merged = budget_plan if budget_plan is not None else (_triangle_levels(g.test, tris, settings, n_map), {})
+    baked = None
+    if budget_plan is None:
+        levels, merged = _triangle_levels(g.test, tris, settings, n_map), {}
+    else:
+        levels, merged = budget_plan[0], budget_plan[1]
+        if len(budget_plan) > 2 and budget_plan[2] is not None:
+            baked = (budget_plan[2], budget_plan[3])
     area = g.areas(tris)
     unknown = None if g.unknown is None else np.asarray(g.unknown, dtype=bool)
     inverse = None
@@ -383,7 +392,7 @@ def plan_geometry(g: Geometry, settings: OmmSettings, n_map: int | None = None, 
         area = np.bincount(inverse, weights=area, minlength=len(first_of))
         tris, levels = tris[first_of], levels[first_of]
         unknown = None if unknown is None else unknown[first_of]
-    return GeometryPlan(tris, levels, weight, area, unknown, inverse, merged, n_tris)
+    return GeometryPlan(tris, levels, weight, area, unknown, inverse, merged, n_tris, baked)
 
 
 def bake_states(grid, tris: np.ndarray, levels: np.ndarray, sat=None, unknown=None) -> tuple[np.ndarray, np.ndarray]:
@@ -396,6 +405,17 @@ def bake_states(grid, tris: np.ndarray, levels: np.ndarray, sat=None, unknown=No
         for i in np.flatnonzero(unknown):
             s3[starts[i]:starts[i + 1]] = states.C
     return s3, starts
+
+
+def _counts_of(s3: np.ndarray, omm: np.ndarray, starts: np.ndarray) -> np.ndarray:
+    """``resolve_counted``'s counts of micromaps already resolved: per triangle (T, 7) its T, O and
+    C micro-triangles, then how many C ones are OMM state 0, 1, 2, 3."""
+    n = len(starts) - 1
+    tri = np.repeat(np.arange(n), np.diff(starts))
+    key = tri * 7 + np.where(s3 == states.C, 3 + omm.astype(np.int64), s3)
+    out = np.bincount(key, minlength=7 * n).reshape(n, 7)
+    out[:, 2] = out[:, 3:].sum(axis=1)
+    return out
 
 
 def build(geometries: list[Geometry], settings: OmmSettings = OmmSettings(),
@@ -433,10 +453,12 @@ def build(geometries: list[Geometry], settings: OmmSettings = OmmSettings(),
         tris, levels, weight, area, unknown, inverse, merged = (gp.tris, gp.levels, gp.weight, gp.area, gp.unknown,
                                                                 gp.inverse, gp.merged)
         n_tris = gp.n_input
-        grid = g.test.grid()
-        sat = flag_table(grid) if n_map is None else None
+        grid = g.test.grid() if gp.baked is None else None
+        sat = flag_table(grid) if n_map is None and grid is not None else None
         idx = np.empty(len(tris), dtype=np.int32)
         n_blocks = 0
+        if gp.baked is not None:
+            starts_all = micro_starts(levels)
         if n_map is not None:
             s3_all, blk, rec = _pair_states(g, grid, tris, scheme, settings.jobs)
             starts_all = micro_starts(levels)
@@ -447,7 +469,12 @@ def build(geometries: list[Geometry], settings: OmmSettings = OmmSettings(),
         for a, b in _chunks(levels):
             lv = levels[a:b]
             chunk_unknown = None if unknown is None else unknown[a:b]
-            if n_map is None:
+            if gp.baked is not None:  # --budget: the pricing's own bake and resolve, merged rows included
+                s3 = gp.baked[0][starts_all[a]:starts_all[b]]
+                omm = gp.baked[1][starts_all[a]:starts_all[b]]
+                starts = starts_all[a:b + 1] - starts_all[a]
+                tri_counts = _counts_of(s3, omm, starts)
+            elif n_map is None:
                 s3, starts = bake_states(grid, tris[a:b], lv, sat, chunk_unknown)
             else:
                 s3 = s3_all[starts_all[a]:starts_all[b]]
@@ -455,15 +482,16 @@ def build(geometries: list[Geometry], settings: OmmSettings = OmmSettings(),
                 if chunk_unknown is not None:
                     for i in np.flatnonzero(chunk_unknown):
                         s3[starts[i]:starts[i + 1]] = states.C
-            mine = [t for t in merged if a <= t < b]  # --budget: micromaps shared by merging (their meet)
-            for t in mine:
-                s3[starts[t - a]:starts[t - a + 1]] = merged[t][0]
-            omm, tri_counts = resolve.resolve_counted(s3, starts, lv, g.test, tris[a:b], fmt, settings.promotion,
-                                                      settings.seed)
-            for t in mine:  # one stored row for the whole group: its unknowns' hint codes too
-                row = merged[t][1]
-                omm[starts[t - a]:starts[t - a + 1]] = row
-                tri_counts[t - a, 3:] = np.bincount(np.where(merged[t][0] == states.C, row, 4), minlength=5)[:4]
+            if gp.baked is None:
+                mine = [t for t in merged if a <= t < b]  # --budget: micromaps shared by merging (their meet)
+                for t in mine:
+                    s3[starts[t - a]:starts[t - a + 1]] = merged[t][0]
+                omm, tri_counts = resolve.resolve_counted(s3, starts, lv, g.test, tris[a:b], fmt, settings.promotion,
+                                                          settings.seed)
+                for t in mine:  # one stored row for the whole group: its unknowns' hint codes too
+                    row = merged[t][1]
+                    omm[starts[t - a]:starts[t - a + 1]] = row
+                    tri_counts[t - a, 3:] = np.bincount(np.where(merged[t][0] == states.C, row, 4), minlength=5)[:4]
             w = weight[a:b]
             counts3 += (tri_counts[:, :3] * w[:, None]).sum(axis=0)
             promoted += (tri_counts[:, 3:] * w[:, None]).sum(axis=0)
