@@ -258,32 +258,31 @@ def frontier_plot(path: str, report: dict) -> None:
     from ..frontier import front_panel, label_panel
 
     pts = _frontier_points(report)
-    memory = bool(pts) and all(p[3] is not None for p in pts)
+    with_lines = [p for p in pts if p[3] is not None]  # (a budget's or a file's maps: no memory model)
     dpi = 110
-    fig, axes = plt.subplots(1, 2 if memory else 1, figsize=(13.5 if memory else 7.5, 5.6), dpi=dpi,
+    fig, axes = plt.subplots(1, 2 if with_lines else 1, figsize=(13.5 if with_lines else 7.5, 5.6), dpi=dpi,
                              squeeze=False)
     axes = axes[0]
     fams = list(dict.fromkeys(p[0] for p in pts))
-    colours = [f"C{fams.index(p[0]) % 10}" for p in pts]
     none = report["schemes"].get("none")
     top = max([p[4] for p in pts] + [none["alpha_tests_per_primary_ray"] if none else 0.0] + [1e-9])
     cam = report["camera"]
     scene = os.path.basename(report["scene"]["file"])
-    panels = [(axes[0], [p[2] for p in pts], "map bytes")]
-    if memory:
-        panels.append((axes[1], [p[3] for p in pts], "64-byte lines of map data per primary ray (own or shared layout)"))
-    unit = 1024.0
-    for k, (ax, xs, what) in enumerate(panels):
-        if k == 0 and pts:
+    panels = [(axes[0], pts, [p[2] for p in pts])]
+    if with_lines:
+        panels.append((axes[1], with_lines, [p[3] for p in with_lines]))
+    drawn = []
+    for k, (ax, ps, xs) in enumerate(panels):
+        if k == 0 and ps:
             unit = _bytes_axis(ax, xs)
             xs = [x / unit for x in xs]
-            panels[0] = (ax, xs, what)
-        elif pts:
-            hi = max(xs)
-            ax.set_xlim(0, hi * 1.12 + 1e-9)
-            ax.set_xlabel(what)
-        if pts:
-            front_panel(ax, xs, [p[4] for p in pts], colours=colours, marker_pt=MARKER_PT)
+        elif ps:
+            ax.set_xlim(0, max(xs) * 1.12 + 1e-9)
+            ax.set_xlabel("64-byte lines of map data per primary ray (own or shared layout)")
+        if ps:
+            front_panel(ax, xs, [p[4] for p in ps], colours=[f"C{fams.index(p[0]) % 10}" for p in ps],
+                        marker_pt=MARKER_PT)
+        drawn.append((ax, xs, [p[4] for p in ps], [p[1] for p in ps]))
         if none is not None:
             ax.axhline(none["alpha_tests_per_primary_ray"], color="grey", ls="--", lw=1,
                        label=f"none, no maps ({none['alpha_tests_per_primary_ray']:.2f})")
@@ -298,9 +297,9 @@ def frontier_plot(path: str, report: dict) -> None:
                      fontsize=9.5)
         ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.13), ncol=3, fontsize=7.5, frameon=False)
     fig.tight_layout()
-    for ax, xs, _ in panels:
-        if pts:
-            label_panel(ax, xs, [p[4] for p in pts], [p[1] for p in pts], marker_pt=MARKER_PT)
+    for ax, xs, ys, labels in drawn:
+        if xs:
+            label_panel(ax, xs, ys, labels, marker_pt=MARKER_PT)
     with atomic_path(path, suffix=".png") as tmp:
         fig.savefig(tmp, dpi=dpi, format="png")
     plt.close(fig)
