@@ -185,13 +185,14 @@ def _get(doc, path):
 
 
 @st.composite
-def mutated_json(draw, doc, max_ops: int = 3):
+def mutated_json(draw, doc, max_ops: int = 3, where=None):
     """A deep copy of ``doc`` after 1..max_ops of: replace a value by an odd one, nudge a number
     (+-1, x2, /2, negate), delete a key or list item, duplicate or truncate a list, insert a
-    reader's key with an odd value."""
+    reader's key with an odd value. ``where``: a predicate on paths (tuples of keys) choosing
+    which values are mutated (default: all)."""
     d = copy.deepcopy(doc)
     for _ in range(draw(st.integers(1, max_ops))):
-        paths = json_paths(d)[1:]
+        paths = [p for p in json_paths(d)[1:] if where is None or where(p)]
         if not paths:
             break
         path = draw(st.sampled_from(paths))
@@ -938,3 +939,219 @@ def test_fuzzed_asset_uris_never_read_outside(uri):
         assert not low.startswith(("http", "ftp", "c:", "\\", "//")) and "\\" not in uri, uri
     finally:
         os.remove(path)
+
+
+# -- hierarchical micromaps: succinct and csm blobs -------------------------------------------------
+# Their readers take a blob, a level and (csm) a micromap count. ``check`` validates every field a
+# lookup reads; ``decode`` checks first. Each example: an InputError, or states 0..2 that the
+# random-access lookups (numba kernels, no bounds checks: run only on blobs ``check`` passed) give
+# too, at every micro-triangle tried.
+
+ODD_LEVELS = (-1, 13, 2.5, "3", None, True)
+
+
+@lru_cache(maxsize=None)
+def hierarchical_seeds() -> dict[int, tuple[bytes, bytes, int]]:
+    """Per level 0..6: a succinct blob of one structured micromap and a csm blob of three."""
+    from omaps.codecs import csm_encode, succinct_encode
+
+    rng = np.random.default_rng(29)
+    out = {}
+    for level in range(7):
+        maps = []
+        for _ in range(3):
+            coarse = int(rng.integers(0, level + 1))
+            m = np.repeat(rng.integers(0, 3, 4 ** coarse), 4 ** (level - coarse)).astype(np.uint8)
+            flips = rng.integers(0, 4 ** level, 1 + 4 ** level // 8)
+            m[flips] = rng.integers(0, 3, len(flips))
+            maps.append(m)
+        out[level] = (succinct_encode(maps[0], level), csm_encode(np.stack(maps), level)[0], 3)
+    return out
+
+
+@st.composite
+def hierarchical_blob(draw, which: int):
+    """(blob, level, count): a seed blob (mutated or not) at its level or another, or random
+    bytes; now and then an odd level."""
+    level = draw(st.integers(0, 6))
+    seed = hierarchical_seeds()[level][which]
+    blob = draw(st.just(seed) | mutated_bytes(seed) | st.binary(max_size=64))
+    lv = draw(st.just(level) | st.integers(0, 12) | st.sampled_from(ODD_LEVELS))
+    count = draw(st.just(3) | st.integers(0, 5) | st.sampled_from((-1, 2 ** 31, 2 ** 40, 1.5)))
+    return blob, lv, count
+
+
+def _micro_triangles(data, level: int, n: int = 48) -> list[int]:
+    rng = np.random.default_rng(len(data))
+    return sorted(set(rng.integers(0, 4 ** level, n).tolist()) | {0, 4 ** level - 1})
+
+
+@fuzz_settings(300)
+@given(hierarchical_blob(0), st.sampled_from((0, 0, 0, 3, 8)))
+def test_fuzzed_succinct_blobs(case, start):
+    from omaps.codecs import succinct_check, succinct_decode, succinct_lookup
+
+    blob, level, _ = case
+    try:
+        bits = succinct_check(blob, level, start)
+    except InputError:
+        event("InputError")
+        with pytest.raises(InputError):
+            succinct_decode(blob, level, start)
+        return
+    event("a valid blob")
+    assert start + bits <= 8 * len(blob)
+    m = succinct_decode(blob, level, start)
+    assert m.shape == (4 ** level,) and m.max() <= 2
+    arr = kernel_bytes(blob)
+    for k in _micro_triangles(blob, level):
+        assert succinct_lookup(arr, start, level, k) == m[k]
+
+
+@fuzz_settings(300)
+@given(hierarchical_blob(1))
+def test_fuzzed_csm_blobs(case):
+    from omaps.codecs import csm_check, csm_decode, csm_lookup
+
+    blob, level, count = case
+    try:
+        arr = csm_check(blob, level, count)
+    except InputError:
+        event("InputError")
+        with pytest.raises(InputError):
+            csm_decode(blob, level, count)
+        return
+    event("a valid blob")
+    small = count * 4 ** level <= 1 << 16  # decode materialises every micromap
+    m = csm_decode(blob, level, count) if small else None
+    for t in range(min(count, 8)):
+        for k in _micro_triangles(blob, level, 16):
+            got = csm_lookup(arr, level, t, k)
+            assert 0 <= got <= 2 and (m is None or got == m[t, k])
+    if m is not None:
+        assert m.shape == (count, 4 ** level) and (m.size == 0 or m.max() <= 2)
+
+
+def test_hierarchical_regressions():
+    """Blobs the fuzz tests found or that state a rule: each refused with its problem named."""
+    from omaps.codecs import csm_check, csm_decode, csm_encode, succinct_decode, succinct_encode
+
+    cases = [
+        (lambda: succinct_decode(b"", 3), "header runs past"),
+        (lambda: succinct_decode(b"\xff", 1), "run past the end"),  # n_T 1, internal root: its 4 leaves missing
+        (lambda: succinct_decode(bytes([0b11111111]) * 4, 2), "node count"),  # n_T = 7: not 1 mod 4
+        (lambda: succinct_decode(bytes([0b1101]), 1), "code 3"),  # n_T 1, a leaf root holding code 3
+        (lambda: csm_decode(b"\x01\x00\x00\x00" + b"\xff" * 4, 2, 1), "references itself"),
+        (lambda: csm_decode(b"\xff\xff\xff\xff", 2, 1), "bits, the data"),  # 2^32 - 1 nodes
+        (lambda: csm_decode(csm_encode(np.arange(16)[None] % 3, 2)[0], 1, 1), "deeper than the level"),
+        (lambda: csm_decode(csm_encode(np.arange(16)[None] % 3, 2)[0], 2, 2 ** 40), "bits, the data"),
+    ]
+    for call, message in cases:
+        with pytest.raises(InputError, match=message):
+            call()
+    for level in range(0, 7, 3):  # valid blobs read the same as before the checks
+        m = (np.arange(4 ** level) // 5 % 3).astype(np.uint8)
+        assert np.array_equal(succinct_decode(succinct_encode(m, level), level), m)
+        blob, _ = csm_encode(np.stack([m, m[::-1]]), level)
+        assert csm_check(blob, level, 2).tobytes() == blob
+
+
+# -- EXT_mesh_opacity_micromap (and OMAPS_pair_opacity_maps) in a glTF file -------------------------
+
+@lru_cache(maxsize=None)
+def micromap_gltf_seed() -> dict:
+    """A quad baked by ``omaps omm --from vq2`` into a .gltf: both extensions, data URIs only."""
+    alpha = np.zeros((16, 16), np.uint8)
+    alpha[:, :7] = 255
+    alpha[3:6, 10:13] = 255
+    with tempfile.TemporaryDirectory() as d:
+        src = write_quad_gltf(os.path.join(d, "q.gltf"), alpha)
+        out = os.path.join(d, "o.gltf")
+        with contextlib.redirect_stdout(io.StringIO()):
+            assert main(["omm", src, "-o", out, "--quiet", "--from", "vq2"]) == 0
+        with open(out) as f:
+            doc = json.load(f)
+    assert "EXT_mesh_opacity_micromap" in doc["extensions"] and "OMAPS_pair_opacity_maps" in doc["extensions"]
+    return doc
+
+
+def _extension_path(doc):
+    """Paths into the extensions' JSON and the bufferViews, accessors and buffer they add (not
+    their ``extras``): where the micromap readers look."""
+    ext = doc["extensions"]["EXT_mesh_opacity_micromap"]["micromaps"][0]
+    pair = doc["extensions"]["OMAPS_pair_opacity_maps"]["maps"][0]
+    prim = doc["meshes"][0]["primitives"][0]["extensions"]
+    views = {ext["data"], ext["triangles"], pair["blocks"], prim["OMAPS_pair_opacity_maps"]["pairs"]}
+    views |= {doc["accessors"][prim["EXT_mesh_opacity_micromap"]["micromapIndices"]]["bufferView"]}
+    accessors = {prim["EXT_mesh_opacity_micromap"]["micromapIndices"]}
+
+    def where(path):
+        if "extras" in path:
+            return False
+        return (path[:1] == ("extensions",) or "extensions" in path[:5] and path[:1] == ("meshes",)
+                or path[:1] == ("extensionsUsed",)
+                or (len(path) >= 2 and path[0] == "bufferViews" and path[1] in views)
+                or (len(path) >= 2 and path[0] == "accessors" and path[1] in accessors)
+                or path[:2] == ("buffers", len(doc["buffers"]) - 1) and path[2:] != ("uri",))
+    return where
+
+
+@fuzz_settings(300)
+@given(st.data())
+def test_fuzzed_micromap_extension_json(data):
+    """The micromap extensions' JSON (and the bufferViews, accessor and byteLength they use)
+    mutated, now and then their binary records too: the scene loads and its stored micromaps
+    trace (``omm``, ``file:vq2``), or an InputError names the file and the problem."""
+    from omaps.scene.alpha import alpha_triangles
+    from omaps.schemes import get_scheme
+    from omaps.trace.stored import stored_maps
+
+    seed = micromap_gltf_seed()
+    doc = data.draw(mutated_json(seed, max_ops=3, where=_extension_path(seed)))
+    last = len(doc.get("buffers") or []) - 1
+    if data.draw(st.booleans()) and last >= 0 and isinstance(doc["buffers"][last], dict) \
+            and isinstance(doc["buffers"][last].get("uri"), str) and "," in doc["buffers"][last]["uri"]:
+        head, b64 = doc["buffers"][last]["uri"].split(",", 1)
+        blob = data.draw(mutated_bytes(base64.b64decode(b64), max_ops=2))
+        doc["buffers"][last]["uri"] = head + "," + base64.b64encode(blob).decode()
+    with tempfile.TemporaryDirectory() as d:
+        path = os.path.join(d, "m.gltf")
+        with open(path, "w") as f:
+            f.write(dumps(doc))
+        with quiet():
+            scene = expect_input_error(lambda: load_scene(path), path)
+            if scene is None:
+                return
+            at = alpha_triangles(scene)
+            for name in ("omm", "file:vq2"):
+                sm = expect_input_error(lambda: stored_maps(at, scene, get_scheme(name)), path)
+                if sm is not None:
+                    assert len(sm.rows) == at.count and (not at.count or sm.rows.max() >= 0)
+
+
+MICROMAP_REGRESSIONS = [  # (path, value) in the seed, the problem named
+    (("extensions", "EXT_mesh_opacity_micromap", "micromaps", 0, "usageCounts"), [-1], "usage entry"),
+    (("extensions", "EXT_mesh_opacity_micromap", "micromaps", 0, "usageLevels"), [13], "usage entry"),
+    (("extensions", "EXT_mesh_opacity_micromap", "micromaps", 0, "data"), 2 ** 40, "bufferView"),
+    (("extensions", "EXT_mesh_opacity_micromap", "micromaps", 0, "triangles"), "4", "not a bufferView index"),
+    (("extensions", "EXT_mesh_opacity_micromap", "micromaps"), {}, "micromaps array"),
+    (("meshes", 0, "primitives", 0, "extensions", "EXT_mesh_opacity_micromap", "micromap"), 1, "does not exist"),
+    (("meshes", 0, "primitives", 0, "extensions", "EXT_mesh_opacity_micromap", "micromapBaseTriangle"), -1,
+     "micromapBaseTriangle"),
+    (("meshes", 0, "primitives", 0, "extensions", "EXT_mesh_opacity_micromap", "micromapBaseTriangle"), 2 ** 62,
+     "references micromap triangle"),
+    (("meshes", 0, "primitives", 0, "extensions", "OMAPS_pair_opacity_maps", "maps"), -1, "does not exist"),
+    (("extensions", "OMAPS_pair_opacity_maps", "maps", 0, "codec"), "vq8", "not a codec"),
+    (("extensions", "OMAPS_pair_opacity_maps", "maps", 0, "blockBytes"), 64, "blockBytes"),
+]
+
+
+@pytest.mark.parametrize("path, value, message", MICROMAP_REGRESSIONS, ids=[str(c[0][-1]) for c in MICROMAP_REGRESSIONS])
+def test_micromap_extension_regressions(tmp_path, path, value, message):
+    doc = copy.deepcopy(micromap_gltf_seed())
+    _get(doc, path[:-1])[path[-1]] = value
+    p = tmp_path / "m.gltf"
+    p.write_text(dumps(doc))
+    with pytest.raises(InputError, match=message) as exc:
+        load_scene(str(p))
+    assert exc.value.path == str(p) and UNCHECKED not in exc.value.problem

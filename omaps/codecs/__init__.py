@@ -13,8 +13,9 @@ _REGISTRY = ["Codec", "CodecEntry", "PairMicromaps", "ENTRIES", "get_codec", "co
 _RAW = ["pack_states", "unpack_states", "row_bytes", "read_state"]  # the one 2-bit layout of every raw map
 # hierarchical micromaps (schemes succinctL, csmL): one triangle's pruned tree with rank support,
 # and a set's merged subtrees
-_SUCCINCT = ["succinct_encode", "succinct_encode_many", "succinct_decode", "succinct_lookup", "succinct_bits"]
-_CSM = ["csm_build", "csm_pack", "csm_encode", "csm_decode", "csm_lookup", "csm_bits"]
+_SUCCINCT = ["succinct_encode", "succinct_encode_many", "succinct_decode", "succinct_lookup", "succinct_bits",
+             "succinct_check"]
+_CSM = ["csm_build", "csm_pack", "csm_encode", "csm_decode", "csm_lookup", "csm_bits", "csm_check"]
 __all__ = _REGISTRY + _RAW + _SUCCINCT + _CSM + ["block_state", "pair_block_state", "MAX_BLOCK_BYTES"]
 
 # each name from its module on first use: the OMM format reads the raw layout alone

@@ -39,10 +39,10 @@ from numba import njit
 
 from ..birdcurve import MAX_LEVEL
 from ..errors import InputError
-from .bits import bit_length, get_bits
+from .bits import bit_length, get_bits, kernel_bytes
 
-__all__ = ["ref_bits", "build", "pack", "encode", "decode", "lookup", "blob_bits", "HEADER_BITS", "csm_build", "csm_encode",
-           "csm_decode", "csm_lookup", "csm_bits", "csm_pack"]
+__all__ = ["ref_bits", "build", "pack", "encode", "decode", "lookup", "blob_bits", "check", "HEADER_BITS", "csm_build", "csm_encode",
+           "csm_decode", "csm_lookup", "csm_bits", "csm_pack", "csm_check"]
 
 HEADER_BITS = 32
 
@@ -194,7 +194,8 @@ def encode(maps, level: int) -> tuple[bytes, int]:
 @njit(cache=True)
 def lookup(data, level, t, k):
     """State of micro-triangle ``k`` of micromap ``t`` of the level-``level`` set whose blob is
-    the uint8 array ``data``: from the root, one W-bit reference read per level.
+    the uint8 array ``data``: from the root, one W-bit reference read per level. The blob is one
+    ``encode`` wrote or ``check`` passed (the kernel reads without bounds checks).
 
     Examples
     --------
@@ -211,6 +212,68 @@ def lookup(data, level, t, k):
             return ref
         ref = get_bits(data, HEADER_BITS + w * (4 * (ref - 3) + ((k >> (2 * (level - 1 - d))) & 3)), w)
     return ref
+
+
+@njit(cache=True)
+def _validate(data, n, w, level, n_maps):
+    """0 if every reference of the blob (N = ``n`` nodes, W = ``w``) names a state or an earlier
+    node and every root's descent ends on a state within ``level`` reads; else the first broken
+    rule (``check``'s messages)."""
+    height = np.empty(n, np.int64)  # the most reads from the node to a state
+    for i in range(n):
+        h = np.int64(1)
+        for c in range(4):
+            r = get_bits(data, HEADER_BITS + w * (4 * i + c), w)
+            if r >= 3 + i:
+                return 1
+            if r >= 3 and height[r - 3] + 1 > h:
+                h = height[r - 3] + 1
+        height[i] = h
+    for t in range(n_maps):
+        r = get_bits(data, HEADER_BITS + w * (4 * n + t), w)
+        if r >= 3 + n:
+            return 2
+        if r >= 3 and height[r - 3] > level:
+            return 3
+    return 0
+
+
+_PROBLEMS = {1: "a node references itself, a later node or no node (nodes are stored children first)",
+             2: "a root references no node", 3: "a root's descent is deeper than the level"}
+
+
+def check(data, level: int, n_maps: int) -> np.ndarray:
+    """``data`` (bytes or uint8) as the uint8 array of a level-``level`` set of ``n_maps``
+    micromaps, after checking every field a lookup reads: an InputError unless the node count,
+    the node array and the roots lie inside ``data``, each node's children are states or earlier
+    nodes, and each root's descent ends on a state within ``level`` reads. A blob that passes is
+    read by ``lookup`` and ``decode`` within its bytes and ends every descent on a state.
+
+    Examples
+    --------
+    >>> blob, _ = encode([[0, 1, 2, 1]], 1)
+    >>> len(check(blob, 1, 1))
+    6
+    >>> check(blob, 0, 1)
+    Traceback (most recent call last):
+    ...
+    omaps.errors.InputError: a level-0 csm set is corrupt: a root's descent is deeper than the level
+    """
+    if not isinstance(level, (int, np.integer)) or not 0 <= level <= MAX_LEVEL:
+        raise InputError(f"a csm micromap's level is an integer in 0..{MAX_LEVEL}, got {level!r}")
+    if not isinstance(n_maps, (int, np.integer)) or n_maps < 0:
+        raise InputError(f"a csm set's micromap count is a non-negative integer, got {n_maps!r}")
+    buf = kernel_bytes(data)
+    if len(buf) * 8 < HEADER_BITS:
+        raise InputError(f"a csm set is at least {HEADER_BITS} bits (its node count), got {8 * len(buf)}")
+    n = int(get_bits(buf, 0, 32))
+    need = blob_bits(n, int(n_maps))
+    if need > 8 * len(buf):
+        raise InputError(f"a csm set of {n} nodes and {n_maps} micromaps is {need} bits, the data {8 * len(buf)}")
+    err = _validate(buf, n, ref_bits(n), int(level), int(n_maps))
+    if err:
+        raise InputError(f"a level-{level} csm set is corrupt: {_PROBLEMS[err]}")
+    return buf
 
 
 @njit(cache=True)
@@ -234,15 +297,12 @@ def _decode(data, level, n_maps):
 
 
 def decode(data, level: int, n_maps: int) -> np.ndarray:
-    """The ``n_maps`` micromaps (n_maps, 4^L) of a set's blob (bytes or uint8 array)."""
-    if not isinstance(level, (int, np.integer)) or not 0 <= level <= MAX_LEVEL:
-        raise InputError(f"a csm micromap's level is an integer in 0..{MAX_LEVEL}, got {level!r}")
-    buf = np.frombuffer(bytes(data), np.uint8) if not isinstance(data, np.ndarray) else data
-    out = _decode(buf, int(level), int(n_maps))
-    if out.size and out.max() > 2:
-        raise InputError("a csm blob whose descent ends on a mixed node at the last level is corrupt")
-    return out
+    """The ``n_maps`` micromaps (n_maps, 4^L) of a set's blob (bytes or uint8 array); an
+    InputError for a blob ``check`` refuses."""
+    buf = check(data, level, n_maps)
+    return _decode(buf, int(level), int(n_maps))
 
 
 # the package API's names (``omaps.codecs``)
 csm_build, csm_pack, csm_encode, csm_decode, csm_lookup, csm_bits = build, pack, encode, decode, lookup, blob_bits
+csm_check = check

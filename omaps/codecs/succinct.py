@@ -40,11 +40,11 @@ from numba import njit
 
 from ..birdcurve import MAX_LEVEL
 from ..errors import InputError
-from .bits import bit_length, get_bits
+from .bits import bit_length, get_bits, kernel_bytes
 
-__all__ = ["header_bits", "tree_counts", "encoded_bits", "encode", "encode_many", "decode", "lookup", "blob_bits",
+__all__ = ["header_bits", "tree_counts", "encoded_bits", "encode", "encode_many", "decode", "lookup", "blob_bits", "check",
            "pair_encode", "pair_lookup",
-           "uniform_levels", "succinct_encode", "succinct_encode_many", "succinct_decode", "succinct_lookup",
+           "uniform_levels", "succinct_encode", "succinct_encode_many", "succinct_decode", "succinct_lookup", "succinct_check",
            "succinct_bits"]
 
 
@@ -89,6 +89,7 @@ def _rank(data, t0, d0, w, i):
 def lookup(data, start, level, k):
     """State of micro-triangle ``k`` of the level-``level`` succinct micromap whose blob starts at
     bit ``start`` of the uint8 array ``data``: a descent from the root, one rank query per level.
+    The blob is one ``encode`` wrote or ``check`` passed (the kernel reads without bounds checks).
 
     Parameters
     ----------
@@ -289,6 +290,85 @@ def _decode(data, start, level):
     return prev
 
 
+@njit(cache=True)
+def _validate(data, start, level):
+    """0 if the blob at bit ``start`` is a level-``level`` tree every lookup reads inside
+    ``data``, else the number of the first rule it breaks (``check``'s messages); its size in
+    bits."""
+    nbits = 8 * np.int64(data.shape[0])
+    w = _header_bits(level)
+    if start + w > nbits:
+        return 1, np.int64(0)
+    n_t = get_bits(data, start, w) if w > 0 else np.int64(0)
+    if level > 0 and (n_t < 1 or n_t > (np.int64(1) << (2 * level)) // 3 or n_t % 4 != 1):
+        return 2, np.int64(0)
+    t0 = start + w
+    d0 = t0 + n_t
+    s0 = d0 + w * (n_t >> 6)
+    if s0 > nbits:
+        return 3, np.int64(0)
+    # the T bits level by level: a level's nodes are 4 per internal node of the one above
+    nodes = np.int64(1)
+    tp = np.int64(0)
+    ones = np.int64(0)
+    for lv in range(level):
+        if tp + nodes > n_t:
+            return 4, np.int64(0)
+        internal = np.int64(0)
+        for i in range(tp, tp + nodes):
+            if i > 0 and i & 63 == 0 and get_bits(data, d0 + w * ((i >> 6) - 1), w) != ones:
+                return 5, np.int64(0)
+            if (data[(t0 + i) >> 3] >> ((t0 + i) & 7)) & 1:
+                internal += 1
+                ones += 1
+        tp += nodes
+        nodes = 4 * internal
+    if tp != n_t:
+        return 4, np.int64(0)
+    if n_t > 0 and n_t & 63 == 0 and get_bits(data, d0 + w * ((n_t >> 6) - 1), w) != ones:
+        return 5, np.int64(0)
+    size = _size(n_t, ones, w)
+    if start + size > nbits:
+        return 6, np.int64(0)
+    for j in range(1 + 3 * ones):
+        if get_bits(data, s0 + 2 * j, 2) > 2:
+            return 7, np.int64(0)
+    return 0, size
+
+
+_PROBLEMS = {1: "its header runs past the end of the data", 2: "its node count n_T is no level-{L} tree's",
+             3: "its T bits and rank directory run past the end of the data",
+             4: "its T bits are not a level-{L} tree's in level order",
+             5: "a rank directory entry is not the ones of T before it",
+             6: "its leaf states run past the end of the data", 7: "a leaf holds code 3, which is no state"}
+
+
+def check(data, level: int, start: int = 0) -> int:
+    """The size in bits of the level-``level`` succinct blob at bit ``start`` of ``data`` (bytes
+    or uint8), after checking every field a lookup reads: an InputError unless the header, the
+    T bits (a level-order tree), the rank directory and the leaf states are consistent and lie
+    inside ``data``. A blob that passes is read by ``lookup`` and ``decode`` within its bytes.
+
+    Examples
+    --------
+    >>> check(encode([0, 1, 2, 1], 1), 1)
+    10
+    >>> check(b"\\xff", 1)
+    Traceback (most recent call last):
+    ...
+    omaps.errors.InputError: a level-1 succinct micromap is corrupt: its leaf states run past the end of the data
+    """
+    if not isinstance(level, (int, np.integer)) or not 0 <= level <= MAX_LEVEL:
+        raise InputError(f"a succinct micromap's level is an integer in 0..{MAX_LEVEL}, got {level!r}")
+    buf = kernel_bytes(data)
+    if not isinstance(start, (int, np.integer)) or not 0 <= start <= 8 * len(buf):
+        raise InputError(f"a succinct micromap's start bit is in 0..{8 * len(buf)}, got {start!r}")
+    err, size = _validate(buf, np.int64(start), int(level))
+    if err:
+        raise InputError(f"a level-{level} succinct micromap is corrupt: " + _PROBLEMS[err].format(L=level))
+    return int(size)
+
+
 def _check(m, level: int, many: bool = False) -> np.ndarray:
     if not isinstance(level, (int, np.integer)) or not 0 <= level <= MAX_LEVEL:
         raise InputError(f"a succinct micromap's level is an integer in 0..{MAX_LEVEL}, got {level!r}")
@@ -367,11 +447,11 @@ def encode(m, level: int) -> bytes:
 
 
 def decode(data, level: int, start: int = 0) -> np.ndarray:
-    """The micromap (4^L states) of the blob at bit ``start`` of ``data`` (bytes or uint8)."""
-    if not isinstance(level, (int, np.integer)) or not 0 <= level <= MAX_LEVEL:
-        raise InputError(f"a succinct micromap's level is an integer in 0..{MAX_LEVEL}, got {level!r}")
-    buf = np.frombuffer(bytes(data), np.uint8) if not isinstance(data, np.ndarray) else data
-    return _decode(np.concatenate([buf, np.zeros(8, np.uint8)]), int(start), int(level))
+    """The micromap (4^L states) of the blob at bit ``start`` of ``data`` (bytes or uint8); an
+    InputError for a blob ``check`` refuses."""
+    buf = kernel_bytes(data)
+    check(buf, level, start)
+    return _decode(buf, int(start), int(level))
 
 
 def succinct_bits(maps, level: int):
@@ -382,3 +462,4 @@ def succinct_bits(maps, level: int):
 
 # the package API's names (``omaps.codecs``)
 succinct_encode, succinct_encode_many, succinct_decode, succinct_lookup = encode, encode_many, decode, lookup
+succinct_check = check
