@@ -3,11 +3,14 @@
 Every reader of a file omaps takes -- images (``texture.load_alpha``, and the glTF reader's base
 colour images), glTF JSON and GLB scenes (``scene.gltf.load_scene``, then the OMM geometry made
 from the scene), OMM folders (``omm.verify``, i.e. ``omaps omm --verify``), UV arrays
-(``omm.inputs.load_uvs``) and codec blocks (``omaps decode``) -- gets hypothesis-mutated copies of
+(``omm.inputs.load_uvs``), codec blocks (``omaps decode``), the hierarchical micromaps' blobs
+(``succinct_check``/``csm_check``, then their decoders and lookups) and the micromap extensions of
+a glTF file (``EXT_mesh_opacity_micromap``, ``OMAPS_pair_opacity_maps``) -- gets hypothesis-mutated copies of
 small valid files written here by our own code: bytes flipped, set, inserted, deleted, truncated;
 JSON values replaced by wrong types, negative or huge numbers, NaN; keys removed; GLB headers and
 chunk lengths changed; OMM files resized. Each example must give a valid result whose basic
-invariants hold, or an ``InputError`` whose message names the file; any other exception fails.
+invariants hold, or an ``InputError`` whose message names the file (for a blob in memory, the
+problem); any other exception fails.
 
 The fuzz tests carry the ``fuzz`` marker (``pytest -m fuzz``, or ``-m "not fuzz"`` to leave them
 out). They are derandomized with no example database, so CI runs the same examples every time;
