@@ -10,6 +10,7 @@ import json
 
 import numpy as np
 import pytest
+from hypothesis import given, settings, strategies as st
 
 from gltf_files import write_quad_gltf
 from omaps import birdcurve, states
@@ -79,6 +80,29 @@ def test_registry_declares_succinct_options_of_variable_bytes():
         get_codec("succinct6")
     codes = [entry(o).code for o in budget_options(variable=True)]
     assert len(set(codes)) == len(codes) and all(format_names()[entry(o).code] == o for o in budget_options(True))
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.integers(0, 5), st.integers(1, 4), st.integers(0, 2 ** 32 - 1))
+def test_pair_blocks_read_each_triangle(level, n_pairs, seed):
+    """A pair's block is its first triangle's blob then its second's (when it has one), each as
+    ``succinct_encode`` writes it alone; the pair lookup reads either triangle's states."""
+    rng = np.random.default_rng(seed)
+    coarse = rng.integers(0, level + 1, (2, n_pairs))
+    maps = [[np.repeat(rng.integers(0, 3, 4 ** int(c)), 4 ** (level - int(c))).astype(np.uint8) for c in row]
+            for row in coarse]
+    first, second = np.stack(maps[0]), np.stack(maps[1])
+    has = rng.random(n_pairs) < 0.7
+    data, starts = entry(f"succinct{level}").make().encode_pairs(first, second, has)
+    lookup = entry(f"succinct{level}").lookup()
+    for p in range(n_pairs):
+        blobs = [succinct_encode(first[p], level)] + ([succinct_encode(second[p], level)] if has[p] else [])
+        block = data[starts[p]:starts[p + 1]]
+        assert block.tobytes() == b"".join(blobs)
+        for k in range(4 ** level):
+            assert lookup(block, level, False, k) == first[p, k]
+            if has[p]:
+                assert lookup(block, level, True, k) == second[p, k]
 
 
 def test_budget_scheme_names_its_options():
