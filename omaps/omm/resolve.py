@@ -26,39 +26,44 @@ def _resolve_one(states3, base, end, level, two_state, mode, seed, value, thr, i
     """Triangle ``t``'s micro-triangles ``states3[base:end]`` into ``out``, its counts into
     ``counts[t]`` (no reference counting: it allocates nothing)."""
     n_s = 1 << (2 * sample_k)
-    n_t = n_o = n_c = r0 = r1 = r2 = r3 = 0
+    # first every state copied and the known ones counted, with no branch (the compiler
+    # vectorises it): most micro-triangles are known, most triangles hold no C one
+    n_t = n_o = 0
     for i in range(base, end):
         s = states3[i]
-        if s < 2:
-            out[i] = s
-            if s == 0:
-                n_t += 1
+        out[i] = s
+        n_t += s == 0
+        n_o += s == 1
+    n_c = (end - base) - n_t - n_o
+    r0 = r1 = r2 = r3 = 0
+    if n_c > 0:
+        need0 = hits_needed(mode, 0.0, n_s)
+        for i in range(base, end):
+            if states3[i] < 2:
+                continue
+            need = need0
+            if 0 < need <= n_s:  # the opaque fraction decides: O iff at least ``need`` sample points pass
+                q = micro_corners_of(tris, t, i - base, level)
+                if mode == HASHED:  # the cut is the threshold hashed from the centroid
+                    need = hits_needed(mode, hashed_threshold((q[0] + q[2] + q[4]) / 3.0,
+                                                              (q[1] + q[3] + q[5]) / 3.0, seed), n_s)
+                opaque = micro_hits_with(value, thr, inclusive, filt, mu, mv, q, samples, sample_k, need,
+                                         taps) >= need
+            else:  # opaque or transparent whatever the fraction
+                opaque = need <= 0
+            if two_state:
+                o = 1 if opaque else 0
             else:
-                n_o += 1
-            continue
-        n_c += 1
-        need = hits_needed(mode, 0.0, n_s)
-        if 0 < need <= n_s:  # the opaque fraction decides: O iff at least ``need`` sample points pass
-            q = micro_corners_of(tris, t, i - base, level)
-            if mode == HASHED:  # the cut is the threshold hashed from the centroid
-                need = hits_needed(mode, hashed_threshold((q[0] + q[2] + q[4]) / 3.0, (q[1] + q[3] + q[5]) / 3.0,
-                                                          seed), n_s)
-            opaque = micro_hits_with(value, thr, inclusive, filt, mu, mv, q, samples, sample_k, need, taps) >= need
-        else:  # opaque or transparent whatever the fraction
-            opaque = need <= 0
-        if two_state:
-            o = 1 if opaque else 0
-        else:
-            o = 3 if opaque else 2
-        out[i] = o
-        if o == 0:
-            r0 += 1
-        elif o == 1:
-            r1 += 1
-        elif o == 2:
-            r2 += 1
-        else:
-            r3 += 1
+                o = 3 if opaque else 2
+            out[i] = o
+            if o == 0:
+                r0 += 1
+            elif o == 1:
+                r1 += 1
+            elif o == 2:
+                r2 += 1
+            else:
+                r3 += 1
     counts[t, 0] = n_t
     counts[t, 1] = n_o
     counts[t, 2] = n_c
