@@ -247,12 +247,53 @@ def finished(command: str, out: str, marker: str, fp: dict) -> dict | None:
 # ---------------------------------------------------------------------------------------------
 # one input
 
-def _run_call(command: str, options: dict, path: str, out: str) -> tuple[str, dict, list[str]]:
+SETTINGS = ("level", "dynamic", "max_level", "budget", "format", "promote", "seed", "special", "dedup", "source",
+            "encoder", "effort", "jobs")  # bake_omms' options that make its OmmSettings (omm_settings)
+
+
+def bake_split(path: str, output: str, run=None, pieces: int = 8, **options):
+    """``bake_omms([path], output, **options)`` for a glTF scene, its bake and resolve split into
+    pieces run by ``run`` (``omaps.omm.split.build_split``; default: here, one after the other),
+    packed and written here: the same files, byte for byte. Options that do not split (a budget,
+    a square source) are an ``InputError``."""
+    from .jobs import OmmBake, omm_input_spec, omm_settings
+    from .omm import files, gltf_io
+    from .omm import format as omm_format
+    from .omm import inputs as omm_inputs
+    from .omm.split import build_split
+
+    spec = omm_input_spec([path], options.get("rules"), options.get("channel"))
+    outputs = atomic.Outputs(inputs=[path])
+    to_gltf = gltf_io.is_gltf(output)
+    if to_gltf:
+        outputs.file(output, "-o")
+    else:
+        outputs.folder(output, "-o", omm_format.SUMMARY_FILE, (".glb", ".gltf"))
+    settings = omm_settings(**{k: v for k, v in options.items() if k in SETTINGS})
+    if options.get("weights", "area") != "area":
+        raise InputError("--weights view needs --budget, which does not split")
+    assets = {"root": options.get("root"), "allow_outside": options.get("allow_outside", False)}
+    t0 = time.perf_counter()
+    geoms, skipped, warned = omm_inputs.load_geometries(spec, None, **assets)
+    result = build_split(geoms, settings, run, pieces)
+    bake = OmmBake(result, settings, spec, output, skipped, [], time.perf_counter() - t0)
+    extra = {"input": spec, "skipped_primitives": skipped, "warnings": warned}
+    with outputs.writing():
+        if to_gltf:
+            bake.warnings = list(gltf_io.write_gltf_result(spec["path"], outputs.path(output), output, result, extra,
+                                                           **assets))
+        else:
+            files.write_into(outputs.path(output), result, extra)
+    return bake
+
+
+def _run_call(command: str, options: dict, path: str, out: str, split=None) -> tuple[str, dict, list[str]]:
     """The command's library call on one input, its output written at ``out``: (status, the
-    figures the summary keeps, the messages the single command would print on stderr)."""
+    figures the summary keeps, the messages the single command would print on stderr).
+    ``split``: (run, pieces) of an omm bake split into pieces (``bake_split``)."""
     call = library_call(command)
     if command == "omm":
-        bake = call([path], out, **options)
+        bake = call([path], out, **options) if split is None else bake_split(path, out, *split, **options)
         st = bake.statistics
         figs = {k: st[k] for k in ("triangles", "micro_triangles", "transparent", "opaque", "unknown",
                                    "known_area_fraction", "micromaps", "data_bytes") if k in st}
@@ -275,10 +316,11 @@ def _run_call(command: str, options: dict, path: str, out: str) -> tuple[str, di
     return ("ok" if res.passed else "problems"), figs, res.messages()
 
 
-def run_one(command: str, options: dict, path: str, name: str, outdir: str, fp: dict) -> dict:
+def run_one(command: str, options: dict, path: str, name: str, outdir: str, fp: dict, split=None) -> dict:
     """Run the command's library call on one input, its output at ``output_path``; then write
     the marker. Returns the input's record: status ok / problems (a scheme changed a visible
-    result) / skipped / error."""
+    result) / skipped / error. ``split``: (run, pieces), an omm bake split into pieces run by
+    ``run`` (``bake_split``)."""
     out = output_path(command, outdir, name, {"glb": options.get("glb")})
     options = {k: v for k, v in options.items() if k != "glb"}
     rec = {"input": path, "output": os.path.relpath(out, outdir), "status": None}
@@ -288,7 +330,7 @@ def run_one(command: str, options: dict, path: str, name: str, outdir: str, fp: 
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always", UserWarning)
             try:
-                rec["status"], rec["figures"], messages = _run_call(command, options, path, out)
+                rec["status"], rec["figures"], messages = _run_call(command, options, path, out, split)
             finally:
                 messages = [f"omaps: warning: {w.message}" for w in caught] + messages
     except InputError as exc:
@@ -317,12 +359,17 @@ def run_one(command: str, options: dict, path: str, name: str, outdir: str, fp: 
 
 DEFAULT_PORT = 8786  # a Dask scheduler's port when the address names none
 CONNECT_SECONDS = 3  # an unreachable scheduler: the error within this (a refused connection: at once)
+HANDSHAKE_BYTES = 16  # a Dask scheduler speaks first: its handshake's length and frame count (8 bytes each)
 
 
 def check_scheduler(address: str) -> None:
-    """A ``tcp://`` / ``tls://`` scheduler address that takes a TCP connection, checked in
-    ``CONNECT_SECONDS`` at most before any work (Dask's client would retry for its whole timeout)."""
+    """A ``tcp://`` scheduler address that takes a TCP connection and answers as a Dask scheduler
+    does (it sends its handshake first: a message length, then a frame count), checked in
+    ``CONNECT_SECONDS`` at most before any work (Dask's client would retry for its whole timeout,
+    and a server that is not Dask's can make it fail with a traceback). A ``tls://`` address is
+    checked for the connection only."""
     import socket
+    import struct
     from urllib.parse import urlsplit
 
     if not address.startswith(("tcp://", "tls://")):
@@ -334,14 +381,27 @@ def check_scheduler(address: str) -> None:
         raise InputError(f"not a scheduler address tcp://HOST:PORT ({exc})", address) from None
     if not host:
         raise InputError("not a scheduler address tcp://HOST:PORT (no host)", address)
+    deadline = time.monotonic() + CONNECT_SECONDS
+    got, connected = b"", False
     try:
-        with socket.create_connection((host, port), timeout=CONNECT_SECONDS):
-            pass
+        with socket.create_connection((host, port), timeout=CONNECT_SECONDS) as s:
+            connected = True
+            while address.startswith("tcp://") and len(got) < HANDSHAKE_BYTES:
+                s.settimeout(max(deadline - time.monotonic(), 0.01))
+                more = s.recv(HANDSHAKE_BYTES - len(got))
+                if not more:
+                    raise InputError("not a Dask scheduler (it closed the connection without a handshake)",
+                                     address)
+                got += more
     except socket.timeout:
-        raise InputError(f"cannot connect to the Dask scheduler (no answer in {CONNECT_SECONDS} s)",
-                         address) from None
+        what = "it took the connection but sent no Dask handshake" if connected else "no answer"
+        raise InputError(f"cannot connect to the Dask scheduler ({what} in {CONNECT_SECONDS} s)", address) from None
     except OSError as exc:
         raise InputError(f"cannot connect to the Dask scheduler ({exc.strerror or exc})", address) from None
+    if got:
+        length, frames = struct.unpack("<QQ", got)
+        if not (0 < length < 1 << 24 and 0 < frames < 64):
+            raise InputError("not a Dask scheduler (its first bytes are not a Dask handshake)", address)
 
 
 def _children() -> set:
@@ -397,10 +457,26 @@ def _stop_quietly(stack: contextlib.ExitStack, before: set, clusters: set) -> No
             os.close(devnull)
 
 
+CLOSE_SECONDS = 5  # closing the client or the cluster (a cluster whose workers were killed can wait for ever)
+
+
+def _close(thing) -> None:
+    """Close a Dask client or cluster within ``CLOSE_SECONDS``; the batch's work is done (or
+    interrupted) by then, so a slow or failed close is not its error."""
+    with contextlib.suppress(Exception):
+        thing.close(timeout=CLOSE_SECONDS)
+
+
+# a local worker computes on one core: its numba kernels use one thread (else each worker's parallel
+# kernels would take every core, and two workers oversubscribe them)
+WORKER_ENV = {"NUMBA_NUM_THREADS": "1", "OMP_NUM_THREADS": "1"}
+
+
 @contextlib.contextmanager
 def dask_client(scheduler: str):
     """A distributed Client: ``local`` starts a LocalCluster (one single-threaded worker process
-    per core; workers may start the command's own worker processes), else connects to the address.
+    per core, its numba kernels on one thread: ``WORKER_ENV``; workers may start the command's own
+    worker processes), else connects to the address.
 
     Dask's event loop thread is started with SIGINT blocked, so the cluster's processes (spawned
     from it) never see Ctrl-C; this thread does, at any moment (start-up included), and the
@@ -425,16 +501,18 @@ def dask_client(scheduler: str):
         if scheduler == "local":
             n = max(1, os.cpu_count() or 1)
             with dask.config.set({"distributed.worker.daemon": False}):
-                cluster = stack.enter_context(LocalCluster(
-                    n_workers=n, threads_per_worker=1, processes=True, dashboard_address=":0",
-                    silence_logs=logging.CRITICAL, loop=runner.loop))
-            client = stack.enter_context(Client(cluster, loop=runner.loop))
+                cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=":0",
+                                       silence_logs=logging.CRITICAL, loop=runner.loop, env=WORKER_ENV)
+            stack.callback(_close, cluster)
+            client = Client(cluster, loop=runner.loop)
+            stack.callback(_close, client)
         else:
             try:
                 client = Client(scheduler, timeout="5s", loop=runner.loop)
-            except (OSError, TimeoutError) as exc:
-                raise InputError(f"cannot connect to the Dask scheduler ({exc})", scheduler) from None
-            stack.enter_context(client)
+            except Exception as exc:  # (a server that is not Dask's can fail its handshake any way)
+                raise InputError(f"cannot connect to the Dask scheduler ({type(exc).__name__}: {exc})",
+                                 scheduler) from None
+            stack.callback(_close, client)
     except BaseException:  # Ctrl-C during the start-up, or no connection
         _stop_quietly(stack, before, set(SpecCluster._instances) - known)
         raise
@@ -450,15 +528,55 @@ def dask_client(scheduler: str):
         stack.close()
 
 
-def run_all(command, jobs, scheduler: str, window: int | None, progress: bool):
-    """Run ``jobs`` (lists of ``run_one``'s arguments) and yield their records as they finish."""
+def dask_pieces(client, window: int):
+    """A ``build_split`` runner on a Dask client: the pieces submitted (at most ``window`` in
+    flight), each distinct alpha test sent to the cluster once, the results yielded in order."""
+    import collections
+
+    def run(jobs):
+        sent: dict[int, object] = {}  # id(test) -> its future on the cluster
+        todo = collections.deque(jobs)
+        flight: collections.deque = collections.deque()
+        try:
+            while todo or flight:
+                while todo and len(flight) < window:
+                    test, *rest = todo.popleft()
+                    if id(test) not in sent:
+                        sent[id(test)] = client.scatter(test, hash=False)
+                    flight.append(client.submit(bake_piece_task, sent[id(test)], *rest, pure=False,
+                                                key=f"omaps-piece-{os.urandom(8).hex()}"))
+                fut = flight.popleft()
+                res = fut.result()
+                fut.release()
+                yield res
+        finally:
+            for f in list(flight) + list(sent.values()):
+                f.release()
+
+    return run
+
+
+def bake_piece_task(test, piece, *rest):
+    """``omaps.omm.split.bake_piece`` as a Dask task."""
+    from .omm.split import bake_piece
+
+    return bake_piece(test, piece, *rest)
+
+
+PIECES_PER_THREAD = 4  # a split scene: its bake in this many pieces per worker thread (they differ in cost)
+
+
+def run_all(command, jobs, scheduler: str, window: int | None, progress: bool, split: bool = False):
+    """Run ``jobs`` (lists of ``run_one``'s arguments) and yield their records as they finish.
+    ``split``: one input after the other, each omm bake in pieces (``PIECES_PER_THREAD`` per
+    worker thread) run on the scheduler's workers, packed and written here (``bake_split``)."""
     from tqdm import tqdm
 
     bar = tqdm(total=len(jobs), desc=f"batch {command}", unit="input", disable=not progress, leave=False)
     try:
         if scheduler == "none":
             for j in jobs:
-                rec = run_one(*j)
+                rec = run_one(*j, split=(None, PIECES_PER_THREAD) if split else None)
                 bar.update()
                 yield rec
             return
@@ -467,6 +585,12 @@ def run_all(command, jobs, scheduler: str, window: int | None, progress: bool):
         with dask_client(scheduler) as client:
             threads = sum(client.nthreads().values()) or 1
             limit = window or 2 * threads
+            if split:  # one input at a time, its pieces on every worker
+                for j in jobs:
+                    rec = run_one(*j, split=(dask_pieces(client, limit), PIECES_PER_THREAD * threads))
+                    bar.update()
+                    yield rec
+                return
             todo = list(jobs)
             todo.reverse()
             pending = as_completed()
@@ -592,11 +716,13 @@ class BatchPlan:
     names: list
     records: dict
     jobs: list
+    split: bool = False
 
     def line(self) -> str:
         """The line ``omaps batch`` prints before it runs."""
         return (f"omaps batch {self.command}: {count(len(self.found), 'input')}, {len(self.found) - len(self.jobs)} "
-                f"already done or refused, {len(self.jobs)} to run (scheduler {self.scheduler})")
+                f"already done or refused, {len(self.jobs)} to run (scheduler {self.scheduler}"
+                + ("; each scene split into pieces)" if self.split else ")"))
 
 
 @dataclasses.dataclass
@@ -637,11 +763,27 @@ class BatchResult:
         return text
 
 
+def check_split(command: str, options: dict) -> None:
+    """A batch that splits each input into pieces: omm, with options whose bake splits
+    (``omaps.omm.split.splittable``), else an ``InputError`` saying why."""
+    if command != "omm":
+        raise InputError(f"--split splits an omm bake; omaps batch {command} runs one task per input")
+    from .jobs import omm_settings
+    from .omm.split import splittable
+
+    why = splittable(omm_settings(**{k: v for k, v in options.items() if k in SETTINGS}))
+    if why is None and options.get("weights", "area") != "area":
+        why = "--weights view goes with --budget"
+    if why is not None:
+        raise InputError(f"--split: this bake does not split into pieces ({why}); drop --split")
+
+
 def plan_batch(command: str, inputs, outdir, options: dict | None = None, *, scheduler: str = "local",
-               window: int | None = None, glb: bool = False) -> BatchPlan:
+               window: int | None = None, glb: bool = False, split: bool = False) -> BatchPlan:
     """Check a batch before any work and find what it runs: the options (``precheck``), the
     scheduler's address, OUTDIR, the inputs and their output names, and the inputs finished
-    before with the same options (resumed, not run again)."""
+    before with the same options (resumed, not run again). ``split``: each omm scene's bake in
+    pieces on every worker (``bake_split``; the same outputs)."""
     if command not in COMMANDS:
         raise InputError(f"unknown batch command {command!r} (choose from {', '.join(COMMANDS)})")
     options = {**(options or {}), **({"glb": True} if glb else {})}
@@ -649,6 +791,8 @@ def plan_batch(command: str, inputs, outdir, options: dict | None = None, *, sch
         raise InputError(f"--scheduler must be local, none or tcp://HOST:PORT, got {scheduler!r}")
     check_scheduler(scheduler)
     precheck(command, {k: v for k, v in options.items() if k != "glb"})
+    if split:
+        check_split(command, options)
     if window is not None and window < 1:
         raise InputError(f"--window must be >= 1, got {window}")
     outdir = os.fspath(outdir)
@@ -674,7 +818,7 @@ def plan_batch(command: str, inputs, outdir, options: dict | None = None, *, sch
                                       "not replacing it"}
             continue
         jobs.append((command, with_root(command, options, path, rel), path, name, outdir, fp))
-    return BatchPlan(command, outdir, options, scheduler, window, found, names, records, jobs)
+    return BatchPlan(command, outdir, options, scheduler, window, found, names, records, jobs, split)
 
 
 def run_plan(plan: BatchPlan, progress: bool = False) -> BatchResult:
@@ -682,7 +826,7 @@ def run_plan(plan: BatchPlan, progress: bool = False) -> BatchResult:
     t0 = time.perf_counter()
     records = dict(plan.records)
     by_input = {j[2]: j[3] for j in plan.jobs}
-    for rec in run_all(plan.command, plan.jobs, plan.scheduler, plan.window, progress):
+    for rec in run_all(plan.command, plan.jobs, plan.scheduler, plan.window, progress, plan.split):
         records[by_input.get(rec["input"], rec["input"])] = rec
     dt = time.perf_counter() - t0
     ordered = [records[n] for n in plan.names if n in records]
@@ -690,7 +834,8 @@ def run_plan(plan: BatchPlan, progress: bool = False) -> BatchResult:
     tot = totals(plan.command, ordered)
     tot["seconds"] = round(dt, 3)
     tot["inputs_per_second"] = round(len(plan.jobs) / dt, 4) if plan.jobs and dt > 0 else None
-    settings = {"command": plan.command, "scheduler": plan.scheduler, "options": plain(plan.options)}
+    settings = {"command": plan.command, "scheduler": plan.scheduler, "split": plan.split,
+                "options": plain(plan.options)}
     with contextlib.suppress(OSError):
         os.rmdir(os.path.join(plan.outdir, MARKERS))  # only if empty (nothing done)
     js, cs = os.path.join(plan.outdir, SUMMARY + ".json"), os.path.join(plan.outdir, SUMMARY + ".csv")
@@ -700,7 +845,8 @@ def run_plan(plan: BatchPlan, progress: bool = False) -> BatchResult:
 
 
 def run_batch(command: str, inputs, outdir, options: dict | None = None, *, scheduler: str = "local",
-              window: int | None = None, glb: bool = False, progress: bool = False) -> BatchResult:
+              window: int | None = None, glb: bool = False, split: bool = False,
+              progress: bool = False) -> BatchResult:
     """Run one command's library call over many inputs, one output per input under ``outdir``.
 
     Parameters
@@ -719,7 +865,14 @@ def run_batch(command: str, inputs, outdir, options: dict | None = None, *, sche
         ``none`` (serial, in this process), ``local`` (a Dask LocalCluster, one worker process per
         core) or ``tcp://HOST:PORT`` (an existing Dask scheduler).
     window : int, optional
-        At most this many inputs in flight (default: twice the workers' threads).
+        At most this many inputs (or pieces of a split scene) in flight (default: twice the
+        workers' threads).
+    glb : bool
+        omm: write OUTDIR/NAME.glb instead of an OMM folder.
+    split : bool
+        omm: one scene after the other, each one's bake split into pieces that run on every
+        worker, packed and written here: the same outputs, byte for byte. Not with a budget or a
+        square source.
     progress : bool
         A progress bar on stderr.
 
@@ -734,5 +887,5 @@ def run_batch(command: str, inputs, outdir, options: dict | None = None, *, sche
     >>> res = omaps.run_batch("eval", ["textures/"], "out", {"schemes": "sq16,vq4"}, scheduler="none")  # doctest: +SKIP
     >>> res.totals["ok"], res.totals["mean_savings"]["vq4"]                        # doctest: +SKIP
     """
-    plan = plan_batch(command, inputs, outdir, options, scheduler=scheduler, window=window, glb=glb)
+    plan = plan_batch(command, inputs, outdir, options, scheduler=scheduler, window=window, glb=glb, split=split)
     return run_plan(plan, progress)

@@ -150,9 +150,84 @@ def test_unreachable_scheduler_fails_quickly_naming_it(tmp_path, capsys):
     t0 = time.monotonic()
     rc = main(["batch", "eval", str(src), "-o", str(tmp_path / "out"), "--scheduler", address, "--quiet"])
     dt = time.monotonic() - t0
-    assert rc == 2 and dt < 5, dt
+    assert rc == 2 and dt < engine.CONNECT_SECONDS + 10, dt  # (a refused connection: at once; generous bound)
     err = capsys.readouterr().err
     assert address in err and "scheduler" in err and len(err.strip().splitlines()) == 1, err
+    assert not (tmp_path / "out").exists()
+
+
+class _Server:
+    """A local TCP server that takes connections and then says nothing (``reply`` None) or
+    sends ``reply`` at once: not a Dask scheduler, which speaks first with its handshake."""
+
+    def __init__(self, reply=None):
+        import threading
+
+        self.sock = socket.socket()
+        self.sock.bind(("127.0.0.1", 0))
+        self.sock.listen(8)
+        self.address = f"tcp://127.0.0.1:{self.sock.getsockname()[1]}"
+        self.reply, self.conns = reply, []
+        threading.Thread(target=self._serve, daemon=True).start()
+
+    def _serve(self):
+        while True:
+            try:
+                c, _ = self.sock.accept()
+            except OSError:
+                return
+            self.conns.append(c)
+            if self.reply:
+                c.sendall(self.reply)
+
+    def close(self):
+        for c in self.conns:
+            c.close()
+        self.sock.close()
+
+
+def test_a_dask_scheduler_passes_the_check():
+    """The check reads a real scheduler's handshake (``dask scheduler``, as on a cluster)."""
+    port = _free_port()
+    p = subprocess.Popen([sys.executable, "-m", "distributed.cli.dask_scheduler", "--host", "127.0.0.1", "--port",
+                          str(port), "--dashboard-address", ":0"], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    try:
+        deadline = time.monotonic() + 120
+        while time.monotonic() < deadline:
+            with socket.socket() as s:
+                if s.connect_ex(("127.0.0.1", port)) == 0:
+                    break
+            assert p.poll() is None, "the scheduler did not start"
+            time.sleep(0.2)
+        engine.check_scheduler(f"tcp://127.0.0.1:{port}")  # no error
+    finally:
+        p.terminate()
+        p.wait(30)
+
+
+@pytest.mark.parametrize("kind", ["silent", "http", "unroutable"])
+def test_a_scheduler_address_that_is_not_a_dask_scheduler_fails_quickly_naming_it(tmp_path, capsys, kind):
+    """A server that takes the connection but is silent or speaks another protocol (Dask's own
+    client failed there with a traceback, or waited its whole timeout), and an address no route
+    leads to (on some networks a proxy takes the connection): exit 2 within the connection check's
+    time (``CONNECT_SECONDS``; the bound here is generous: a slow machine must not fail it), one
+    line naming the address, nothing written."""
+    src = tmp_path / "tex"
+    _textures(src, n=1)
+    server = None if kind == "unroutable" else _Server(b"HTTP/1.1 400 Bad Request\r\n\r\n" if kind == "http" else None)
+    address = "tcp://10.255.255.1:8786" if server is None else server.address
+    try:
+        t0 = time.monotonic()
+        rc = main(["batch", "eval", str(src), "-o", str(tmp_path / "out"), "--scheduler", address, "--quiet"])
+        dt = time.monotonic() - t0
+    finally:
+        if server is not None:
+            server.close()
+    err = capsys.readouterr().err
+    assert rc == 2, err
+    assert address in err and "scheduler" in err and len(err.strip().splitlines()) == 1, err
+    assert "Traceback" not in err
+    assert dt < engine.CONNECT_SECONDS + 10, dt
     assert not (tmp_path / "out").exists()
 
 

@@ -142,3 +142,88 @@ def test_a_cluster_interrupted_in_its_constructor_is_dropped_quietly():
         for r in list(SpecCluster._instances.data):
             if r() is c:
                 SpecCluster._instances.data.discard(r)
+
+
+# --- Ctrl-C while a local-cluster batch runs ---------------------------------------------------
+
+def _batch_children(pid):
+    import psutil
+
+    try:
+        return psutil.Process(pid).children(recursive=True)
+    except psutil.NoSuchProcess:
+        return []
+
+
+def _wait(cond, what, p, limit=300):
+    import time
+
+    deadline = time.monotonic() + limit
+    while not cond():
+        assert p.poll() is None, f"the batch ended before {what}"
+        assert time.monotonic() < deadline, f"no {what} in {limit} s"
+        time.sleep(0.05)
+
+
+def _grid_scene(path, k=24):
+    from gltf_files import write_quad_gltf
+
+    rng = np.random.default_rng(0)
+    x, y = np.meshgrid(np.arange(k, dtype=np.float32), np.arange(k, dtype=np.float32))
+    pos = np.stack([x.ravel(), y.ravel(), np.zeros(k * k, np.float32)], axis=1)
+    uv = (rng.random((k * k, 2)) * 1.2 - 0.1).astype(np.float32)
+    v = np.arange(k * k).reshape(k, k)
+    a, b, c, d = v[:-1, :-1].ravel(), v[:-1, 1:].ravel(), v[1:, :-1].ravel(), v[1:, 1:].ravel()
+    idx = np.stack([np.stack([a, b, c], 1), np.stack([b, d, c], 1)], 1).reshape(-1)
+    alpha = np.kron((rng.random((16, 16)) > 0.5).astype(np.uint8) * 255, np.ones((4, 4), np.uint8))
+    return write_quad_gltf(str(path), alpha, positions=pos, uvs=uv, indices=idx)
+
+
+@pytest.mark.long
+@pytest.mark.parametrize("phase", ["inputs", "pieces"])
+def test_ctrl_c_while_a_local_cluster_batch_runs(tmp_path, phase):
+    """Ctrl-C (SIGINT to the process group, as a terminal sends it) once the batch is under way:
+    ``inputs``, after the first input of many finished on the workers; ``pieces``, while a split
+    scene's pieces run on the workers and this process waits for them (``omaps batch omm
+    --split``). One line, exit 130, no summary, no process left."""
+    import signal
+    import time
+
+    out = tmp_path / "out"
+    if phase == "inputs":
+        src = tmp_path / "tex"
+        src.mkdir()
+        rng = np.random.default_rng(0)
+        for i in range(40):
+            a = np.kron((rng.random((32, 32)) > 0.5).astype(np.uint8) * 255, np.ones((8, 8), np.uint8))
+            Image.fromarray(a).save(src / f"t{i:02d}.png")
+        cmd = ["eval", str(src), "--schemes", "sq16,tri4,vq2,wavelet3"]
+    else:
+        cmd = ["omm", _grid_scene(tmp_path / "grid.gltf", k=32), "--level", "8", "--split"]
+    env = dict(ENV, OMAPS_PROGRESS="0")
+    p = subprocess.Popen([sys.executable, "-m", "omaps", "batch", *cmd, "-o", str(out), "--scheduler", "local"],
+                         env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, start_new_session=True)
+    try:
+        if phase == "inputs":
+            _wait(lambda: (out / ".batch").is_dir() and any((out / ".batch").iterdir()), "a finished input", p)
+        else:  # the workers are up and busy with pieces: their CPU time grows past their start-up's
+            def busy():
+                import psutil
+
+                kids = _batch_children(p.pid)
+                try:
+                    return len(kids) >= 2 and sum(c.cpu_times().user for c in kids) > 8
+                except psutil.Error:
+                    return False
+
+            _wait(busy, "busy workers", p)
+        os.killpg(p.pid, signal.SIGINT)
+        err = p.communicate(timeout=60)[1].decode(errors="replace")
+    finally:
+        if p.poll() is None:
+            p.kill()
+    assert p.returncode == 130, err
+    assert err == "omaps: interrupted\n", err
+    assert not (out / "summary.json").exists()
+    time.sleep(0.5)
+    assert not _batch_children(p.pid)

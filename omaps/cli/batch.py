@@ -70,12 +70,17 @@ def add_parser(sub) -> None:
             g.add_argument("--glb", action="store_true",
                            help="write OUTDIR/NAME.glb (each glTF scene with EXT_mesh_opacity_micromap, as "
                                 "omaps omm SCENE -o NAME.glb) instead of an OMM folder")
+            g.add_argument("--split", action="store_true",
+                           help="one scene after the other, each one's bake split into pieces of triangles that "
+                                "run on every worker, then packed and written here: the same outputs (for a few "
+                                "large scenes; not with --budget or --from)")
         g.add_argument("--scheduler", default="local", metavar="local|none|tcp://HOST:PORT",
                        help="local: a Dask LocalCluster sized to this machine (default); none: serial, in this "
-                            "process; tcp://HOST:PORT: an existing Dask scheduler (an address that takes no "
-                            f"connection in {engine.CONNECT_SECONDS} s is an error)")
+                            "process; tcp://HOST:PORT: an existing Dask scheduler (an address that does not answer as "
+                            f"one within {engine.CONNECT_SECONDS} s is an error)")
         g.add_argument("--window", type=int, default=None, metavar="N",
-                       help="at most N inputs in flight (default: twice the workers' threads)")
+                       help="at most N inputs (or pieces of a split scene) in flight (default: twice the "
+                            "workers' threads)")
         p.set_defaults(func=cmd_batch)
 
 
@@ -98,7 +103,7 @@ def cmd_batch(a: argparse.Namespace) -> int:
         raise InputError(f"omaps batch {command} writes each input's JSON under OUTDIR; drop --json")
     options = {"omm": omm.bake_options, "eval": maps.eval_options, "trace": trace.trace_options}[command](a)
     plan = engine.plan_batch(command, getattr(a, INPUT_DEST[command]), outdir, options, scheduler=a.scheduler,
-                             window=a.window, glb=getattr(a, "glb", False))
+                             window=a.window, glb=getattr(a, "glb", False), split=getattr(a, "split", False))
     print(plan.line(), flush=True)
     res = engine.run_plan(plan, show_progress(a.quiet))
     for m in res.messages():
