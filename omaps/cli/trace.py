@@ -35,14 +35,13 @@ the printed table, one row per scheme (every figure is also in --json):
   x opaque      Mrays/s relative to an opaque-only traversal of the same scene (no any-hit filter);
                 above 1 (marked *) is timing noise, as every scheme does more work
   map KiB       storage of the scheme's maps over every prototype pair (or triangle), in KiB
-with --memory, a second table: what each lookup of the primary pass reads (docs/FORMAT.md, "What a
-lookup reads"), per scheme in two layouts: own (each pair's or triangle's map stored with it, as
-map KiB counts) and shared (identical maps stored once behind a 32-bit index per pair or triangle;
-for triL the standard OMMs omaps omm writes: index buffer, records, data, special indices):
-  KiB           the layout's map bytes, in KiB
-  reads         dependent reads per lookup (map_reads_per_lookup)
-  lines         distinct 64-byte lines of map data per primary ray (map_lines_per_ray)
-  misses        with --cache-kib K: misses per primary ray of a K KiB LRU cache shared by 8x8 pixels
+with --memory, a second table says what each lookup of the primary pass reads (docs/FORMAT.md, "What a
+lookup reads"): lookups/ray (filter calls per primary ray), then per layout -- own (each pair's or
+triangle's map stored with it, as map KiB counts it) and shared (identical maps once, behind a 32-bit
+index per pair or triangle; for triL the standard OMMs omaps omm writes: index buffer, record, data,
+special indices) -- KiB (its map bytes), reads (dependent reads per lookup), lines (distinct 64-byte
+lines of map data per primary ray) and, with --cache-kib K, misses (per primary ray, of a K KiB LRU
+cache shared by each 8x8 tile of pixels).
 """
 
 

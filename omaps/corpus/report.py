@@ -114,9 +114,10 @@ def plot_savings(path, results, scheme_names, title="Shader invocation savings")
     plt.close(fig)
 
 
-def _mark_front(ax, bits, xs, ys) -> None:
-    """The Pareto front of the points (``bits``, savings ``ys``; drawn at ``xs``) as a line behind
-    the markers through the non-dominated ones, and the dominated ones lightened."""
+def _mark_front(ax, drawn, bits, xs, ys) -> None:
+    """The Pareto front of the points (``bits``, savings ``ys``; drawn at ``xs``, in ``drawn``'s
+    order) as a line behind the markers through the non-dominated ones; each family's markers
+    drawn on their own, the dominated ones lighter (the key keeps the family's marker)."""
     import numpy as np
 
     from ..frontier import front_mask
@@ -125,8 +126,14 @@ def _mark_front(ax, bits, xs, ys) -> None:
     xs, ys = np.asarray(xs, float), np.asarray(ys, float)
     order = np.flatnonzero(front)[np.argsort(np.asarray(bits, float)[front], kind="stable")]
     ax.plot(xs[order], ys[order], "-", color="0.1", lw=2.4, alpha=0.55, zorder=1.5)
-    for i in np.flatnonzero(~front):
-        ax.plot([xs[i]], [ys[i]], "o", color="white", alpha=0.6, ms=MARKER_PX + 1, mec="none", zorder=2.5)
+    i = 0
+    for line, pts in drawn:
+        marker = line.get_marker()
+        line.set_marker("None")
+        for k in range(len(pts)):
+            ax.plot([xs[i + k]], [ys[i + k]], ls="none", marker=marker, ms=line.get_markersize(),
+                    color=line.get_color(), alpha=1.0 if front[i + k] else 0.3)
+        i += len(pts)
 
 
 def _label_points(ax, drawn, marker_px: float, front: bool = False) -> None:
@@ -142,9 +149,9 @@ def _label_points(ax, drawn, marker_px: float, front: bool = False) -> None:
     for line, pts in drawn:
         line.set_xdata(new_x[i:i + len(pts)])
         i += len(pts)
-    if front:
-        _mark_front(ax, xs, new_x, ys)
     drawing.place_labels(ax, new_x, ys, labels, fontsize=7, marker_px=marker_px)
+    if front:  # (after the labels: their places are the chart's without it)
+        _mark_front(ax, drawn, xs, new_x, ys)
 
 
 def plot_suffixes() -> tuple[str, ...]:
