@@ -27,6 +27,10 @@ Per layout: ``map_reads_per_lookup`` (dependent reads, mean over lookups), ``map
 misses per ray of a fully associative LRU cache of that many KiB shared by an 8 x 8 tile of
 pixels: it starts empty at each tile, whose 64 rays run one after another in row-major order,
 each ray's lookups in the order the filter made them.
+
+numba's on-disk cache keys a kernel on its own file: the walks compile ``pair.hit_st``,
+``pair.uv_to_cell`` and ``birdcurve.bary_to_index`` into themselves, so a change there needs this
+file touched too.
 """
 
 from __future__ import annotations
@@ -264,11 +268,11 @@ def _walk_block(out, p, tri, b1, b2, pair_of, corners, rows, bb, n, span, blk_ba
         a = blk_base + bb * rows[tri]
     else:
         a = bb * pr
-    if span == 0:
+    if span == SPAN_BLOCK:
         return reads, _span(out, p, a, a + bb), -1
     s, t = pair.hit_st(corners, tri, b1, b2)
     i, j = pair.uv_to_cell(s, t, n)
-    if span == 1:
+    if span == SPAN_CELL_BYTE:
         c = a + ((j * n + i) >> 2)
         return reads, _span(out, p, c, c + 1), -1
     q = a + 64 * (2 * (j >> 5) + (i >> 5))
@@ -340,15 +344,15 @@ def _walk_csm(out, p, tri, k, data, level):
 
 @njit(cache=True)
 def _walk(kind, out, p, tri, b1, b2, i0, i1, i2, data, q0, q1, q2, q3, q4):
-    if kind == 1:
+    if kind == K_ROWS:
         return _walk_rows(out, p, tri, birdcurve.bary_to_index(b1, b2, q1), q0)
-    if kind == 2:
+    if kind == K_OMM:
         return _walk_omm(out, p, tri, birdcurve.bary_to_index(b1, b2, q2), i0, i1, q0, q1)
-    if kind == 3:
+    if kind == K_BLOCK:
         return _walk_block(out, p, tri, b1, b2, i0, i1, i2, q0, q1, q2, q3, q4 > 0)
-    if kind == 4:
+    if kind == K_SUCCINCT:
         return _walk_succinct(out, p, tri, birdcurve.bary_to_index(b1, b2, q0), data, i1[i0[tri]], i2[tri], q0, q1)
-    if kind == 5:
+    if kind == K_CSM:
         return _walk_csm(out, p, tri, birdcurve.bary_to_index(b1, b2, q0), data, q0)
     return 0, p, -1
 
