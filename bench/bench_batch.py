@@ -15,13 +15,20 @@ The library is built at run time in a temporary folder from the shared data (nev
   codec);
 * ``omm``: ``--scenes`` copies of ``palm.glb`` whose UVs are mirrored, rotated by quarter turns
   and shrunk into one of the texture's quadrants (``omm --level 5``);
-* ``split``: ``forest.glb`` alone (``omm --level 4``): ``--split`` against one task.
+* ``split``: ``forest.glb`` alone (``omm --level 4``): serial, the local cluster with the scene as
+  one task, and the local cluster with ``--split`` (its bake in pieces on both workers).
 
 Each round runs serial then local (alternating which goes first), each as a user runs it (a
 process of its own: interpreter, import and cluster start-up are part of both timings); it prints
-each run's seconds, the local / serial speed-up, /proc/loadavg before and after, and whether
-every output file is identical (eval JSONs byte for byte; omm folders byte for byte; the
-summaries' figures, leaving out timings). No assertion on times (the machine may be shared).
+each run's seconds and CPU-seconds (its processes', workers included), the local / serial
+speed-up, /proc/loadavg before and after, and whether every output file is identical (eval JSONs
+byte for byte; omm folders byte for byte; the summaries' figures, leaving out timings). No
+assertion on times (the machine may be shared).
+
+The serial run's numba kernels (the micromap and pair-square bakers, the resolve) already run on
+every core, so a local cluster on the same cores wins only the rest; ``--one-thread`` adds a
+serial run with numba on one thread (one core, as each local worker), against which the cluster's
+own scaling shows.
 """
 
 from __future__ import annotations
@@ -112,17 +119,23 @@ def scene_library(folder: Path, n: int) -> list[str]:
     return [str(folder)]
 
 
-def run(command: str, paths, opts, scheduler: str, out: str) -> tuple[float, dict]:
-    """The command as a user runs it: (seconds, the summary's totals)."""
+def run(command: str, paths, opts, scheduler: str, out: str, env=None) -> tuple[float, float, dict]:
+    """The command as a user runs it: (seconds, CPU seconds of it and its processes, the
+    summary's totals)."""
+    import resource
+
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
     t0 = time.perf_counter()
     r = subprocess.run([sys.executable, "-m", "omaps", "batch", command, *paths, "-o", out, "--scheduler", scheduler,
-                        "--quiet", *opts], capture_output=True, text=True)
+                        "--quiet", *opts], capture_output=True, text=True, env=env)
     dt = time.perf_counter() - t0
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
     if r.returncode not in (0, 1):
         raise SystemExit(f"omaps batch {command} --scheduler {scheduler} exited {r.returncode}:\n{r.stderr}")
     with open(os.path.join(out, "summary.json")) as f:
         tot = json.load(f)["totals"]
-    return dt, tot
+    return dt, cpu, tot
 
 
 def summary_figures(out: str) -> list:
@@ -161,6 +174,9 @@ def main() -> None:
     ap.add_argument("--max-side", type=int, default=256, help="eval: longer side of each texture, at most")
     ap.add_argument("--scenes", type=int, default=32, help="omm: transformed copies of the palm")
     ap.add_argument("--schemes", default=SCHEMES, help="eval: the schemes")
+    ap.add_argument("--level", type=int, default=None, help="omm and split: the subdivision level (5; split 4)")
+    ap.add_argument("--one-thread", action="store_true",
+                    help="also run serially with numba on one thread (NUMBA_NUM_THREADS=1): one core, as a worker")
     ap.add_argument("--keep", metavar="DIR", help="build the library and outputs here (kept) instead of a temp folder")
     a = ap.parse_args()
     tmp = Path(a.keep) if a.keep else Path(tempfile.mkdtemp(prefix="omaps-bench-batch-"))
@@ -168,26 +184,31 @@ def main() -> None:
         if a.job == "eval":
             command, paths, opts = "eval", texture_library(tmp / "lib", a.variants, a.max_side), ["--schemes", a.schemes]
         elif a.job == "omm":
-            command, paths, opts = "omm", scene_library(tmp / "lib", a.scenes), ["--level", "5"]
+            command, paths, opts = "omm", scene_library(tmp / "lib", a.scenes), ["--level", str(a.level or 5)]
         else:
-            command, paths, opts = "omm", [str(SHARED / "scenes" / "forest.glb")], ["--level", "4"]
+            command, paths, opts = "omm", [str(SHARED / "scenes" / "forest.glb")], ["--level", str(a.level or 4)]
         n_in = sum(len(fs) for _, _, fs in os.walk(paths[0])) if os.path.isdir(paths[0]) else len(paths)
         print(f"omaps batch {command}: {n_in} inputs, {' '.join(opts)}; {os.cpu_count()} cores")
         runs = {"none": [], "local": []} if a.job != "split" else {"none": [], "local": [], "local --split": []}
+        if a.one_thread:
+            runs["none 1-thread"] = []
         verdicts = []
         for r in range(a.repeat):
             order = list(runs) if r % 2 == 0 else list(runs)[::-1]
             outs = {}
             for key in order:
                 sched, *extra = key.split()
+                env = None
+                if extra == ["1-thread"]:  # numba's kernels on one thread: one core, as each local worker
+                    extra, env = [], dict(os.environ, NUMBA_NUM_THREADS="1")
                 out = str(tmp / f"out_{r}_{key.replace(' ', '').replace('-', '')}")
                 shutil.rmtree(out, ignore_errors=True)
                 before = loadavg()
-                dt, tot = run(command, paths, opts + extra, sched, out)
+                dt, cpu, tot = run(command, paths, opts + extra, sched, out, env)
                 runs[key].append(dt)
                 outs[key] = out
-                print(f"  round {r + 1} --scheduler {key:14s}: {dt:7.2f} s, {tot['ok']} ok, {tot['error']} errors "
-                      f"(loadavg {before} -> {loadavg()})", flush=True)
+                print(f"  round {r + 1} --scheduler {key:14s}: {dt:7.2f} s, {cpu:7.1f} CPU-s, {tot['ok']} ok, "
+                      f"{tot['error']} errors (loadavg {before} -> {loadavg()})", flush=True)
             ref = outs["none"]
             for key in outs:
                 if key != "none":
@@ -198,9 +219,12 @@ def main() -> None:
                 shutil.rmtree(out, ignore_errors=True)
         best = {k: min(v) for k, v in runs.items()}
         for k in runs:
-            if k != "none":
+            if k.startswith("local"):
                 print(f"local/serial speed-up ({k}): {best['none'] / best[k]:.2f}x (best of {a.repeat}: serial "
                       f"{best['none']:.2f} s, {k} {best[k]:.2f} s)")
+                if "none 1-thread" in best:
+                    print(f"  against the one-thread serial run: {best['none 1-thread'] / best[k]:.2f}x "
+                          f"({best['none 1-thread']:.2f} s)")
         print("outputs identical in every round" if all(verdicts) else "OUTPUTS DIFFER")
     finally:
         if not a.keep:
