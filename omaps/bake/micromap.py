@@ -130,13 +130,15 @@ STACK = 3 * MAX_LEVEL + 4  # nodes pending: 3 more per level down, plus the root
 
 @njit(cache=True, _nrt=False)
 def _bake_one(sat, flags, mixed, values, bounds, period_x, period_y, tri, level, w, h, offset, grow, out, base, st_l,
-              st_k, st_v, vx, vf, ptri, buf_a, buf_b):
+              st_k, st_v, st_f, vx, vf, ptri, buf_a, buf_b):
     """States of one triangle's 4**level micro-triangles into ``out[base:]``; returns how many
     micro-triangles had no area (the reference raises on those). ``st_*``: the node stack
-    (level, index, barycentric grid coordinates of p0, p1, p2), STACK entries; ``vx`` (6, 2),
+    (level, index, barycentric grid coordinates of p0, p1, p2, and the own flags of p0, p1, p2
+    where known, else -1), STACK entries; ``vx`` (6, 2),
     ``vf`` (6,) the vertices of a node's children and their flags; ``ptri`` (3, 2), ``buf_*``
     (POLY_MAX, 2) the leaf's scratch. A node just above the leaves bakes its four children in
-    place: their six vertices, and those vertices' own flags, are computed once."""
+    place: their six vertices, and those vertices' own flags, are computed once; a vertex's own
+    flag, once read, is handed down the stack to the children that share the vertex."""
     n = 1 << level
     inv_n = 1.0 / n
     scale = 1.0
@@ -153,6 +155,9 @@ def _bake_one(sat, flags, mixed, values, bounds, period_x, period_y, tri, level,
     st_v[0, 3] = 0
     st_v[0, 4] = 0
     st_v[0, 5] = n
+    st_f[0, 0] = -1
+    st_f[0, 1] = -1
+    st_f[0, 2] = -1
     top = 1
     empty = 0
     while top > 0:
@@ -160,6 +165,7 @@ def _bake_one(sat, flags, mixed, values, bounds, period_x, period_y, tri, level,
         lv = st_l[top]
         k = st_k[top]
         i0, j0, i1, j1, i2, j2 = st_v[top, 0], st_v[top, 1], st_v[top, 2], st_v[top, 3], st_v[top, 4], st_v[top, 5]
+        f0, f1, f2 = st_f[top, 0], st_f[top, 1], st_f[top, 2]
         x0, y0 = _vertex(tri, i0, j0, inv_n, w, h, offset)
         x1, y1 = _vertex(tri, i1, j1, inv_n, w, h, offset)
         x2, y2 = _vertex(tri, i2, j2, inv_n, w, h, offset)
@@ -176,8 +182,20 @@ def _bake_one(sat, flags, mixed, values, bounds, period_x, period_y, tri, level,
             if f:
                 state = 2 if f == 3 else f - 1  # all T, all O, or every cell C and none mixed
             elif nm > 0 and nc <= NODE_EXACT_CELLS:
-                f = _leaf_flag(sat, flags, mixed, values, bounds, period_x, period_y, x0, y0, x1, y1, x2, y2, grow,
-                               no_points, ptri, buf_a, buf_b)
+                pts = no_points
+                if points_first:  # the vertices' own flags (``_leaf_flag`` would read them first)
+                    if f0 < 0:
+                        f0 = point_flag(flags, mixed, values, bounds, period_x, period_y, x0, y0, grow)
+                    if f1 < 0:
+                        f1 = point_flag(flags, mixed, values, bounds, period_x, period_y, x1, y1, grow)
+                    if f2 < 0:
+                        f2 = point_flag(flags, mixed, values, bounds, period_x, period_y, x2, y2, grow)
+                    pts = f0 | f1 | f2
+                if pts == 3:
+                    f = 3
+                else:
+                    f = _leaf_flag(sat, flags, mixed, values, bounds, period_x, period_y, x0, y0, x1, y1, x2, y2, grow,
+                                   pts, ptri, buf_a, buf_b)
                 if f == 1 or f == 2:
                     state = f - 1  # known exactly: so is every micro-triangle inside it
         if state >= 0:
@@ -196,8 +214,10 @@ def _bake_one(sat, flags, mixed, values, bounds, period_x, period_y, tri, level,
             vx[4, 0], vx[4, 1] = _vertex(tri, m12i, m12j, inv_n, w, h, offset)
             vx[5, 0], vx[5, 1] = _vertex(tri, m02i, m02j, inv_n, w, h, offset)
             if points_first:
+                vf[0], vf[1], vf[2] = f0, f1, f2
                 for v in range(6):
-                    vf[v] = point_flag(flags, mixed, values, bounds, period_x, period_y, vx[v, 0], vx[v, 1], grow)
+                    if v >= 3 or vf[v] < 0:
+                        vf[v] = point_flag(flags, mixed, values, bounds, period_x, period_y, vx[v, 0], vx[v, 1], grow)
             for c in range(4):
                 a, b, d = CHILD_VERTS[c]
                 pts = no_points
@@ -225,6 +245,7 @@ def _bake_one(sat, flags, mixed, values, bounds, period_x, period_y, tri, level,
             st_k[top] = 4 * k + c
             (st_v[top, 0], st_v[top, 1]), (st_v[top, 2], st_v[top, 3]), (st_v[top, 4], st_v[top, 5]) = child(
                 c, (i0, j0), (i1, j1), (i2, j2), (m01i, m01j), (m12i, m12j), (m02i, m02j))
+            st_f[top, 0], st_f[top, 1], st_f[top, 2] = child(c, f0, f1, f2, no_points, no_points, no_points)
             top += 1
     return empty
 
@@ -241,6 +262,7 @@ def _bake_all(sat, grid, tris, levels, starts, w, h, offset, grow, out):
         st_l = np.empty(STACK, dtype=np.int64)
         st_k = np.empty(STACK, dtype=np.int64)
         st_v = np.empty((STACK, 6), dtype=np.int64)
+        st_f = np.empty((STACK, 3), dtype=np.int64)
         vx = np.empty((6, 2))
         vf = np.empty(6, dtype=np.int64)
         tri = np.empty((3, 2))
@@ -252,7 +274,7 @@ def _bake_all(sat, grid, tris, levels, starts, w, h, offset, grow, out):
                 tri[v, 0] = tris[t, v, 0]
                 tri[v, 1] = tris[t, v, 1]
             empty[t] = _bake_one(sat, flags, mixed, values, bounds, period_x, period_y, tri, levels[t], w, h, offset,
-                                 grow, out, starts[t], st_l, st_k, st_v, vx, vf, ptri, buf_a, buf_b)
+                                 grow, out, starts[t], st_l, st_k, st_v, st_f, vx, vf, ptri, buf_a, buf_b)
     return empty
 
 
