@@ -26,7 +26,9 @@ are computed once; a grown leaf then reads its own box from the table before its
 kernels and ``bilinear``'s cell kernels run without numba's reference counting (they allocate
 nothing; the atomic counts of their array arguments took about a tenth of the bake).
 
-Triangles run in parallel (numba ``prange``); ``numba.set_num_threads`` picks the thread count.
+Triangles run in parallel (numba ``prange``), in ``locality_order`` (neighbours in the texture one
+after another, so the grid's cells stay in the caches); ``numba.set_num_threads`` picks the thread
+count.
 
 Example::
 
@@ -42,6 +44,8 @@ Example::
 
 from __future__ import annotations
 
+import math
+
 import numba
 import numpy as np
 from numba import njit, prange
@@ -54,7 +58,7 @@ from ..raster import rows_flag
 from ..sampling import FootprintGrid
 
 __all__ = ["bake_micromaps", "bake_micromap_rows", "dynamic_levels", "micro_starts", "check_level",
-           "check_uv_triangles", "flag_table", "GROW_TEXEL", "MAX_LEVEL"]
+           "check_uv_triangles", "flag_table", "locality_order", "GROW_TEXEL", "MAX_LEVEL"]
 
 # Growth of every region of real geometry, in texels: a hit's region (from barycentrics) and its
 # texel (from interpolated UVs) are two floating-point computations of one point, so a hit on a
@@ -251,10 +255,64 @@ def _bake_one(sat, flags, mixed, values, bounds, period_x, period_y, tri, level,
 
 
 CHUNK = 64  # triangles per parallel work item (one node stack each)
+TILE = 16  # texels per side of the tiles of ``locality_order``
+MAX_TILES = 1024  # tiles per axis at most (larger textures: larger tiles)
+
+
+@njit(cache=True, inline="always")
+def _spread_bits(v):
+    """The bits of v (< 2**16) spread to the even bit positions (a Morton code's half)."""
+    v = (v | (v << 8)) & 0x00FF00FF
+    v = (v | (v << 4)) & 0x0F0F0F0F
+    v = (v | (v << 2)) & 0x33333333
+    return (v | (v << 1)) & 0x55555555
+
+
+@njit(cache=True, inline="always")
+def _tile(c, n):
+    """Tile index in [0, n) of coordinate c (in tiles; any finite value, wrapped)."""
+    q = math.floor(c)
+    q -= math.floor(q / n) * n
+    return min(max(int(q), 0), n - 1)
+
+
+@njit(cache=True)
+def _locality_order(tris, sx, sy, n_tiles):
+    n = tris.shape[0]
+    keys = np.empty(n, dtype=np.int64)
+    for t in range(n):
+        cx = (tris[t, 0, 0] + tris[t, 1, 0] + tris[t, 2, 0]) * sx
+        cy = (tris[t, 0, 1] + tris[t, 1, 1] + tris[t, 2, 1]) * sy
+        keys[t] = _spread_bits(_tile(cx, n_tiles)) | (_spread_bits(_tile(cy, n_tiles)) << 1)
+    first = np.zeros(n_tiles * n_tiles + 1, dtype=np.int64)  # a counting sort: stable, O(n)
+    for t in range(n):
+        first[keys[t] + 1] += 1
+    for k in range(n_tiles * n_tiles):
+        first[k + 1] += first[k]
+    order = np.empty(n, dtype=np.int64)
+    for t in range(n):
+        order[first[keys[t]]] = t
+        first[keys[t]] += 1
+    return order
+
+
+def locality_order(tris_uv: np.ndarray, width: int, height: int) -> np.ndarray:
+    """An order of UV triangles (T, 3, 2) in which the bakers visit them: by the tile of about
+    TILE x TILE texels holding each one's centroid, the tiles along a Morton curve (input order
+    within a tile). Triangles near one another read the same cells of the grid, its table and
+    the texture, which then stay in the processor's caches (a random order over a large texture
+    misses them at almost every triangle). Every triangle is baked on its own, so the states do
+    not depend on the order."""
+    n_tiles = 1
+    while n_tiles < MAX_TILES and n_tiles * TILE < max(width, height):
+        n_tiles *= 2
+    tile = max(width, height) / n_tiles  # texels per tile side
+    t = np.ascontiguousarray(tris_uv, dtype=np.float64).reshape(-1, 3, 2)
+    return _locality_order(t, width / (3.0 * tile), height / (3.0 * tile), n_tiles)
 
 
 @njit(cache=True, parallel=True)
-def _bake_all(sat, grid, tris, levels, starts, w, h, offset, grow, out):
+def _bake_all(sat, grid, tris, order, levels, starts, w, h, offset, grow, out):
     flags, mixed, values, bounds, period_x, period_y = grid
     empty = np.zeros(tris.shape[0], dtype=np.int64)
     n_chunks = (tris.shape[0] + CHUNK - 1) // CHUNK
@@ -269,7 +327,8 @@ def _bake_all(sat, grid, tris, levels, starts, w, h, offset, grow, out):
         ptri = np.empty((3, 2))
         buf_a = np.empty((POLY_MAX, 2))
         buf_b = np.empty((POLY_MAX, 2))
-        for t in range(c * CHUNK, min((c + 1) * CHUNK, tris.shape[0])):
+        for i in range(c * CHUNK, min((c + 1) * CHUNK, tris.shape[0])):
+            t = order[i]
             for v in range(3):
                 tri[v, 0] = tris[t, v, 0]
                 tri[v, 1] = tris[t, v, 1]
@@ -305,8 +364,8 @@ def bake_micromaps(grid: FootprintGrid, tris_uv, levels, grow: float = 0.0,
     if len(t):
         sat = flag_table(grid) if sat is None else sat
         with numba.parallel_chunksize(1):  # hand out chunks dynamically: threads may be slowed unevenly
-            empty = _bake_all(sat, grid.kernel_args(), t, lv, starts, float(grid.width),
-                              float(grid.height), float(grid.offset), float(grow), out)
+            empty = _bake_all(sat, grid.kernel_args(), t, locality_order(t, grid.width, grid.height), lv, starts,
+                              float(grid.width), float(grid.height), float(grid.offset), float(grow), out)
         if empty.any():
             bad = int(np.flatnonzero(empty)[0])
             raise InputError(f"UV triangle {bad} has micro-triangles with no area")
