@@ -470,6 +470,11 @@ def _close(thing) -> None:
 # a local worker computes on one core: its numba kernels use one thread (else each worker's parallel
 # kernels would take every core, and two workers oversubscribe them)
 WORKER_ENV = {"NUMBA_NUM_THREADS": "1", "OMP_NUM_THREADS": "1"}
+# the local cluster's Dask settings: workers may start processes (not daemons); no statistical
+# profiler (it samples every thread every 10 ms) and no GIL monitor (every 1 ms) in the workers:
+# on a loaded machine they cost a tenth of a core or more, and nobody reads them here
+LOCAL_CONFIG = {"distributed.worker.daemon": False, "distributed.worker.profile.enabled": False,
+                "distributed.admin.system-monitor.gil.enabled": False}
 
 
 @contextlib.contextmanager
@@ -500,7 +505,7 @@ def dask_client(scheduler: str):
         stack.callback(runner.stop)
         if scheduler == "local":
             n = max(1, os.cpu_count() or 1)
-            with dask.config.set({"distributed.worker.daemon": False}):
+            with dask.config.set(LOCAL_CONFIG):
                 cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=":0",
                                        silence_logs=logging.CRITICAL, loop=runner.loop, env=WORKER_ENV)
             stack.callback(_close, cluster)
