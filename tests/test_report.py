@@ -187,3 +187,40 @@ def test_palm_page_in_chromium(palm):
     assert all(u.startswith(("file://", "data:")) for u in requests), requests
     for n in ("tri3", "vq4"):
         assert counts[n]["C"] > 1000 and counts[n]["T"] > 1000, (n, counts[n])
+
+
+
+def test_a_profile_still_being_written_is_removed(tmp_path, monkeypatch):
+    """A browser's helper processes may still write into its profile folder as they stop: removing
+    it then raised "Directory not empty" (seen under load). ``remove_tree`` tries again, and a
+    folder that stays busy past its patience is left behind without an error."""
+    import errno
+    import shutil
+
+    from omaps.report import browser
+
+    profile = tmp_path / "profile"
+    (profile / "Default").mkdir(parents=True)
+    real, calls = shutil.rmtree, []
+
+    def busy_twice(path, ignore_errors=False):
+        calls.append(ignore_errors)
+        if len(calls) <= 2 and not ignore_errors:
+            raise OSError(errno.ENOTEMPTY, "Directory not empty", "Default")
+        real(path, ignore_errors=ignore_errors)
+
+    monkeypatch.setattr(browser.shutil, "rmtree", busy_twice)
+    browser.remove_tree(profile)
+    assert not profile.exists() and calls == [False, False, False]
+
+    (profile / "Default").mkdir(parents=True)
+    calls.clear()
+
+    def always_busy(path, ignore_errors=False):
+        calls.append(ignore_errors)
+        if not ignore_errors:
+            raise OSError(errno.ENOTEMPTY, "Directory not empty", "Default")
+
+    monkeypatch.setattr(browser.shutil, "rmtree", always_busy)
+    browser.remove_tree(profile, patience=0.3)  # never raises
+    assert calls[-1] is True and calls.count(False) >= 2

@@ -19,6 +19,7 @@ import json
 import os
 import pathlib
 import shutil
+import signal
 import subprocess
 import tempfile
 import time
@@ -152,7 +153,8 @@ class Page:
 def open_page(chromium: str, path, width: int = 1280, height: int = 1000, flags=()):
     """A ``Page`` with the file ``path`` opened (file:// URL) in headless ``chromium``."""
     url = pathlib.Path(path).resolve().as_uri()
-    with tempfile.TemporaryDirectory(prefix="omaps-chromium-") as profile:
+    profile = tempfile.mkdtemp(prefix="omaps-chromium-")
+    try:
         to_child_r, to_child_w = os.pipe()
         from_child_r, from_child_w = os.pipe()
 
@@ -167,7 +169,8 @@ def open_page(chromium: str, path, width: int = 1280, height: int = 1000, flags=
         proc = subprocess.Popen([chromium, *CHROMIUM_FLAGS, f"--user-data-dir={profile}",
                                  f"--window-size={width},{height}", *flags, "about:blank"],
                                 stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
-                                preexec_fn=fds, close_fds=False)  # (fds 3 and 4 stay open; the rest are close-on-exec)
+                                preexec_fn=fds, close_fds=False,  # (fds 3 and 4 stay open; the rest are close-on-exec)
+                                process_group=0)  # the browser's helper processes with it: stopped together
         os.close(to_child_r)
         os.close(from_child_w)
         w = os.fdopen(to_child_w, "wb")
@@ -179,10 +182,36 @@ def open_page(chromium: str, path, width: int = 1280, height: int = 1000, flags=
         finally:
             with contextlib.suppress(Exception):
                 w.close()
-            proc.terminate()
+            _signal_group(proc.pid, signal.SIGTERM)
             try:
                 proc.wait(10)
             except subprocess.TimeoutExpired:
-                proc.kill()
-                proc.wait()
+                pass
+            _signal_group(proc.pid, signal.SIGKILL)  # helper processes that outlived the browser
+            proc.wait()
             r.close()
+    finally:
+        remove_tree(profile)
+
+
+def _signal_group(pgid: int, sig) -> None:
+    with contextlib.suppress(ProcessLookupError, PermissionError):
+        os.killpg(pgid, sig)
+
+
+def remove_tree(path, patience: float = 10.0) -> None:
+    """Remove a folder that processes may still be writing into as they stop (a browser's profile:
+    its helper processes flush files after the browser exits), trying again for ``patience``
+    seconds; what is left after that stays (a temporary folder is not worth failing for)."""
+    end = time.monotonic() + patience
+    while True:
+        try:
+            shutil.rmtree(path)
+            return
+        except FileNotFoundError:
+            return
+        except OSError:
+            if time.monotonic() > end:
+                shutil.rmtree(path, ignore_errors=True)
+                return
+            time.sleep(0.1)
