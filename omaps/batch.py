@@ -358,7 +358,7 @@ def run_one(command: str, options: dict, path: str, name: str, outdir: str, fp: 
 # scheduling
 
 DEFAULT_PORT = 8786  # a Dask scheduler's port when the address names none
-CONNECT_SECONDS = 3  # an unreachable scheduler: the error within this (a refused connection: at once)
+CONNECT_SECONDS = 2  # an unreachable scheduler: the error within this (a refused connection: at once)
 HANDSHAKE_BYTES = 16  # a Dask scheduler speaks first: its handshake's length and frame count (8 bytes each)
 
 
