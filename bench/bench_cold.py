@@ -1,18 +1,17 @@
-"""First use: a command's time with an empty numba cache against the same command warm, in one run.
+"""First use: the README's first command and a trace with an empty numba cache, against warm, in one run.
 
     python bench/bench_cold.py [SCENE] [--skip-install]
 
-Runs ``omaps trace SCENE --schemes none,vq4 --size 128 --quiet`` (default SCENE: palm.glb from
-../shared) as a process:
+1. The README's first command, ``omaps eval`` (the embedded corpus), with an empty private numba
+   cache (NUMBA_CACHE_DIR; the shared cache is never touched), as a user sees it (OMAPS_PROGRESS=1):
+   its time, and the longest gap between two outputs on its stdout or stderr (progress bars and
+   the compile's status lines count), then the same command warm;
+2. ``omaps trace SCENE --schemes none,vq4 --size 128 --quiet`` (default SCENE: palm.glb from
+   ../shared) with another empty cache, then warm;
+3. with ``--skip-install`` only step 2.
 
-1. cold: with an empty private numba cache (NUMBA_CACHE_DIR; the shared cache is never touched);
-2. warm: again, with the cache step 1 filled;
-3. after install: with another empty cache, first the README's first command's ``omaps eval``
-   (the embedded corpus, which compiles every command's kernels ahead, beside the evaluation),
-   then the trace command: what a user's first real command costs after the README's two commands.
-
-Prints each time and the ratios to the warm time. Timings depend on the machine's load: the
-ratios are measured side by side in one run.
+Prints each time and the ratios to the warm time. Timings depend on the machine's load (the
+1-minute load average before and after is printed): the ratios are measured side by side in one run.
 """
 
 from __future__ import annotations
@@ -29,14 +28,35 @@ ROOT = Path(__file__).resolve().parents[1]
 PALM = ROOT.parent / "shared" / "data" / "scenes" / "palm.glb"
 
 
-def run(argv, cache: str) -> float:
-    env = dict(os.environ, NUMBA_CACHE_DIR=cache, OMAPS_PROGRESS="0")
+def run(argv, cache: str, progress: bool = False) -> tuple[float, float]:
+    """Run a command with the numba cache ``cache``: its time, and the longest gap between two
+    outputs (stdout or stderr, a progress bar's redraw included) from its start to its end."""
+    import selectors
+
+    env = dict(os.environ, NUMBA_CACHE_DIR=cache, OMAPS_PROGRESS="1" if progress else "0")
     t0 = time.perf_counter()
-    r = subprocess.run(argv, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
-    dt = time.perf_counter() - t0
-    if r.returncode != 0:
-        sys.exit(f"bench_cold: {' '.join(map(str, argv))} exited {r.returncode}:\n{r.stderr}")
-    return dt
+    p = subprocess.Popen(argv, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    sel = selectors.DefaultSelector()
+    sel.register(p.stdout, selectors.EVENT_READ)
+    sel.register(p.stderr, selectors.EVENT_READ)
+    last, gap, err, open_ = t0, 0.0, b"", 2
+    while open_:
+        for key, _ in sel.select():
+            chunk = os.read(key.fileobj.fileno(), 65536)
+            now = time.perf_counter()
+            if not chunk:
+                sel.unregister(key.fileobj)
+                open_ -= 1
+                continue
+            gap, last = max(gap, now - last), now
+            if key.fileobj is p.stderr:
+                err += chunk
+    p.wait()
+    end = time.perf_counter()
+    gap = max(gap, end - last)
+    if p.returncode != 0:
+        sys.exit(f"bench_cold: {' '.join(map(str, argv))} exited {p.returncode}:\n{err.decode(errors='replace')}")
+    return end - t0, gap
 
 
 def main() -> int:
@@ -49,20 +69,22 @@ def main() -> int:
         return 0
     omaps = [sys.executable, "-m", "omaps"]
     cmd = omaps + ["trace", a.scene, "--schemes", "none,vq4", "--size", "128", "--quiet"]
-    print(f"omaps {' '.join(cmd[3:])}, {os.cpu_count()} cores")
+    print(f"{os.cpu_count()} cores, load {os.getloadavg()[0]:.1f}")
     with tempfile.TemporaryDirectory(prefix="omaps-cold-") as tmp:
-        cold = run(cmd, f"{tmp}/a")
-        warm = run(cmd, f"{tmp}/a")
+        if not a.skip_install:
+            first, gap = run(omaps + ["eval"], f"{tmp}/b", progress=True)
+            again, _ = run(omaps + ["eval"], f"{tmp}/b", progress=True)
+            print("omaps eval (the README's first command)")
+            print(f"  empty cache                  {first:7.1f} s  (longest silent gap {gap:.1f} s)")
+            print(f"  warm                         {again:7.1f} s")
+            print(f"  first / warm                 {first / again:7.1f} x")
+        cold, _ = run(cmd, f"{tmp}/a")
+        warm, _ = run(cmd, f"{tmp}/a")
+        print(f"omaps {' '.join(cmd[3:])}")
         print(f"  empty cache (cold)           {cold:7.1f} s")
         print(f"  warm                         {warm:7.1f} s")
         print(f"  cold / warm                  {cold / warm:7.1f} x")
-        if not a.skip_install:
-            install = run(omaps + ["eval", "--quiet"], f"{tmp}/b")
-            first = run(cmd, f"{tmp}/b")
-            print(f"  omaps eval, empty cache      {install:7.1f} s  (the README's first command after pip: "
-                  "its evaluation and every command's kernels compiled ahead)")
-            print(f"  then this command (first)    {first:7.1f} s")
-            print(f"  first / warm                 {first / warm:7.1f} x")
+    print(f"load {os.getloadavg()[0]:.1f}")
     return 0
 
 

@@ -1,6 +1,6 @@
 """What a new user runs into on the command line: options that only apply in one texel-state mode,
 inputs and outputs of the wrong kind, misspelt options and commands, counts in messages, and the
-wait for the kernels compiled ahead by the first command."""
+wait for the kernels a first use compiles."""
 
 import json
 import os
@@ -165,7 +165,7 @@ def test_eval_counts_read_in_the_singular(tmp_path, leaf, capsys):
     assert "1 file without an image extension" in err and "1 file could not be read" in err, err
 
 
-# ---- the wait for the kernels compiled ahead ---------------------------------------------------
+# ---- the wait for the kernels compiled before a command runs ---------------------------------
 
 STUB = """
 import sys, time
@@ -211,7 +211,7 @@ class _Stamped:
         return False
 
 
-def test_waiting_for_the_compile_ahead_shows_progress(monkeypatch):
+def test_waiting_for_the_compile_shows_progress(monkeypatch):
     """Slow compile processes (stubs that sleep): while the command waits for them, a line at
     least every PROGRESS_EVERY seconds says which families are done, which still compile, and
     the time so far (on a virtual clock: no timing of this machine is asserted)."""
@@ -223,10 +223,14 @@ def test_waiting_for_the_compile_ahead_shows_progress(monkeypatch):
     monkeypatch.setattr(precompile, "_command", lambda group: [sys.executable, "-c", STUB.format(delays=delays),
                                                                 *group])
     monkeypatch.delenv("OMAPS_PRECOMPILE", raising=False)
+    monkeypatch.setenv("OMAPS_PROGRESS", "1")
+    monkeypatch.setattr(precompile, "_cores", lambda: 2)
+    monkeypatch.setattr(precompile, "families_for", lambda args: ["vq4", "synth", "wavelet", "trace", "vq2", "omm",
+                                                                  "budget"])
     err = _Stamped(clock)
     monkeypatch.setattr(sys, "stderr", err)
-    args = type("A", (), {"command": "eval", "paths": []})()
-    started = precompile.start_ahead(args)
+    args = type("A", (), {"command": "trace", "schemes": "none,vq4"})()
+    started = precompile.compile_first(args)
     assert started is not None
     assert "about" in err.lines[0][1]
     t0 = clock.t
@@ -236,26 +240,44 @@ def test_waiting_for_the_compile_ahead_shows_progress(monkeypatch):
     assert gaps.max() <= 0.4 + 0.002, (gaps, err.lines)  # PROGRESS_EVERY between lines (+ the clock's step)
     waiting = [ln for _, ln in err.lines[1:-1]]
     assert len(waiting) >= 4, err.lines
-    assert any("vq4" in ln and "done" in ln and "synth" in ln for ln in waiting), waiting
+    assert len(started.procs) == 2  # one process per core
+    assert any("done" in ln and "compiling" in ln for ln in waiting), waiting
     assert all(re.search(r"\d+ s", ln) for ln in waiting), waiting
     assert not any(re.search(r"compiling +\(", ln) for ln in waiting), waiting  # never an empty list
-    assert "compiled ahead" in err.lines[-1][1]
+    assert "kernels compiled in" in err.lines[-1][1]
 
 
-def test_compile_ahead_estimate_is_the_measured_one(monkeypatch):
-    """On the 2-core reference machine the first command's compile ahead took 110-220 s when
-    idle, 853 s at a load of 7-9: the estimate says so, and grows with the load of other work."""
+def test_compile_estimate_and_split(monkeypatch):
+    """The families are spread over the cores, longest first, so the processes take about as long;
+    the estimate is the slowest process's, from the measured factor, and grows with the load of
+    other work."""
     monkeypatch.setattr(precompile, "_cores", lambda: 2)
-    assert precompile._ahead_seconds(precompile.AHEAD) == (110, 220)
-    low, high = precompile._ahead_seconds(precompile.AHEAD, load=7.0)
-    assert low >= 350 and high >= 700
+    fam = precompile.FAMILIES
+    groups = precompile._groups(["square", "micromap", "trace", "omm"], 2)
+    assert sorted(f for g in groups for f in g) == ["micromap", "omm", "square", "trace"] and len(groups) == 2
+    per = sorted(sum(fam[f][1] for f in g) for g in groups)
+    assert per[1] - per[0] <= max(fam[f][1] for f in ["square", "micromap", "trace", "omm"])
+    assert precompile._groups(["square"], 2) == [["square"]]
+    low, high = precompile._ahead_seconds([["square"], ["micromap"]])
+    assert abs(low - fam["square"][1] * precompile.AHEAD_FACTOR) <= 5 and high >= 2 * low - 5
+    busy_low, _ = precompile._ahead_seconds([["square"], ["micromap"]], load=7.0)
+    assert busy_low >= 4 * low - 10
 
 
-def test_compile_ahead_off(monkeypatch):
+def test_compile_first_off_or_cached(monkeypatch, capsys):
+    """OMAPS_PRECOMPILE=0: nothing starts, one line announces the compile; nothing uncached:
+    nothing starts and nothing is said."""
+    monkeypatch.setenv("OMAPS_PROGRESS", "1")
+    monkeypatch.setattr(precompile, "uncached", lambda families: list(families))
+    args = type("A", (), {"command": "eval", "paths": [], "schemes": "sq16,tri3"})()
     monkeypatch.setenv("OMAPS_PRECOMPILE", "0")
-    args = type("A", (), {"command": "eval", "paths": []})()
-    assert precompile.start_ahead(args) is None
-
+    assert precompile.compile_first(args) is None
+    err = capsys.readouterr().err.splitlines()
+    assert len(err) == 1 and "compiling numba kernels for first use: square, micromap" in err[0], err
+    monkeypatch.delenv("OMAPS_PRECOMPILE")
+    monkeypatch.setattr(precompile, "uncached", lambda families: [])
+    assert precompile.compile_first(args) is None
+    assert capsys.readouterr().err == ""
 
 
 def test_status_when_every_family_is_done_but_the_processes_run_on(tmp_path):

@@ -85,15 +85,13 @@ def main(argv=None) -> int:
         from ..workers import start_resource_tracker
 
         start_resource_tracker()  # before a progress bar's lock or a worker pool starts one that prints
-        precompile.announce(args)
-        ahead = precompile.start_ahead(args)
+        ahead = precompile.compile_first(args)  # the command's uncached kernels, on every core, announced
+        precompile.finish_ahead(ahead)
+        ahead = None
         with warnings.catch_warnings():
             warnings.showwarning = show_warning
             warnings.simplefilter("always", UserWarning)
-            rc = args.func(args)
-        precompile.finish_ahead(ahead)
-        ahead = None
-        return rc
+            return args.func(args)
     except InputError as exc:
         print(f"omaps: error: {exc}", file=sys.stderr)
         return 2

@@ -1,15 +1,17 @@
 """Numba kernels before their first use: which a command needs, whether numba's on-disk cache
-holds them, the one line that announces a compile, and the ahead-of-time compile that the
-README's first command (``omaps eval`` on the embedded corpus) runs beside its evaluation.
+holds them, and their compile before the command runs -- in parallel processes, one per core,
+announced with an estimate and a line at least every ``PROGRESS_EVERY`` seconds.
 
 Kernels are compiled with ``cache=True``: once per machine (and per change of their source), then
 loaded in about a second. A *family* is the set of modules one kind of work compiles; a module
 counts as cached when numba's index of at least one of its kernels matches the module's current
 source (what numba itself checks before loading).
 
-The ahead-of-time compile runs the real commands on tiny inputs written to a temporary folder
-(``python -m omaps.cli.precompile FAMILY...``), so it compiles exactly the specialisations the
-commands use. ``python bench/bench_cold.py`` measures what it saves.
+The compile runs the real commands on tiny inputs written to a temporary folder (``python -m
+omaps.cli.precompile FAMILY...``; with no family: every one), so it compiles exactly the
+specialisations the commands use; the command then loads them from the cache, and so do its
+worker processes (which would otherwise each compile the same kernels). ``python
+bench/bench_cold.py`` measures a first use.
 """
 
 from __future__ import annotations
@@ -20,8 +22,7 @@ import os
 import sys
 import time
 
-__all__ = ["FAMILIES", "uncached", "families_for", "announce", "start_ahead", "finish_ahead", "stop_ahead",
-           "warm"]
+__all__ = ["FAMILIES", "uncached", "families_for", "compile_first", "finish_ahead", "stop_ahead", "warm"]
 
 # family: (modules whose kernels it compiles, seconds to compile them with an empty cache on one
 # core of the 2-core reference machine: numba's compile events, summed per family, of the palm
@@ -35,11 +36,6 @@ COMMAND_FAMILIES = {
     "omm": (("omaps.omm.resolve", "omaps.omm.format", "omaps.coverage"), 6),
     "budget": (("omaps.allocate", "omaps.omm.budget"), 10),
 }
-# what the README's first command compiles ahead, beside its own evaluation (which compiles
-# "square" and "micromap"): two processes, the VQ4 encoder with the two codecs built on its
-# search (synth needs the vq4 family's kernels; after vq4's warm trace, theirs compile no trace
-# kernel again)
-AHEAD = (("vq4", "synth", "wavelet"), ("trace", "vq2", "omm", "budget"))
 
 
 def _module_cached(name: str) -> bool:
@@ -122,6 +118,16 @@ def families_for(args) -> list[str]:
         out = ["micromap", "omm"] + _scheme_families(getattr(args, "source", ""))
         if getattr(args, "budget", None) is not None:
             out.append("budget")
+    elif cmd == "report":  # a scene is traced, a folder of textures evaluated
+        scene = str(getattr(args, "input", "")).lower().endswith((".gltf", ".glb"))
+        if scene:
+            from ..trace.experiment import DEFAULT_SCHEMES as TRACE_DEFAULT
+
+            out = ["trace"] + _scheme_families(args.schemes or TRACE_DEFAULT)
+        else:
+            from ..schemes import DEFAULT_SCHEMES
+
+            out = _scheme_families(args.schemes or ",".join(DEFAULT_SCHEMES))
     elif cmd == "encode":
         out = _scheme_families(args.codec)
     elif cmd == "bake":
@@ -141,17 +147,6 @@ def _seconds(families) -> int:
     return sum(fam[f][1] for f in families)
 
 
-def announce(args) -> None:
-    """One line on stderr (a terminal, or OMAPS_PROGRESS=1) when the command's kernels are not in
-    numba's cache yet."""
-    if not _wanted():
-        return
-    missing = uncached(families_for(args))
-    if missing:
-        print(f"omaps: compiling numba kernels for first use: {', '.join(missing)} (once; about "
-              f"{_seconds(missing)} s on one core)", file=sys.stderr, flush=True)
-
-
 PROGRESS_EVERY = 5.0  # seconds between the lines while a command waits for the compile ahead
 
 
@@ -162,12 +157,11 @@ def _cores() -> int:
         return max(1, os.cpu_count() or 1)
 
 
-# The compile ahead of the README's first command, measured on the 2-core reference machine: on
-# an idle machine it took 110-220 s in all (its two processes and the evaluation beside them, each
-# process also compiling kernels the others do: 142 CPU-s for vq4, synth, wavelet, 183 CPU-s for
-# trace, vq2, omm, budget, 65 CPU-s for the evaluation), and 853 s at a load of 7-9 from other work.
-# Relative to FAMILIES' figures (numba's compile events only) that is this factor:
-AHEAD_FACTOR = 1.2
+# A family's compile process against FAMILIES' figures (numba's compile events only), measured on
+# the 2-core reference machine: ``python -m omaps.cli.precompile square`` took 46 CPU-s and
+# ``micromap`` 34 CPU-s (imports, the tiny runs and the cache writes besides the compile events:
+# 4.6 and 3.8 times the figures), at a load of 13 from other work; the range's top is twice this.
+AHEAD_FACTOR = 3.5
 
 
 def _load() -> float:
@@ -179,11 +173,21 @@ def _load() -> float:
 
 
 def _ahead_seconds(groups, load: float = 0.0) -> tuple[int, int]:
-    """About how long the compile ahead takes, as a range: its slowest process's families,
-    slowed down while more processes (the ahead ones, the command's own, other work) than cores
-    share the machine; the measured runs spread over a factor of 2."""
-    low = max(_seconds(g) for g in groups) * AHEAD_FACTOR * max(1.0, (len(groups) + 1 + load) / _cores())
-    return int(round(low, -1)), int(round(2 * low, -1))
+    """About how long the compile takes, as a range: its slowest process's families, slowed down
+    while more processes (its own, other work) than cores share the machine; the measured runs
+    spread over a factor of 2."""
+    low = max(_seconds(g) for g in groups) * AHEAD_FACTOR * max(1.0, (len(groups) + load) / _cores())
+    return max(5, int(round(low / 5) * 5)), max(10, int(round(2 * low / 5) * 5))
+
+
+def _groups(families, cores: int) -> list[list[str]]:
+    """The families spread over at most ``cores`` processes, the longest first onto the process
+    with the least to do (each process then compiles for about as long)."""
+    fam = _families()
+    bins = [[] for _ in range(max(1, min(cores, len(families))))]
+    for f in sorted(families, key=lambda f: -fam[f][1]):
+        min(bins, key=lambda b: sum(fam[x][1] for x in b)).append(f)
+    return [b for b in bins if b]
 
 
 def _command(group) -> list[str]:
@@ -192,15 +196,16 @@ def _command(group) -> list[str]:
 
 
 class _Ahead:
-    """The compile-ahead processes of ``start_ahead``: per process its families, the process, and
+    """The compile processes of ``compile_first``: per process its families, the process, and
     the files its stdout (the families done, one a line) and stderr go to."""
 
-    def __init__(self, groups, estimate: tuple[int, int]):
+    def __init__(self, groups, estimate: tuple[int, int], show: bool = True):
         import subprocess  # here, not at the top: a command that starts nothing ahead skips its import
         import tempfile
 
         self.t0 = time.perf_counter()
         self.estimate = estimate
+        self.show = show
         self.procs = []
         for g in groups:
             out, err = tempfile.TemporaryFile(), tempfile.TemporaryFile()
@@ -234,7 +239,7 @@ class _Ahead:
         low, high = self.estimate
         when = (f"about {low}-{high} s in all" if elapsed <= high
                 else f"longer than the estimate of {low}-{high} s")
-        return f"omaps: waiting for the kernels compiled ahead: {'; '.join(parts)} ({elapsed:.0f} s so far, {when})"
+        return f"omaps: compiling numba kernels: {'; '.join(parts)} ({elapsed:.0f} s so far, {when})"
 
     def stop(self) -> None:
         for _, p, out, err in self.procs:
@@ -245,28 +250,34 @@ class _Ahead:
             err.close()
 
 
-def start_ahead(args):
-    """For ``omaps eval`` on the embedded corpus (the README's first command): compile the other
-    commands' uncached kernels in background processes while it evaluates. Returns what
-    ``finish_ahead`` waits for (None when everything is cached or OMAPS_PRECOMPILE=0)."""
-    if getattr(args, "command", None) != "eval" or args.paths or os.environ.get("OMAPS_PRECOMPILE") == "0":
+def compile_first(args):
+    """Before a command runs: compile its kernels that numba's cache does not hold yet, in
+    background processes (its families spread over the cores), and say so on stderr (a terminal,
+    or OMAPS_PROGRESS=1) with an estimate. Returns what ``finish_ahead`` waits for (None when
+    everything is cached). With OMAPS_PRECOMPILE=0 nothing starts: the command compiles on first
+    use, announced by one line."""
+    missing = uncached(families_for(args))
+    if not missing:
         return None
-    groups = [[f for f in group if f in uncached(group)] for group in AHEAD]
-    groups = [g for g in groups if g]
-    if not groups:
+    show = _wanted()
+    if os.environ.get("OMAPS_PRECOMPILE") == "0":
+        if show:
+            print(f"omaps: compiling numba kernels for first use: {', '.join(missing)} (once; about "
+                  f"{_seconds(missing)} s of compiling on one core)", file=sys.stderr, flush=True)
         return None
-    names = [f for g in groups for f in g]
+    groups = _groups(missing, _cores())
     load = _load()
     low, high = _ahead_seconds(groups, load)
     busy = f", the machine busy with other work (load {load + 1:.1f})" if load >= 0.5 else ""
-    print(f"omaps: compiling the numba kernels of {', '.join(names)} ahead of first use, beside this "
-          f"evaluation (once; about {low}-{high} s on {_cores()} cores{busy}; OMAPS_PRECOMPILE=0 skips it)",
-          file=sys.stderr, flush=True)
-    return _Ahead(groups, (low, high))
+    if show:
+        print(f"omaps: compiling numba kernels for first use: {', '.join(missing)} (once, then cached; about "
+              f"{low}-{high} s on {_cores()} cores{busy}; a line every {PROGRESS_EVERY:.0f} s)",
+              file=sys.stderr, flush=True)
+    return _Ahead(groups, (low, high), show)
 
 
 def finish_ahead(started) -> None:
-    """Wait for ``start_ahead``'s processes, with a line on stderr at least every
+    """Wait for ``compile_first``'s processes, with a line on stderr at least every
     ``PROGRESS_EVERY`` seconds (the families done and still compiling, the time so far); a
     failure is reported (those kernels compile on first use instead) and changes no exit code."""
     if not started:
@@ -275,23 +286,24 @@ def finish_ahead(started) -> None:
         last = None
         while any(p.poll() is None for _, p, _, _ in started.procs):
             now = time.perf_counter()
-            if last is None or now - last >= PROGRESS_EVERY:
+            if started.show and (last is None or now - last >= PROGRESS_EVERY):
                 print(started.status(), file=sys.stderr, flush=True)
                 last = now
             time.sleep(min(0.1, max(0.0, PROGRESS_EVERY - (time.perf_counter() - last))))
         for g, p, _, err in started.procs:
-            if p.returncode:
+            if p.returncode and started.show:
                 err.seek(0)
                 text = err.read().decode(errors="replace").strip().splitlines()
-                print(f"omaps: compiling {', '.join(g)} ahead failed ({(text or ['?'])[-1]}); they compile on "
-                      "first use", file=sys.stderr)
+                print(f"omaps: compiling {', '.join(g)} failed ({(text or ['?'])[-1]}); the command compiles "
+                      "what it needs itself", file=sys.stderr)
     finally:
         started.stop()
-    print(f"omaps: kernels compiled ahead in {time.perf_counter() - started.t0:.0f} s", file=sys.stderr, flush=True)
+    if started.show:
+        print(f"omaps: kernels compiled in {time.perf_counter() - started.t0:.0f} s", file=sys.stderr, flush=True)
 
 
 def stop_ahead(started) -> None:
-    """Stop ``start_ahead``'s processes (the command failed or was interrupted)."""
+    """Stop ``compile_first``'s processes (the command failed or was interrupted)."""
     if started:
         started.stop()
 
