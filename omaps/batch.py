@@ -471,10 +471,15 @@ def _close(thing) -> None:
 # kernels would take every core, and two workers oversubscribe them)
 WORKER_ENV = {"NUMBA_NUM_THREADS": "1", "OMP_NUM_THREADS": "1"}
 # the local cluster's Dask settings: workers may start processes (not daemons); no statistical
-# profiler (it samples every thread every 10 ms) and no GIL monitor (every 1 ms) in the workers:
-# on a loaded machine they cost a tenth of a core or more, and nobody reads them here
+# profiler (it samples every thread every 10 ms), GIL monitor (every 1 ms) or disk counters, and the
+# event loops' tick (every 20 ms), system monitor (500 ms) and memory monitor (100 ms) slowed: an idle
+# cluster cost a tenth of a core on a loaded 2-core machine (a fifth of a short job's CPU time), a
+# fiftieth with these; nobody reads the dashboard here
 LOCAL_CONFIG = {"distributed.worker.daemon": False, "distributed.worker.profile.enabled": False,
-                "distributed.admin.system-monitor.gil.enabled": False}
+                "distributed.admin.system-monitor.gil.enabled": False,
+                "distributed.admin.system-monitor.disk": False, "distributed.admin.tick.interval": "1s",
+                "distributed.admin.system-monitor.interval": "5s",
+                "distributed.worker.memory.monitor-interval": "1s"}
 
 
 @contextlib.contextmanager
@@ -547,7 +552,7 @@ def dask_pieces(client, window: int):
                 while todo and len(flight) < window:
                     test, *rest = todo.popleft()
                     if id(test) not in sent:
-                        sent[id(test)] = client.scatter(test, hash=False)
+                        sent[id(test)] = client.scatter(test, hash=False, broadcast=True)  # (no worker favoured)
                     flight.append(client.submit(bake_piece_task, sent[id(test)], *rest, pure=False,
                                                 key=f"omaps-piece-{os.urandom(8).hex()}"))
                 fut = flight.popleft()
