@@ -16,9 +16,11 @@ _RAW = ["pack_states", "unpack_states", "row_bytes", "read_state"]  # the one 2-
 _SUCCINCT = ["succinct_encode", "succinct_encode_many", "succinct_decode", "succinct_lookup", "succinct_bits",
              "succinct_check"]
 _CSM = ["csm_build", "csm_pack", "csm_encode", "csm_decode", "csm_lookup", "csm_bits", "csm_check"]
-__all__ = _REGISTRY + _RAW + _SUCCINCT + _CSM + ["block_state", "pair_block_state", "MAX_BLOCK_BYTES"]
+_BITS = ["get_bits", "bit_length"]  # the bit-field rule of every block (docs/FORMAT.md)
+__all__ = _REGISTRY + _RAW + _SUCCINCT + _CSM + _BITS + ["block_state", "pair_block_state", "MAX_BLOCK_BYTES"]
 
 # each name from its module on first use: the OMM format reads the raw layout alone
 __getattr__, __dir__ = exports(__name__, {**dict.fromkeys(_REGISTRY, "registry"), **dict.fromkeys(_RAW, "raw"),
                                           "block_state": "dispatch", "pair_block_state": "dispatch", "MAX_BLOCK_BYTES": "dispatch",
-                                          **dict.fromkeys(_SUCCINCT, "succinct"), **dict.fromkeys(_CSM, "csm")})
+                                          **dict.fromkeys(_SUCCINCT, "succinct"), **dict.fromkeys(_CSM, "csm"),
+                                          **dict.fromkeys(_BITS, "bits")})

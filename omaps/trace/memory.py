@@ -41,6 +41,7 @@ import numpy as np
 from numba import njit
 
 from .. import birdcurve, pair
+from ..codecs import bit_length, get_bits
 
 __all__ = ["LINE_BYTES", "TILE", "Lookups", "Layout", "record_lookups", "layouts", "touches", "measure",
            "scheme_memory", "lines_per_ray", "lru_misses"]
@@ -204,24 +205,6 @@ def layouts(sm, at) -> dict[str, Layout]:
 
 
 # ---- the walks: per lookup its dependent reads and the lines they touch ------------------------
-
-@njit(cache=True, inline="always")
-def get_bits(data, pos, n):
-    """The ``n``-bit field at bit ``pos`` (bit k: bit k mod 8 of byte k div 8), a bit at a time."""
-    v = np.int64(0)
-    for b in range(n):
-        v |= np.int64((data[(pos + b) >> 3] >> ((pos + b) & 7)) & 1) << b
-    return v
-
-
-@njit(cache=True, inline="always")
-def bit_length(n):
-    w = 0
-    while n > 0:
-        w += 1
-        n >>= 1
-    return w
-
 
 @njit(cache=True, inline="always")
 def _span(out, p, a, b):
