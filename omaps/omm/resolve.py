@@ -13,7 +13,6 @@ import numpy as np
 from numba import njit, prange
 
 from ..alpha_test import AlphaTest
-from ..bake.micromap import locality_order
 from ..coverage import TAPS, micro_corners_of, micro_hits_with, sample_levels, sample_points, texel_triangles
 from ..promotion import HASHED, hashed_threshold, hits_needed, promotion_code
 from . import format as omm_format
@@ -75,10 +74,9 @@ def _resolve_one(states3, base, end, level, two_state, mode, seed, value, thr, i
 
 
 @njit(cache=True, parallel=True)
-def _resolve(states3, starts, levels, two_state, mode, seed, value, thr, inclusive, filt, mu, mv, tris, order,
+def _resolve(states3, starts, levels, two_state, mode, seed, value, thr, inclusive, filt, mu, mv, tris,
              samples, sample_k, out, counts):
-    for i in prange(tris.shape[0]):
-        t = order[i]
+    for t in prange(tris.shape[0]):
         taps = np.empty((TAPS, TAPS))
         _resolve_one(states3, starts[t], starts[t + 1], levels[t], two_state, mode, seed, value, thr, inclusive, filt,
                      mu, mv, tris, t, samples, sample_k[t], out, counts, taps)
@@ -87,8 +85,7 @@ def _resolve(states3, starts, levels, two_state, mode, seed, value, thr, inclusi
 def resolve_counted(states3: np.ndarray, starts: np.ndarray, levels, test: AlphaTest, tris_uv, fmt: int,
                     promotion: str = "nearest", seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
     """``resolve``, and per triangle (T, 7) int64 counts: its T, O and C micro-triangles
-    (``states3``), then how many C ones became OMM state 0, 1, 2, 3. The triangles are visited in
-    ``bake.micromap.locality_order`` (the texture's texels stay in the caches)."""
+    (``states3``), then how many C ones became OMM state 0, 1, 2, 3."""
     mode = promotion_code(promotion)
     tris = texel_triangles(test, tris_uv)
     lv = np.array(np.broadcast_to(np.asarray(levels), (len(tris),)), dtype=np.int64)  # writable: one specialisation
@@ -97,8 +94,7 @@ def resolve_counted(states3: np.ndarray, starts: np.ndarray, levels, test: Alpha
     filt, mu, mv = test.codes()
     with numba.parallel_chunksize(16):  # triangles differ a lot in cost: hand them out dynamically
         _resolve(states3, np.asarray(starts, dtype=np.int64), lv, fmt == omm_format.FORMAT_2_STATE, mode, int(seed),
-                 test.value, float(test.threshold), bool(test.inclusive), filt, mu, mv, tris,
-                 locality_order(tris_uv, test.width, test.height), sample_points(),
+                 test.value, float(test.threshold), bool(test.inclusive), filt, mu, mv, tris, sample_points(),
                  sample_levels(tris, lv), out, counts)
     return out, counts
 
