@@ -296,3 +296,19 @@ def test_status_when_every_family_is_done_but_the_processes_run_on(tmp_path):
     line = ahead.status()
     assert "done vq4, synth" in line and "writing the cache" in line, line
     assert not re.search(r"compiling +\(", line), line
+
+
+def test_a_silent_compile_is_waited_for(monkeypatch, capsys):
+    """Off a terminal (no OMAPS_PROGRESS) the compile still runs first and is waited for, silently
+    (the wait loop once read the time of a line it had not printed: TypeError)."""
+    monkeypatch.setenv("OMAPS_PROGRESS", "0")
+    monkeypatch.delenv("OMAPS_PRECOMPILE", raising=False)
+    monkeypatch.setattr(precompile, "uncached", lambda families: list(families))
+    monkeypatch.setattr(precompile, "_command", lambda group: [sys.executable, "-c", STUB.format(
+        delays="square=0.3,micromap=0.2"), *group])
+    args = type("A", (), {"command": "eval", "paths": [], "schemes": "sq16,tri3"})()
+    started = precompile.compile_first(args)
+    assert started is not None
+    precompile.finish_ahead(started)
+    assert all(p.poll() is not None for _, p, _, _ in started.procs)
+    assert capsys.readouterr().err == ""

@@ -23,6 +23,10 @@ def test_families_of_commands():
     assert families_for(ns(command="trace", schemes="none,vq4")) == ["trace", "square", "vq4"]
     assert families_for(ns(command="trace", schemes="none,file:vq4,omm")) == ["trace"]
     assert families_for(ns(command="trace", schemes="budget:1MiB")) == ["trace", "square", "vq2", "vq4", "budget"]
+    assert families_for(ns(command="trace", schemes="budget:1MiB:vq4+succinct6")) == [
+        "trace", "square", "vq4", "hierarchical", "budget"]
+    assert families_for(ns(command="report", input="palm.glb", schemes="none,tri3")) == ["trace", "micromap"]
+    assert families_for(ns(command="report", input="textures", schemes=None)) == ["square", "micromap"]
     assert families_for(ns(command="omm", inputs=["a.glb"], expand=False, source="texture", budget=900)) == [
         "micromap", "omm", "budget"]
     assert families_for(ns(command="omm", inputs=["a.glb"], expand=False, source="texture")) == ["micromap", "omm"]

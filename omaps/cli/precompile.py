@@ -100,7 +100,7 @@ def _scheme_families(text) -> list[str]:
         elif s.kind == "square":
             out += list(entry(s.codec.name).families)
         elif s.kind == "budget":
-            out += [f for o in PAIR_OPTIONS[1:] for f in entry(o).families] + ["budget"]
+            out += [f for o in (s.options or PAIR_OPTIONS)[1:] for f in entry(o).families] + ["budget"]
     return out
 
 
@@ -286,8 +286,9 @@ def finish_ahead(started) -> None:
         last = None
         while any(p.poll() is None for _, p, _, _ in started.procs):
             now = time.perf_counter()
-            if started.show and (last is None or now - last >= PROGRESS_EVERY):
-                print(started.status(), file=sys.stderr, flush=True)
+            if last is None or now - last >= PROGRESS_EVERY:
+                if started.show:
+                    print(started.status(), file=sys.stderr, flush=True)
                 last = now
             time.sleep(min(0.1, max(0.0, PROGRESS_EVERY - (time.perf_counter() - last))))
         for g, p, _, err in started.procs:
