@@ -256,35 +256,11 @@ def bake_split(path: str, output: str, run=None, pieces: int = 8, **options):
     pieces run by ``run`` (``omaps.omm.split.build_split``; default: here, one after the other),
     packed and written here: the same files, byte for byte. Options that do not split (a budget,
     a square source) are an ``InputError``."""
-    from .jobs import OmmBake, omm_input_spec, omm_settings
-    from .omm import files, gltf_io
-    from .omm import format as omm_format
-    from .omm import inputs as omm_inputs
+    from .jobs import bake_omms
     from .omm.split import build_split
 
-    spec = omm_input_spec([path], options.get("rules"), options.get("channel"))
-    outputs = atomic.Outputs(inputs=[path])
-    to_gltf = gltf_io.is_gltf(output)
-    if to_gltf:
-        outputs.file(output, "-o")
-    else:
-        outputs.folder(output, "-o", omm_format.SUMMARY_FILE, (".glb", ".gltf"))
-    settings = omm_settings(**{k: v for k, v in options.items() if k in SETTINGS})
-    if options.get("weights", "area") != "area":
-        raise InputError("--weights view needs --budget, which does not split")
-    assets = {"root": options.get("root"), "allow_outside": options.get("allow_outside", False)}
-    t0 = time.perf_counter()
-    geoms, skipped, warned = omm_inputs.load_geometries(spec, None, **assets)
-    result = build_split(geoms, settings, run, pieces)
-    bake = OmmBake(result, settings, spec, output, skipped, [], time.perf_counter() - t0)
-    extra = {"input": spec, "skipped_primitives": skipped, "warnings": warned}
-    with outputs.writing():
-        if to_gltf:
-            bake.warnings = list(gltf_io.write_gltf_result(spec["path"], outputs.path(output), output, result, extra,
-                                                           **assets))
-        else:
-            files.write_into(outputs.path(output), result, extra)
-    return bake
+    return bake_omms([path], output, build_stage=lambda geoms, settings, progress=None: build_split(
+        geoms, settings, run, pieces), **options)
 
 
 def _run_call(command: str, options: dict, path: str, out: str, split=None) -> tuple[str, dict, list[str]]:

@@ -183,7 +183,7 @@ def bake_omms(inputs, output=None, *, level: int | None = None, dynamic: float |
               budget=None, weights: str = "area", size=(512, 512), format: str = "4state", promote: str = "nearest",
               seed: int = 0, special: bool = True, dedup: bool = True, source: str = "texture", encoder=None,
               effort=None, jobs: int = 1, threads: int | None = None, rules=None, channel=None,
-              progress=None, root=None, allow_outside: bool = False) -> OmmBake:
+              progress=None, root=None, allow_outside: bool = False, build_stage=None) -> OmmBake:
     """Bake standard opacity micromaps (VK_EXT_opacity_micromap / DXR 1.2) and write them.
 
     Parameters
@@ -238,6 +238,11 @@ def bake_omms(inputs, output=None, *, level: int | None = None, dynamic: float |
     -------
     OmmBake
 
+    build_stage : callable, optional
+        What bakes and packs the loaded geometries: ``(geometries, settings[, progress]) ->
+        OmmResult``, by default ``omaps.omm.build``; ``omaps batch omm --split`` passes
+        ``omaps.omm.split.build_split`` with its worker pool.
+
     Raises
     ------
     InputError
@@ -280,7 +285,8 @@ def bake_omms(inputs, output=None, *, level: int | None = None, dynamic: float |
     bar = TqdmProgress() if progress is True else (progress or None)
     with _numba_threads(threads):
         try:
-            result = build(geoms, settings, bar) if bar is not None else build(geoms, settings)
+            stage = build if build_stage is None else build_stage
+            result = stage(geoms, settings, bar) if bar is not None else stage(geoms, settings)
         finally:
             if isinstance(bar, TqdmProgress):
                 bar.close()

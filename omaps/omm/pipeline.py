@@ -284,8 +284,9 @@ class Packer:
         return self.n_records - 1
 
 
-def _chunks(levels: np.ndarray):
-    """Triangle ranges [a, b) of at most CHUNK_MICRO_TRIANGLES micro-triangles (at least one)."""
+def chunk_ranges(levels: np.ndarray):
+    """Triangle ranges [a, b) of at most CHUNK_MICRO_TRIANGLES micro-triangles (at least one):
+    the chunks ``build`` bakes, resolves and packs one after the other."""
     sizes = np.left_shift(np.int64(1), 2 * levels)
     n = len(levels)
     a = 0
@@ -419,9 +420,13 @@ def _counts_of(s3: np.ndarray, omm: np.ndarray, starts: np.ndarray) -> np.ndarra
 
 
 def build(geometries: list[Geometry], settings: OmmSettings = OmmSettings(),
-          progress: Progress | None = None) -> OmmResult:
+          progress: Progress | None = None, *, plans: list[GeometryPlan] | None = None,
+          chunks=None) -> OmmResult:
     """Bake every geometry's micromaps and pack them into the standard buffers; ``progress``:
-    told of each stage and step (``Progress``).
+    told of each stage and step (``Progress``). ``plans`` (each geometry's ``plan_geometry``) and
+    ``chunks`` (an iterator of ``resolve_counted``'s (OMM states, counts) for each chunk of each
+    plan, in order: ``chunk_ranges``) let a caller run the plan, bake and resolve stages
+    elsewhere (``omm.split``): the pack and the statistics are then this function's own.
 
     The stages, each public over arrays: plan (``plan_geometry``: levels, identical triangles
     once; with a budget, ``omm.budget.budget_levels`` first), bake (``bake_states``, or a square
@@ -449,11 +454,11 @@ def build(geometries: list[Geometry], settings: OmmSettings = OmmSettings(),
     if progress is not None:
         progress.stage("baking", len(geometries), "geometries")
     for gi, g in enumerate(geometries):
-        gp = plan_geometry(g, settings, n_map, plan[gi] if plan is not None else None)
+        gp = plans[gi] if plans is not None else plan_geometry(g, settings, n_map, plan[gi] if plan is not None else None)
         tris, levels, weight, area, unknown, inverse, merged = (gp.tris, gp.levels, gp.weight, gp.area, gp.unknown,
                                                                 gp.inverse, gp.merged)
         n_tris = gp.n_input
-        grid = g.test.grid() if gp.baked is None else None
+        grid = g.test.grid() if gp.baked is None and chunks is None else None
         sat = flag_table(grid) if n_map is None and grid is not None else None
         idx = np.empty(len(tris), dtype=np.int32)
         n_blocks = 0
@@ -466,10 +471,13 @@ def build(geometries: list[Geometry], settings: OmmSettings = OmmSettings(),
             blocks_all.append(blk)
             records_all.append(rec)
             n_blocks = len(blk)
-        for a, b in _chunks(levels):
+        for a, b in chunk_ranges(levels):
             lv = levels[a:b]
             chunk_unknown = None if unknown is None else unknown[a:b]
-            if gp.baked is not None:  # --budget: the pricing's own bake and resolve, merged rows included
+            if chunks is not None:  # baked and resolved elsewhere
+                omm, tri_counts = next(chunks)
+                starts = micro_starts(lv)
+            elif gp.baked is not None:  # --budget: the pricing's own bake and resolve, merged rows included
                 s3 = gp.baked[0][starts_all[a]:starts_all[b]]
                 omm = gp.baked[1][starts_all[a]:starts_all[b]]
                 starts = starts_all[a:b + 1] - starts_all[a]
@@ -482,7 +490,7 @@ def build(geometries: list[Geometry], settings: OmmSettings = OmmSettings(),
                 if chunk_unknown is not None:
                     for i in np.flatnonzero(chunk_unknown):
                         s3[starts[i]:starts[i + 1]] = states.C
-            if gp.baked is None:
+            if gp.baked is None and chunks is None:
                 mine = [t for t in merged if a <= t < b]  # --budget: micromaps shared by merging (their meet)
                 for t in mine:
                     s3[starts[t - a]:starts[t - a + 1]] = merged[t][0]

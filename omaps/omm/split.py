@@ -5,9 +5,9 @@ same buffers as ``build``, byte for byte.
 (``bake_states``), resolve (``resolve.resolve_counted``), pack (``Packer``). The bake and the
 resolve of a triangle depend on that triangle alone (its UVs, level, unknown flag and the
 geometry's alpha test), so they split into pieces of triangles (``Piece``) that a pool of
-workers runs in any order (``bake_piece``); the plan and the pack stay here, in order: the
-pack sees the pieces' micromaps in ``build``'s order and accumulates the statistics over
-``build``'s own chunks, so every buffer and figure (floating-point sums included) is the same.
+workers runs in any order (``bake_piece``); the plan stays here, and ``build`` itself packs
+the pieces' micromaps, joined into its own chunks in its order (its ``plans`` and ``chunks``), so
+every buffer and figure (floating-point sums included) is the same.
 
 What splits: the texture source at one level or ``--dynamic`` levels. What does not: a
 ``--budget`` (its levels are chosen over the whole scene at once) and a square ``--from``
@@ -33,11 +33,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .. import __version__, states
 from ..bake.micromap import flag_table
 from ..errors import InputError
-from . import format as omm_format
-from .pipeline import Geometry, OmmResult, OmmSettings, Packer, _chunks, bake_states, plan_geometry
+from .pipeline import Geometry, OmmResult, OmmSettings, bake_states, build, chunk_ranges, plan_geometry
 from .resolve import resolve_counted
 
 __all__ = ["Piece", "bake_piece", "plan_pieces", "build_split", "splittable"]
@@ -95,7 +93,7 @@ def plan_pieces(geometries: list[Geometry], settings: OmmSettings, pieces: int) 
     target = max(total // max(int(pieces), 1), MIN_PIECE_MICRO_TRIANGLES)
     out = []
     for gi, p in enumerate(plans):
-        for a, b in _chunks(p.levels):
+        for a, b in chunk_ranges(p.levels):
             sizes = np.cumsum(np.left_shift(np.int64(1), 2 * p.levels[a:b]))
             cuts = [a] + [a + int(np.searchsorted(sizes, k * target, side="right")) for k in
                           range(1, int(sizes[-1] // target) + 1)] + [b]
@@ -122,90 +120,20 @@ def build_split(geometries: list[Geometry], settings: OmmSettings = OmmSettings(
     jobs = [(geometries[p.geometry].test, p, fmt, settings.promotion, settings.seed) for p in work]
     results = (run or _serial)(jobs)
     try:
-        return _pack(geometries, settings, plans, work, results)
+        return build(geometries, settings, plans=plans, chunks=_per_chunk(plans, work, results))
     finally:
         close = getattr(results, "close", None)
         if close is not None:  # (a generator left early: its own clean-up, now)
             close()
 
 
-def _pack(geometries, settings, plans, work, results) -> OmmResult:
-    """``build``'s pack stage and statistics over the pieces' results, in ``build``'s chunks."""
-    fmt = settings.format_code
-    packer = Packer(settings)
-    index_parts, geo_info = [], []
-    counts3 = np.zeros(3, dtype=np.int64)
-    promoted = np.zeros(4, dtype=np.int64)
-    known_area = total_area = 0.0
-    micro_total = 0
-    level_hist: dict[int, int] = {}
-    bytes_no_reuse = 0
-    first = 0
+def _per_chunk(plans, work: list[Piece], results):
+    """The pieces' results joined into ``build``'s chunks, in its order."""
     k = 0  # the next piece
-    for gi, (g, gp) in enumerate(zip(geometries, plans)):
-        levels, weight, area = gp.levels, gp.weight, gp.area
-        idx = np.empty(len(gp.tris), dtype=np.int32)
-        for a, b in _chunks(levels):
+    for gi, gp in enumerate(plans):
+        for _, b in chunk_ranges(gp.levels):
             parts = []
             while k < len(work) and work[k].geometry == gi and work[k].b <= b:
                 parts.append(next(results))
                 k += 1
-            omm = np.concatenate([o for o, _ in parts])
-            tri_counts = np.concatenate([c for _, c in parts])
-            lv = levels[a:b]
-            starts = np.concatenate([[0], np.cumsum(np.left_shift(np.int64(1), 2 * lv))])
-            w = weight[a:b]
-            counts3 += (tri_counts[:, :3] * w[:, None]).sum(axis=0)
-            promoted += (tri_counts[:, 3:] * w[:, None]).sum(axis=0)
-            micro_total += int(np.sum(w << (2 * lv)))
-            per_tri_known = tri_counts[:, 0] + tri_counts[:, 1]
-            known_area += float(np.sum(area[a:b] * per_tri_known / np.left_shift(1, 2 * lv)))
-            total_area += float(np.sum(area[a:b]))
-            for lvl in np.unique(lv):
-                sel = np.flatnonzero(lv == lvl)
-                if len(sel) == len(lv):
-                    rows = omm.reshape(len(lv), -1)
-                else:
-                    rows = omm[starts[sel][:, None] + np.arange(1 << (2 * int(lvl)))]
-                idx[a + sel] = packer.add(rows, int(lvl), weights=w[sel])
-                bytes_no_reuse += int(w[sel].sum()) * omm_format.micromap_bytes(int(lvl), fmt)
-                level_hist[int(lvl)] = level_hist.get(int(lvl), 0) + int(w[sel].sum())
-        index_parts.append(idx if gp.inverse is None else idx[gp.inverse])
-        geo_info.append({"name": g.name, "first_triangle": first, "triangles": gp.n_input, "texture": g.test.name,
-                         "width": g.test.width, "height": g.test.height, "filter": g.test.filter,
-                         "wrap_u": g.test.wrap_u, "wrap_v": g.test.wrap_v, "threshold": g.test.threshold,
-                         "inclusive": g.test.inclusive, "state_rule": g.test.rule, **g.info})
-        first += gp.n_input
-    index = np.concatenate(index_parts) if index_parts else np.zeros(0, dtype=np.int32)
-    triangles = packer.record_array()
-    data = packer.data()
-    usage = omm_format.usage_histograms(triangles["level"], triangles["format"], index)
-    special = {str(int(v)): int(np.count_nonzero(index == v)) for v in omm_format.SPECIAL_INDEX}
-    summary = {
-        "omaps": __version__,
-        "format": settings.format, "format_code": fmt,
-        "settings": {"source": settings.source, "level": None if settings.dynamic_scale else settings.level,
-                     "dynamic_scale": settings.dynamic_scale, "max_level": settings.max_level,
-                     "promotion": settings.promotion, "special": settings.special, "dedup": settings.dedup,
-                     "seed": settings.seed, "encoder": settings.encoder, "effort": settings.effort,
-                     "budget": settings.budget},
-        "geometries": geo_info,
-        "statistics": {
-            "triangles": int(len(index)), "micro_triangles": int(micro_total),
-            "levels": {str(k): v for k, v in sorted(level_hist.items())},
-            "transparent": int(counts3[states.T]), "opaque": int(counts3[states.O]),
-            "unknown": int(counts3[states.C]),
-            "known_fraction": float((counts3[0] + counts3[1]) / micro_total) if micro_total else 0.0,
-            "known_area_fraction": known_area / total_area if total_area > 0 else 0.0,
-            "unknown_resolved": {"transparent": int(promoted[0]), "opaque": int(promoted[1]),
-                                 "unknown_transparent": int(promoted[2]), "unknown_opaque": int(promoted[3])},
-            "special_indices": special,
-            "micromaps_without_reuse": int(len(index)),
-            "micromaps_after_special_indices": int(packer.needing),
-            "micromaps": int(len(triangles)),
-            "data_bytes": int(len(data)), "data_bytes_without_reuse": int(bytes_no_reuse),
-            "data_and_record_bytes": int(len(data) + triangles.nbytes),
-            "bytes": int(len(data) + triangles.nbytes + index.nbytes),
-        },
-    }
-    return OmmResult(data, triangles, index, usage, summary)
+            yield np.concatenate([o for o, _ in parts]), np.concatenate([c for _, c in parts])
