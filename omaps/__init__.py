@@ -22,6 +22,14 @@ Example::
 
 __version__ = "0.1.0"
 
+import os as _os
+
+# numba's OpenMP threads wait for work asleep, not spinning: spinning, each took its share of a
+# core between parallel loops (a serial batch used 2-3x the CPU-seconds of one thread on a busy
+# 2-core machine). Read when the OpenMP runtime starts, with the first parallel kernel; a value
+# the caller set stays.
+_os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
+
 # the public names, imported on first use (PEP 562): ``import omaps`` (and so parsing a command
 # line, ``omaps omm --help``) loads neither numpy nor numba until a name is used
 _LAZY = {
