@@ -220,8 +220,8 @@ def test_waiting_for_the_compile_shows_progress(monkeypatch):
     monkeypatch.setattr(precompile, "time", clock)
     monkeypatch.setattr(precompile, "PROGRESS_EVERY", 0.4)
     monkeypatch.setattr(precompile, "uncached", lambda families: list(families))
-    monkeypatch.setattr(precompile, "_command", lambda group: [sys.executable, "-c", STUB.format(delays=delays),
-                                                                *group])
+    monkeypatch.setattr(precompile, "_command", lambda group, evaluation=False: [
+        sys.executable, "-c", STUB.format(delays=delays), *group])
     monkeypatch.delenv("OMAPS_PRECOMPILE", raising=False)
     monkeypatch.setenv("OMAPS_PROGRESS", "1")
     monkeypatch.setattr(precompile, "_cores", lambda: 2)
@@ -229,7 +229,7 @@ def test_waiting_for_the_compile_shows_progress(monkeypatch):
                                                                   "budget"])
     err = _Stamped(clock)
     monkeypatch.setattr(sys, "stderr", err)
-    args = type("A", (), {"command": "trace", "schemes": "none,vq4"})()
+    args = type("A", (), {"command": "eval", "schemes": "vq4-synth"})()
     started = precompile.compile_first(args)
     assert started is not None
     assert "about" in err.lines[0][1]
@@ -304,7 +304,7 @@ def test_a_silent_compile_is_waited_for(monkeypatch, capsys):
     monkeypatch.setenv("OMAPS_PROGRESS", "0")
     monkeypatch.delenv("OMAPS_PRECOMPILE", raising=False)
     monkeypatch.setattr(precompile, "uncached", lambda families: list(families))
-    monkeypatch.setattr(precompile, "_command", lambda group: [sys.executable, "-c", STUB.format(
+    monkeypatch.setattr(precompile, "_command", lambda group, evaluation=False: [sys.executable, "-c", STUB.format(
         delays="square=0.3,micromap=0.2"), *group])
     args = type("A", (), {"command": "eval", "paths": [], "schemes": "sq16,tri3"})()
     started = precompile.compile_first(args)

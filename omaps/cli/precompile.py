@@ -190,16 +190,17 @@ def _groups(families, cores: int) -> list[list[str]]:
     return [b for b in bins if b]
 
 
-def _command(group) -> list[str]:
-    """The command line of one compile-ahead process (it prints each family's name when done)."""
-    return [sys.executable, "-m", "omaps.cli.precompile", *group]
+def _command(group, evaluation: bool = False) -> list[str]:
+    """The command line of one compile process (it prints each family's name when done);
+    ``evaluation``: only the kernels ``omaps eval`` runs (``warm``'s ``evaluation_only``)."""
+    return [sys.executable, "-m", "omaps.cli.precompile", *(["--eval"] if evaluation else []), *group]
 
 
 class _Ahead:
     """The compile processes of ``compile_first``: per process its families, the process, and
     the files its stdout (the families done, one a line) and stderr go to."""
 
-    def __init__(self, groups, estimate: tuple[int, int], show: bool = True):
+    def __init__(self, groups, estimate: tuple[int, int], show: bool = True, evaluation: bool = False):
         import subprocess  # here, not at the top: a command that starts nothing ahead skips its import
         import tempfile
 
@@ -209,7 +210,7 @@ class _Ahead:
         self.procs = []
         for g in groups:
             out, err = tempfile.TemporaryFile(), tempfile.TemporaryFile()
-            self.procs.append((g, subprocess.Popen(_command(g), stdin=subprocess.DEVNULL, stdout=out, stderr=err),
+            self.procs.append((g, subprocess.Popen(_command(g, evaluation), stdin=subprocess.DEVNULL, stdout=out, stderr=err),
                                out, err))
 
     def done(self) -> list[str]:
@@ -252,10 +253,11 @@ class _Ahead:
 
 def compile_first(args):
     """Before a command runs: compile its kernels that numba's cache does not hold yet, in
-    background processes (its families spread over the cores), and say so on stderr (a terminal,
-    or OMAPS_PROGRESS=1) with an estimate. Returns what ``finish_ahead`` waits for (None when
-    everything is cached). With OMAPS_PRECOMPILE=0 nothing starts: the command compiles on first
-    use, announced by one line."""
+    background processes (its families spread over the cores; for ``omaps eval`` only what an
+    evaluation runs), and say so on stderr (a terminal, or OMAPS_PROGRESS=1) with an estimate; the
+    command and its worker processes then load them instead of each compiling them. Returns what
+    ``finish_ahead`` waits for (None when everything is cached). With OMAPS_PRECOMPILE=0 nothing
+    starts: the command compiles on first use in its own process, announced by one line."""
     missing = uncached(families_for(args))
     if not missing:
         return None
@@ -273,7 +275,7 @@ def compile_first(args):
         print(f"omaps: compiling numba kernels for first use: {', '.join(missing)} (once, then cached; about "
               f"{low}-{high} s on {_cores()} cores{busy}; a line every {PROGRESS_EVERY:.0f} s)",
               file=sys.stderr, flush=True)
-    return _Ahead(groups, (low, high), show)
+    return _Ahead(groups, (low, high), show, evaluation=getattr(args, "command", None) == "eval")
 
 
 def finish_ahead(started) -> None:
@@ -351,9 +353,10 @@ def _quad_scene(folder: str) -> str:
     return path
 
 
-def warm(families, report=None) -> None:
+def warm(families, report=None, evaluation_only: bool = False) -> None:
     """Compile the families' kernels by running the library calls the commands make on tiny
-    inputs; ``report``: a stream that gets each family's name when its kernels are compiled."""
+    inputs; ``report``: a stream that gets each family's name when its kernels are compiled;
+    ``evaluation_only``: only the calls of ``omaps eval`` (a family with none compiles nothing)."""
     import tempfile
     import warnings
 
@@ -369,7 +372,11 @@ def warm(families, report=None) -> None:
         np.save(uvs, np.random.default_rng(0).random((48, 3, 2)))
 
         def ev(schemes):
-            return lambda: evaluate_corpus([leaf], schemes, jobs=1)
+            def run():
+                evaluate_corpus([leaf], schemes, jobs=1)
+
+            run.evaluation = True  # what omaps eval compiles (warm's evaluation_only)
+            return run
 
         def tr(schemes, path=scene, **kw):
             return lambda: trace_scene(path, schemes, size=16, camera="0.5,0.5,2:0.5,0.5,0:60", jobs=1, **kw)
@@ -397,7 +404,7 @@ def warm(families, report=None) -> None:
         }
         failed = []
         for f in families:  # one family failing (no Embree, say) leaves the others compiled
-            for run in runs[f]:
+            for run in [r for r in runs[f] if not evaluation_only or getattr(r, "evaluation", False)]:
                 try:
                     with warnings.catch_warnings():
                         warnings.simplefilter("ignore")
@@ -414,7 +421,9 @@ def warm(families, report=None) -> None:
 
 if __name__ == "__main__":
     known = _families()
-    unknown = [f for f in sys.argv[1:] if f not in known]
+    only_eval = "--eval" in sys.argv[1:]
+    names = [a for a in sys.argv[1:] if a != "--eval"]
+    unknown = [f for f in names if f not in known]
     if unknown:
         sys.exit(f"unknown families: {', '.join(unknown)} (known: {', '.join(known)})")
-    warm(sys.argv[1:] or list(known), report=sys.stdout)
+    warm(names or list(known), report=sys.stdout, evaluation_only=only_eval)
