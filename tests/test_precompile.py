@@ -41,6 +41,18 @@ def test_families_of_commands():
     assert all(f in FAMILIES for f in ["square", "micromap", "trace", "vq2", "vq4", "omm", "budget", "synth", "wavelet"])
 
 
+def test_a_texture_bake_imports_no_codec_before_it_runs():
+    """Finding an ``omm`` bake's families from the texture loads no codec or budget module (their
+    imports took about half a second of every bake's start)."""
+    code = ("import sys; from omaps.cli.main import parser; from omaps.cli import precompile; "
+            "a = parser('omm').parse_args(['omm', 'leaf.png', 'uv.npy', '-o', 'out', '--level', '4']); "
+            "precompile.uncached(precompile.families_for(a)); "
+            "print(sorted(m for m in sys.modules if m.startswith(('omaps.codecs.vq', 'omaps.codecs.wavelet', "
+            "'omaps.budget', 'omaps.allocate', 'omaps.bake.square'))))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
+    assert out.strip() == "[]"
+
+
 @pytest.mark.long
 def test_empty_cache_is_announced_once_and_compiled_kernels_are_found(tmp_path):
     """With an empty private cache every family is uncached; a command announces its compile

@@ -84,7 +84,6 @@ def _scheme_families(text) -> list[str]:
     """The families that baking and encoding these comma-separated schemes compiles: a micromap
     level's, each codec's own (its registry entry), a budget's options' and its allocator's. A name
     that is no scheme compiles nothing here (the command reports it)."""
-    from ..budget import PAIR_OPTIONS
     from ..codecs.registry import entry
     from ..errors import InputError
     from ..schemes import get_scheme
@@ -100,6 +99,8 @@ def _scheme_families(text) -> list[str]:
         elif s.kind == "square":
             out += list(entry(s.codec.name).families)
         elif s.kind == "budget":
+            from ..budget import PAIR_OPTIONS
+
             out += [f for o in (s.options or PAIR_OPTIONS)[1:] for f in entry(o).families] + ["budget"]
     return out
 
@@ -115,7 +116,8 @@ def families_for(args) -> list[str]:
     elif cmd == "omm" and getattr(args, "verify", None):
         out = ["omm"]
     elif cmd == "omm" and getattr(args, "inputs", None) and not getattr(args, "expand", False):
-        out = ["micromap", "omm"] + _scheme_families(getattr(args, "source", ""))
+        source = getattr(args, "source", None) or "texture"
+        out = ["micromap", "omm"] + (_scheme_families(source) if source != "texture" else [])
         if getattr(args, "budget", None) is not None:
             out.append("budget")
     elif cmd == "report":  # a scene is traced, a folder of textures evaluated
