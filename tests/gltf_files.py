@@ -100,3 +100,16 @@ def edit_json(path, fn):
     with open(path, "w") as f:
         json.dump(doc, f)
     return str(path)
+
+
+def grid_scene(path, alpha, k=24, seed=0):
+    """A k x k grid of vertices in the z = 0 plane, 2 (k-1)^2 triangles, with UVs scattered at
+    random over [-0.1, 1.1]² (seeded) on the texture ``alpha``: many distinct small triangles."""
+    rng = np.random.default_rng(seed)
+    x, y = np.meshgrid(np.arange(k, dtype=np.float32), np.arange(k, dtype=np.float32))
+    pos = np.stack([x.ravel(), y.ravel(), np.zeros(k * k, np.float32)], axis=1)
+    uv = (rng.random((k * k, 2)) * 1.2 - 0.1).astype(np.float32)
+    v = np.arange(k * k).reshape(k, k)
+    a, b, c, d = v[:-1, :-1].ravel(), v[:-1, 1:].ravel(), v[1:, :-1].ravel(), v[1:, 1:].ravel()
+    idx = np.stack([np.stack([a, b, c], 1), np.stack([b, d, c], 1)], 1).reshape(-1)
+    return write_quad_gltf(str(path), alpha, positions=pos, uvs=uv, indices=idx)

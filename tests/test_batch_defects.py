@@ -17,6 +17,7 @@ import numpy as np
 import pytest
 
 from gltf_files import write_quad_gltf
+from interrupts import check_interrupted, children
 from omaps import batch as engine
 from omaps.cli.main import main
 from omaps.errors import InputError
@@ -233,15 +234,6 @@ def test_a_scheduler_address_that_is_not_a_dask_scheduler_fails_quickly_naming_i
 
 # --- Ctrl-C during the Dask start-up -----------------------------------------------------------
 
-def _children(pid):
-    import psutil
-
-    try:
-        return psutil.Process(pid).children(recursive=True)
-    except psutil.NoSuchProcess:
-        return []
-
-
 @pytest.mark.parametrize("group, after", [(True, 0.0), (True, 1.0), (False, 0.5)])
 def test_ctrl_c_during_cluster_start_up(tmp_path, group, after):
     """SIGINT once the LocalCluster's first process exists (``after`` s later): to the whole
@@ -253,9 +245,10 @@ def test_ctrl_c_during_cluster_start_up(tmp_path, group, after):
     p = subprocess.Popen([sys.executable, "-m", "omaps", "batch", "eval", str(src), "-o", str(out),
                           "--scheduler", "local", "--schemes", "sq16"], env=env, stdout=subprocess.DEVNULL,
                          stderr=subprocess.PIPE, start_new_session=group)
-    try:
+
+    def interrupt():
         deadline = time.monotonic() + 120
-        while not _children(p.pid) and p.poll() is None and time.monotonic() < deadline:
+        while not children(p.pid) and p.poll() is None and time.monotonic() < deadline:
             time.sleep(0.01)
         assert p.poll() is None, "the batch ended before its cluster started"
         time.sleep(after)
@@ -263,15 +256,8 @@ def test_ctrl_c_during_cluster_start_up(tmp_path, group, after):
             os.killpg(p.pid, signal.SIGINT)
         else:
             p.send_signal(signal.SIGINT)
-        err = p.communicate(timeout=60)[1].decode(errors="replace")
-    finally:
-        if p.poll() is None:
-            p.kill()
-    assert p.returncode == 130, err
-    assert err == "omaps: interrupted\n", err
-    assert not os.path.exists(out / "summary.json")
-    time.sleep(0.5)
-    assert not _children(p.pid)
+
+    check_interrupted(p, out, interrupt)
 
 
 def test_a_busy_dashboard_port_is_not_a_warning(tmp_path):

@@ -13,7 +13,7 @@ import sys
 import numpy as np
 import pytest
 
-from gltf_files import write_quad_gltf
+from gltf_files import grid_scene
 from omaps import batch as engine
 from omaps.alpha_test import StateRule
 from omaps.cli.main import main
@@ -95,15 +95,7 @@ def test_bakes_that_do_not_split_say_why():
 # --- omaps batch omm --split --------------------------------------------------------------------
 
 def _grid_scene(path, k=24, seed=3):
-    """A k x k grid of quads (2 (k-1)^2 triangles) with scattered UVs over a random alpha."""
-    rng = np.random.default_rng(seed)
-    x, y = np.meshgrid(np.arange(k, dtype=np.float32), np.arange(k, dtype=np.float32))
-    pos = np.stack([x.ravel(), y.ravel(), np.zeros(k * k, np.float32)], axis=1)
-    uv = (rng.random((k * k, 2)) * 1.2 - 0.1).astype(np.float32)
-    v = np.arange(k * k).reshape(k, k)
-    a, b, c, d = v[:-1, :-1].ravel(), v[:-1, 1:].ravel(), v[1:, :-1].ravel(), v[1:, 1:].ravel()
-    idx = np.stack([np.stack([a, b, c], 1), np.stack([b, d, c], 1)], 1).reshape(-1)
-    return write_quad_gltf(path, _alpha(seed), positions=pos, uvs=uv, indices=idx)
+    return grid_scene(path, _alpha(seed), k, seed)
 
 
 def _files(folder):

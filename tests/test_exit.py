@@ -146,15 +146,6 @@ def test_a_cluster_interrupted_in_its_constructor_is_dropped_quietly():
 
 # --- Ctrl-C while a local-cluster batch runs ---------------------------------------------------
 
-def _batch_children(pid):
-    import psutil
-
-    try:
-        return psutil.Process(pid).children(recursive=True)
-    except psutil.NoSuchProcess:
-        return []
-
-
 def _wait(cond, what, p, limit=300):
     import time
 
@@ -166,17 +157,11 @@ def _wait(cond, what, p, limit=300):
 
 
 def _grid_scene(path, k=24):
-    from gltf_files import write_quad_gltf
+    from gltf_files import grid_scene
 
     rng = np.random.default_rng(0)
-    x, y = np.meshgrid(np.arange(k, dtype=np.float32), np.arange(k, dtype=np.float32))
-    pos = np.stack([x.ravel(), y.ravel(), np.zeros(k * k, np.float32)], axis=1)
-    uv = (rng.random((k * k, 2)) * 1.2 - 0.1).astype(np.float32)
-    v = np.arange(k * k).reshape(k, k)
-    a, b, c, d = v[:-1, :-1].ravel(), v[:-1, 1:].ravel(), v[1:, :-1].ravel(), v[1:, 1:].ravel()
-    idx = np.stack([np.stack([a, b, c], 1), np.stack([b, d, c], 1)], 1).reshape(-1)
-    alpha = np.kron((rng.random((16, 16)) > 0.5).astype(np.uint8) * 255, np.ones((4, 4), np.uint8))
-    return write_quad_gltf(str(path), alpha, positions=pos, uvs=uv, indices=idx)
+    return grid_scene(path, np.kron((rng.random((16, 16)) > 0.5).astype(np.uint8) * 255, np.ones((4, 4), np.uint8)),
+                      k, seed=1)
 
 
 @pytest.mark.long
@@ -187,7 +172,8 @@ def test_ctrl_c_while_a_local_cluster_batch_runs(tmp_path, phase):
     scene's pieces run on the workers and this process waits for them (``omaps batch omm
     --split``). One line, exit 130, no summary, no process left."""
     import signal
-    import time
+
+    from interrupts import check_interrupted, children
 
     out = tmp_path / "out"
     if phase == "inputs":
@@ -203,14 +189,15 @@ def test_ctrl_c_while_a_local_cluster_batch_runs(tmp_path, phase):
     env = dict(ENV, OMAPS_PROGRESS="0")
     p = subprocess.Popen([sys.executable, "-m", "omaps", "batch", *cmd, "-o", str(out), "--scheduler", "local"],
                          env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, start_new_session=True)
-    try:
+
+    def interrupt():
         if phase == "inputs":
             _wait(lambda: (out / ".batch").is_dir() and any((out / ".batch").iterdir()), "a finished input", p)
         else:  # the workers are up and busy with pieces: their CPU time grows past their start-up's
             def busy():
                 import psutil
 
-                kids = _batch_children(p.pid)
+                kids = children(p.pid)
                 try:
                     return len(kids) >= 2 and sum(c.cpu_times().user for c in kids) > 5
                 except psutil.Error:
@@ -218,12 +205,5 @@ def test_ctrl_c_while_a_local_cluster_batch_runs(tmp_path, phase):
 
             _wait(busy, "busy workers", p)
         os.killpg(p.pid, signal.SIGINT)
-        err = p.communicate(timeout=60)[1].decode(errors="replace")
-    finally:
-        if p.poll() is None:
-            p.kill()
-    assert p.returncode == 130, err
-    assert err == "omaps: interrupted\n", err
-    assert not (out / "summary.json").exists()
-    time.sleep(0.5)
-    assert not _batch_children(p.pid)
+
+    check_interrupted(p, out, interrupt)
