@@ -1,9 +1,10 @@
-"""Equal rows found fast: a 64-bit hash per row, then a byte-for-byte check of the rows that
-share a hash.
+"""Equal rows found fast: a 64-bit hash per row, an open-addressing table of the distinct rows
+(``RowIndex``), and a word-by-word check of the rows that share a hash.
 
-Maps and micromaps repeat a lot (a scene's pairs of one texture, uniform regions), and sorting
-whole rows to find the repeats (``np.unique(..., axis=0)``) compares them byte by byte: 2.1 s
-for the 6,431 64 x 64 pair maps of forest.glb. Hashing reads each row once.
+Maps and micromaps repeat a lot (a scene's pairs of one texture, uniform regions, instanced
+foliage), and sorting whole rows to find the repeats (``np.unique(..., axis=0)``) compares them
+byte by byte: 2.1 s for the 6,431 64 x 64 pair maps of forest.glb. Hashing reads each row once,
+and the table finds each row's equal in one probe or a few, with no sort.
 
 Example::
 
@@ -17,8 +18,9 @@ Example::
 from __future__ import annotations
 
 import numpy as np
+from numba import njit
 
-__all__ = ["row_hashes", "unique_rows", "first_occurrences"]
+__all__ = ["row_hashes", "unique_rows", "first_occurrences", "RowIndex"]
 
 _CHUNK_BYTES = 1 << 24  # rows hashed this many bytes at a time (bounded temporaries)
 _MIX = np.uint64(0xBF58476D1CE4E5B9)  # splitmix64's finaliser multipliers
@@ -30,16 +32,25 @@ def _keys(n: int) -> np.ndarray:
     return np.random.default_rng(0x0A3F).integers(0, 2**63, size=n, dtype=np.uint64) * np.uint64(2) + np.uint64(1)
 
 
+def _as_bytes(rows: np.ndarray) -> np.ndarray:
+    """Rows (M, ...) as a contiguous uint8 array (M, K) of their bytes."""
+    a = np.ascontiguousarray(rows)
+    return a.reshape(len(a), int(np.prod(a.shape[1:]))).view(np.uint8)
+
+
+def _words(a: np.ndarray) -> np.ndarray:
+    """uint8 rows (M, K) as little-endian 64-bit words (M, ceil(K / 8)), zero-padded."""
+    pad = -a.shape[1] % 8
+    if pad:
+        a = np.concatenate([a, np.zeros((len(a), pad), np.uint8)], axis=1)
+    return np.ascontiguousarray(a).view("<u8")
+
+
 def row_hashes(rows: np.ndarray) -> np.ndarray:
     """A 64-bit hash of each row's bytes (M, ...) -> (M,) uint64: equal rows, equal hashes (rows
     with equal hashes may still differ: callers compare them)."""
-    a = np.ascontiguousarray(rows)
-    a = a.reshape(len(a), int(np.prod(a.shape[1:]))).view(np.uint8)
-    m, k = a.shape
-    pad = -k % 8
-    if pad:
-        a = np.concatenate([a, np.zeros((m, pad), np.uint8)], axis=1)
-    words = a.view("<u8")
+    words = _words(_as_bytes(rows))
+    m = len(words)
     keys = _keys(words.shape[1])
     out = np.empty(m, dtype=np.uint64)
     step = max(1, _CHUNK_BYTES // max(1, words.shape[1] * 8))
@@ -56,6 +67,97 @@ def row_hashes(rows: np.ndarray) -> np.ndarray:
             x ^= x >> np.uint64(31)
             out[s:s + step] = x.sum(axis=1, dtype=np.uint64)  # wraps modulo 2**64
     return out
+
+
+@njit(cache=True)
+def _insert(words, hashes, table, store, n):
+    """Each row of ``words`` (M, W) looked up in the open-addressing ``table`` (S, 2): per slot
+    the id of a stored row (-1: empty) and its hash (int64 bits), S a power of two at least twice
+    the ids it will hold; the stored rows are ``store[:n]``. A row not found is stored under id
+    n, n + 1, ... Returns (ids, new n). A probe reads one slot (id and hash together); a row's
+    words are compared only when the hashes agree."""
+    m, k = words.shape
+    mask = table.shape[0] - 1
+    ids = np.empty(m, dtype=np.int64)
+    for i in range(m):
+        h = hashes[i]
+        s = h & mask
+        while True:
+            j = table[s, 0]
+            if j < 0:  # not there: a new row
+                table[s, 0] = n
+                table[s, 1] = h
+                for w in range(k):
+                    store[n, w] = words[i, w]
+                ids[i] = n
+                n += 1
+                break
+            if table[s, 1] == h:
+                same = True
+                for w in range(k):
+                    if store[j, w] != words[i, w]:
+                        same = False
+                        break
+                if same:
+                    ids[i] = j
+                    break
+            s = (s + 1) & mask
+    return ids, n
+
+
+@njit(cache=True)
+def _rehash(old, table):
+    mask = table.shape[0] - 1
+    for t in range(old.shape[0]):
+        if old[t, 0] < 0:
+            continue
+        s = old[t, 1] & mask
+        while table[s, 0] >= 0:
+            s = (s + 1) & mask
+        table[s, 0] = old[t, 0]
+        table[s, 1] = old[t, 1]
+
+
+class RowIndex:
+    """The distinct rows of one width seen so far, each with an id (0, 1, 2, ... in the order of
+    first use), found by their 64-bit hashes (``row_hashes``) in an open-addressing table and
+    confirmed word by word: equal rows get one id, different rows different ids, whatever their
+    hashes. The pack stage's reuse of identical micromaps, and ``first_occurrences``.
+
+    Example::
+
+        >>> import numpy as np
+        >>> from omaps.rows import RowIndex
+        >>> index = RowIndex(2)
+        >>> index.add(np.array([[1, 2], [0, 5], [1, 2]], np.uint8)).tolist(), index.add(np.array([[0, 5], [7, 7]], np.uint8)).tolist()
+        ([0, 1, 0], [1, 2])
+    """
+
+    def __init__(self, width: int):
+        self.width = int(width)  # bytes per row
+        self.n = 0  # distinct rows so far
+        self._store = np.empty((0, -(-self.width // 8)), np.uint64)
+        self._table = np.full((16, 2), -1, np.int64)
+
+    def add(self, rows: np.ndarray) -> np.ndarray:
+        """The id of each row (M, ...) of ``width`` bytes: an earlier equal row's, else a new one
+        (ids from ``n`` on, in the order of the rows)."""
+        a = _as_bytes(rows)
+        if a.shape[1] != self.width:
+            raise ValueError(f"rows of {a.shape[1]} bytes in an index of {self.width}-byte rows")
+        need = self.n + len(a)
+        if need > len(self._store):
+            store = np.empty((max(need, 2 * len(self._store)), self._store.shape[1]), np.uint64)
+            store[:self.n] = self._store[:self.n]
+            self._store = store
+        if 2 * need > len(self._table):
+            size = len(self._table)
+            while size < 2 * need:
+                size *= 2
+            old, self._table = self._table, np.full((size, 2), -1, np.int64)
+            _rehash(old, self._table)
+        ids, self.n = _insert(_words(a), row_hashes(a).view(np.int64), self._table, self._store, self.n)
+        return ids
 
 
 def unique_rows(rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -76,17 +178,10 @@ def unique_rows(rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 def first_occurrences(rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(first, inverse) of rows (M, ...): the index of each distinct row's first occurrence, in
     the order of first use, and each row's index among them (``rows[first][inverse]`` equals
-    ``rows``). Found by hashing, checked byte for byte."""
-    a = np.ascontiguousarray(rows)
-    flat = a.reshape(len(a), int(np.prod(a.shape[1:]))).view(np.uint8)
+    ``rows``). Found by a ``RowIndex``: hashed, confirmed word by word."""
+    flat = _as_bytes(rows)
     if len(flat) == 0:
         return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
-    _, first, inverse = np.unique(row_hashes(flat), return_index=True, return_inverse=True)
-    inverse = inverse.ravel()
-    if not all(np.array_equal(flat[s:s + 4096], flat[first[inverse[s:s + 4096]]]) for s in range(0, len(flat), 4096)):
-        _, first, inverse = np.unique(flat, axis=0, return_index=True, return_inverse=True)  # a hash collision
-        inverse = inverse.ravel()
-    order = np.argsort(first, kind="stable")
-    rank = np.empty(len(first), dtype=np.int64)
-    rank[order] = np.arange(len(first))
-    return first[order].astype(np.int64), rank[inverse]
+    ids = RowIndex(flat.shape[1]).add(flat)
+    seen = np.maximum.accumulate(np.concatenate([[-1], ids[:-1]]))  # the largest id before each row
+    return np.flatnonzero(ids > seen).astype(np.int64), ids

@@ -170,7 +170,7 @@ class OmmResult:
 
 class Packer:
     """The pack stage: collects micromaps, turning uniform ones into special indices and sharing
-    duplicates (found by a 64-bit hash of the packed rows, then compared byte for byte).
+    duplicates (``rows.RowIndex`` per level and format: hashed, then compared word by word).
 
     Preconditions of ``add``: rows of OMM states (0..3, ``omm.format``) of one level, every row
     ``4**level`` long, 2-state rows holding only 0 and 1. ``record_array`` and ``data`` give the
@@ -183,7 +183,8 @@ class Packer:
         self.records: list[np.ndarray] = []  # TRIANGLE_RECORD arrays, in order
         self.singles: list[tuple[int, int, int]] = []  # records added one by one, after those
         self.n_records = 0
-        self.stored: dict[tuple[int, int], tuple[np.ndarray, np.ndarray, np.ndarray]] = {}  # sorted hashes, rows, ids
+        # per (level, format): the distinct micromaps stored, and each one's record
+        self.stored: dict[tuple[int, int], tuple[omaps_rows.RowIndex, np.ndarray]] = {}
         self.needing = 0  # micromaps before reuse of identical ones
 
     def add(self, omm_states: np.ndarray, level: int, fmt: int | None = None, weights=None) -> np.ndarray:
@@ -205,57 +206,28 @@ class Packer:
             for r, row in zip(rows, packed):
                 idx[r] = self._new(row.tobytes(), level, fmt)
             return idx
-        hashes = omaps_rows.row_hashes(packed)
-        uniq, first, inverse = np.unique(hashes, return_index=True, return_inverse=True)
-        inverse = inverse.ravel()
-        if not np.array_equal(packed[first][inverse], packed):  # two rows share a hash: compare bytes
-            return self._add_exact(idx, rows, packed, level, fmt)
-        order = np.argsort(first)  # the distinct rows in order of first use
-        h_new, r_new = uniq[order], packed[first[order]]
-        s_h, s_rows, s_ids = self.stored.get((level, fmt), (np.zeros(0, np.uint64), packed[:0], np.zeros(0, np.int32)))
-        pos = np.minimum(np.searchsorted(s_h, h_new), max(len(s_h) - 1, 0))
-        found = (s_h[pos] == h_new) if len(s_h) else np.zeros(len(h_new), bool)
-        if not np.array_equal(s_rows[pos[found]], r_new[found]):
-            return self._add_exact(idx, rows, packed, level, fmt)
-        ids = np.empty(len(h_new), dtype=np.int32)
-        ids[found] = s_ids[pos[found]]
-        fresh = np.flatnonzero(~found)
+        index, record_of = self.stored.get((level, fmt), (None, np.zeros(0, np.int32)))
+        if index is None:
+            index = omaps_rows.RowIndex(packed.shape[1])
+        before = index.n
+        ids = index.add(packed)
+        # the first row of each micromap not stored before, in order (new ids count up from ``before``)
+        fresh = np.flatnonzero(ids > np.maximum.accumulate(np.concatenate([[before - 1], ids[:-1]])))
         nbytes = packed.shape[1]
         if len(fresh):
             if self.size + len(fresh) * nbytes > 0xFFFFFFFF:
                 raise InputError("micromap data exceeds the 4 GiB a 32-bit data offset can address; lower the level")
-            ids[fresh] = self.n_records + np.arange(len(fresh))
             rec = np.empty(len(fresh), dtype=omm_format.TRIANGLE_RECORD)
             rec["data_offset"] = self.size + nbytes * np.arange(len(fresh), dtype=np.int64)
             rec["level"], rec["format"] = level, fmt
             self._flush_singles()  # (they came first)
             self.records.append(rec)
+            record_of = np.concatenate([record_of, self.n_records + np.arange(len(fresh), dtype=np.int32)])
             self.n_records += len(fresh)
-            self.chunks.append(r_new[fresh].tobytes())
+            self.chunks.append(packed[fresh].tobytes())
             self.size += len(fresh) * nbytes
-            h_all = np.concatenate([s_h, h_new[fresh]])
-            keep = np.argsort(h_all, kind="stable")
-            self.stored[(level, fmt)] = (h_all[keep], np.concatenate([s_rows, r_new[fresh]])[keep],
-                                         np.concatenate([s_ids, ids[fresh]])[keep])
-        per_unique = np.empty(len(first), dtype=np.int32)
-        per_unique[order] = ids
-        idx[rows] = per_unique[inverse]
-        return idx
-
-    def _add_exact(self, idx, rows, packed, level, fmt) -> np.ndarray:
-        """``add``'s reuse by the rows' bytes (when 64-bit hashes collide)."""
-        s_h, s_rows, s_ids = self.stored.pop((level, fmt), (np.zeros(0, np.uint64), packed[:0], np.zeros(0, np.int32)))
-        seen = {r.tobytes(): int(i) for r, i in zip(s_rows, s_ids)}
-        for r, row in zip(rows, packed):
-            key = row.tobytes()
-            if key not in seen:
-                seen[key] = self._new(key, level, fmt)
-            idx[r] = seen[key]
-        ids = np.fromiter(seen.values(), np.int32, len(seen))
-        stored = np.array([np.frombuffer(k, np.uint8) for k in seen], dtype=np.uint8).reshape(len(seen), -1)
-        h = omaps_rows.row_hashes(stored)
-        keep = np.argsort(h, kind="stable")
-        self.stored[(level, fmt)] = (h[keep], stored[keep], ids[keep])
+        self.stored[(level, fmt)] = (index, record_of)
+        idx[rows] = record_of[ids]
         return idx
 
     def _flush_singles(self) -> None:
