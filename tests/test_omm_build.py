@@ -399,3 +399,15 @@ def test_repeated_triangles_are_baked_once_with_the_same_result(seed, fmt, dynam
     a, b = got.summary["statistics"], want.summary["statistics"]
     assert a.pop("known_area_fraction") == pytest.approx(b.pop("known_area_fraction"), rel=1e-12)
     assert a == b and got.usage == want.usage
+
+
+@settings(max_examples=100, deadline=None)
+@given(st.integers(0, 30), st.integers(1, 300), st.integers(0, 3), st.data())
+def test_uniform_rows_are_the_rows_of_one_state(n, k, state, data):
+    """``format.uniform_rows`` (special indices) against numpy: a row is uniform iff every entry
+    equals its first; rows with one entry changed anywhere are not."""
+    rows = np.full((n, k), state, np.uint8)
+    for i in range(n):
+        if data.draw(st.booleans()):
+            rows[i, data.draw(st.integers(0, k - 1))] = data.draw(st.integers(0, 3))
+    np.testing.assert_array_equal(omm_format.uniform_rows(rows), (rows == rows[:, :1]).all(axis=1))
