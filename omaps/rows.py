@@ -129,8 +129,10 @@ class RowIndex:
         >>> import numpy as np
         >>> from omaps.rows import RowIndex
         >>> index = RowIndex(2)
-        >>> index.add(np.array([[1, 2], [0, 5], [1, 2]], np.uint8)).tolist(), index.add(np.array([[0, 5], [7, 7]], np.uint8)).tolist()
-        ([0, 1, 0], [1, 2])
+        >>> index.add(np.array([[1, 2], [0, 5], [1, 2]], np.uint8)).tolist()
+        [0, 1, 0]
+        >>> index.add(np.array([[0, 5], [7, 7]], np.uint8)).tolist()
+        [1, 2]
     """
 
     def __init__(self, width: int):
