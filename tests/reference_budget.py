@@ -35,6 +35,7 @@ from omaps.bake import GROW_TEXEL, bake_micromaps, dynamic_levels
 from omaps.bake.micromap import check_uv_triangles, flag_table
 from omaps.scene.alpha import distinct_rows
 from omaps.omm import format as omm_format
+from omaps.omm.budget import _doubt
 from omaps.omm.resolve import resolve
 
 __all__ = ["budget_levels", "FINEST_TEXELS"]
@@ -328,11 +329,18 @@ def _stored(gid, gbytes, level) -> int:
     return int(gbytes[ref > 0].sum())
 
 
-def _adopt(value, gid, gbytes, budget: int, start=None) -> tuple[np.ndarray, int]:
+def _adopt(value, gid, gbytes, budget: int, start=None, watch=()) -> tuple[np.ndarray, int, dict]:
     """Greedy over groups: repeatedly move every item that gains by it to the group with the most
     value per new byte (a group already stored, or free, first), while the bytes stored -- each
     group with a member once -- stay within the budget. Items only ever gain. (An item's options
-    in one group store the same micromap, so they are worth the same: one of them counts.)"""
+    in one group store the same micromap, so they are worth the same: one of them counts.)
+
+    The plain greedy: every step recounts the members, the gains and their sums over the whole
+    (items x options) matrix (tests/test_omm_budget_greedy.py holds ``omaps.omm.budget._adopt``,
+    which sums again only the groups a move changes, to it, ``watch`` and its certificate
+    included: options not priced, as (key, fewest bytes, items, their classes, best value per
+    item); per key the classes whose bound reached a step's chosen value per byte, or stayed
+    affordable when the greedy ended, each step tested by the package's ``_doubt``)."""
     n_items, n_cols = value.shape
     level = np.zeros(n_items, np.int64) if start is None else np.array(start, np.int64)
     rows = np.arange(n_items)
@@ -342,6 +350,12 @@ def _adopt(value, gid, gbytes, budget: int, start=None) -> tuple[np.ndarray, int
     first[:, 1:] = srt[:, 1:] != srt[:, :-1]
     keep = np.zeros(gid.shape, bool)
     np.put_along_axis(keep, order, first, axis=1)
+    doubt: dict = {}
+
+    def check(room, rate):  # the certificate's test of a step is the package's own (``_doubt``)
+        if watch:
+            _doubt(watch, value[rows, level], room, rate, doubt)
+
     while True:
         ref = np.bincount(gid[rows, level], minlength=len(gbytes))
         stored = int(gbytes[ref > 0].sum())
@@ -351,10 +365,14 @@ def _adopt(value, gid, gbytes, budget: int, start=None) -> tuple[np.ndarray, int
         cost = np.where(ref > 0, 0, gbytes)
         ok = (gsum > 0) & (cost <= budget - stored)
         if not ok.any():
-            return level, stored
+            check(budget - stored, 0.0)
+            return level, stored, doubt
         free = ok & (cost == 0)
         score = np.where(free, gsum, -np.inf) if free.any() else np.where(ok, gsum / np.maximum(cost, 1), -np.inf)
-        movers = up & (gid == int(np.argmax(score)))
+        chosen = int(np.argmax(score))
+        if not free.any():
+            check(budget - stored, float(score[chosen]))
+        movers = up & (gid == chosen)
         moved = movers.any(axis=1)
         level[moved] = np.argmax(movers[moved], axis=1)  # its one option in the group
 
@@ -382,11 +400,11 @@ def budget_levels(geometries, settings, budget: int, progress=None) -> tuple[lis
     eff = np.concatenate([p[5] for p in parts])
     gid, gbytes = _groups(nbytes, np.concatenate(ids), eff)
     rows = np.arange(len(value))
-    best, stored = _adopt(value, gid, gbytes, int(budget))
+    best, stored, _ = _adopt(value, gid, gbytes, int(budget))
     # also from the uniform columns that fit, the two most valuable: the greedy never ends below them
     fits = [c for c in range(value.shape[1]) if _stored(gid, gbytes, np.full(len(value), c)) <= budget]
     for c in sorted(fits, key=lambda c: -value[:, c].sum())[:2]:
-        c2, s2 = _adopt(value, gid, gbytes, int(budget), np.full(len(value), c))
+        c2, s2, _ = _adopt(value, gid, gbytes, int(budget), np.full(len(value), c))
         if value[rows, c2].sum() > value[rows, best].sum():
             best, stored = c2, s2
     if stored > budget:  # without special indices even the coarsest micromaps may not fit

@@ -53,14 +53,14 @@ def test_unique_rows_is_numpys(rows):
         np.testing.assert_array_equal(inv, ref.ravel())
 
 
-def _geometry(seed, n=60, size=64):
+def _geometry(seed, n=60, size=64, period=(2, 6), filt="nearest"):
     rng = np.random.default_rng(seed)
     yy, xx = np.mgrid[:size, :size]
-    alpha = ((np.sin(xx / rng.uniform(2, 6)) + np.cos(yy / rng.uniform(2, 6)) + rng.normal(0, 0.3, (size, size)))
+    alpha = ((np.sin(xx / rng.uniform(*period)) + np.cos(yy / rng.uniform(*period)) + rng.normal(0, 0.3, (size, size)))
              > 0).astype(np.uint8) * 255
     tris = _tris(rng, n)
     tris = np.concatenate([tris, tris[:n // 4]])  # repeated UVs: items standing for several triangles
-    return Geometry("g", _test(alpha), tris)
+    return Geometry("g", _test(alpha, filt), tris)
 
 
 @pytest.mark.parametrize("seed", [0, 1, 2])
@@ -81,6 +81,26 @@ def test_plan_is_every_level_priced_plan(seed, fraction):
         for t in over:
             np.testing.assert_array_equal(over[t][0], over_ref[t][0])
             np.testing.assert_array_equal(over[t][1], over_ref[t][1])
+
+
+@pytest.mark.parametrize("seed,max_level", [(0, 6), (2, 7), (3, 7)])
+def test_levels_that_start_no_greedy_are_resolved_where_the_certificate_asks(seed, max_level):
+    """Large triangles over a fine texture: levels 6 and up are out (their classes alone exceed the
+    budget), so the rows the certificate asks for are baked and held, and only the contents whose
+    bound reaches a step's value per byte are resolved -- the plan still every level priced's."""
+    g = [_geometry(seed, 40, 512, (1, 3), "linear")]
+    budget = 6000
+    s = OmmSettings(budget=budget, max_level=max_level)
+    pricings = [omm_budget._Pricing(x, omm_budget._items(x, s), s, budget) for x in g]
+    omm_budget._choose(pricings, budget)
+    # level 6 is lazy (rows held there): some of its rows were never resolved, some were when asked
+    assert any(6 in p.held and 6 in p.fine for p in pricings)
+    plan, rep = omm_budget.budget_levels(g, s, budget)
+    plan_ref, rep_ref = reference.budget_levels(g, s, budget)
+    assert rep == rep_ref
+    for p, (lv_ref, over_ref) in zip(plan, plan_ref):
+        np.testing.assert_array_equal(p.levels, lv_ref)
+        assert p.merged.keys() == over_ref.keys()
 
 
 @pytest.mark.parametrize("seed,promotion", [(3, "nearest"), (4, "nearest"), (5, "hashed")])

@@ -48,8 +48,10 @@ VARIANTS = 1 + len(MERGE_SHARES)
 
 
 @njit(cache=True)
-def _merge_loss(a, wa, b, wb):
-    """Value lost when contents a and b (T/O/C rows, per-cell weights) share their meet."""
+def _merge_loss(a, wa, b, wb, limit):
+    """Value lost when contents a and b (T/O/C rows, per-cell weights) share their meet, summed
+    cell by cell; once the sum reaches ``limit`` the rest is not added (the weights are not
+    negative, so the whole sum would reach it too): the sum so far is returned."""
     s = 0.0
     for c in range(len(a)):
         if a[c] != b[c]:
@@ -57,6 +59,8 @@ def _merge_loss(a, wa, b, wb):
                 s += wa[c]
             if b[c] != 2:
                 s += wb[c]
+            if s >= limit:
+                return s
     return s
 
 
@@ -68,12 +72,13 @@ def _agglomerate(cont, w):
     k = cont.shape[0]
     a = cont.copy()
     ww = w.copy()
+    cut = (w >= 0).all()  # a loss stops at the best so far (``_merge_loss``) only when none can fall
     alive = np.ones(k, np.bool_)
     best = np.full(k, np.inf)
     arg = np.full(k, -1, np.int64)
     for i in range(k):
         for j in range(i + 1, k):
-            s = _merge_loss(a[i], ww[i], a[j], ww[j])
+            s = _merge_loss(a[i], ww[i], a[j], ww[j], best[i] if cut else np.inf)
             if s < best[i]:
                 best[i] = s
                 arg[i] = j
@@ -99,13 +104,13 @@ def _agglomerate(cont, w):
                 arg[r] = -1
                 for q in range(r + 1, k):
                     if alive[q]:
-                        s = _merge_loss(a[r], ww[r], a[q], ww[q])
+                        s = _merge_loss(a[r], ww[r], a[q], ww[q], best[r] if cut else np.inf)
                         if s < best[r]:
                             best[r] = s
                             arg[r] = q
         for r in range(i):  # row i's new meet may be the best partner of an earlier row
             if alive[r]:
-                s = _merge_loss(a[r], ww[r], a[i], ww[i])
+                s = _merge_loss(a[r], ww[r], a[i], ww[i], best[r] if cut else np.inf)
                 if s < best[r]:
                     best[r] = s
                     arg[r] = i
@@ -233,6 +238,16 @@ def _rows_down(grid, sat, tris, target, low, progress) -> dict:
     return res
 
 
+def _add_rows(where: dict, lvl: int, sel, *rows) -> None:
+    """Add the items ``sel`` and their rows (one array or more, a row an item) to ``where[lvl]``,
+    items ascending."""
+    old = where.get(lvl)
+    if old is not None:
+        sel, rows = np.concatenate([old[0], sel]), [np.concatenate([a, b]) for a, b in zip(old[1:], rows)]
+    order = np.argsort(sel, kind="stable")
+    where[lvl] = (sel[order], *(r[order] for r in rows))
+
+
 class _Pricing:
     """One geometry's options: per item (its distinct UV triangle) and option column (level L
     exact, then L's merged variants, ``VARIANTS`` columns a level) the bytes, the value, the
@@ -245,7 +260,12 @@ class _Pricing:
     finer contents meet down to its class's, so a finer micromap is shared only within a class,
     and an item not priced at a level keeps the level below's option there (as an item whose
     level is capped). ``_adopt``'s certificate says which classes must be priced for its choice
-    to be the one every level priced would give."""
+    to be the one every level priced would give.
+
+    A level that starts no greedy (``_choose``'s lazy levels) is priced in two steps: its rows are
+    baked (``held``: the certificate then bounds each content's micromap by its items' values) and
+    resolved -- the greedy offered them -- only for the contents the certificate asks for
+    (``resolve_held``)."""
 
     def __init__(self, g, items, settings, budget: int, progress=None):
         self.g, self.settings, self.items = g, settings, items
@@ -277,6 +297,7 @@ class _Pricing:
         self.base = _base_level(budget, self.max_level)
         self.fine_levels = [lvl for lvl in levels if lvl > self.base]
         self.fine = {}  # fine level -> (items, rows3, stored), items ascending
+        self.held = {}  # fine level -> (items, rows3) baked but not resolved (not offered), items ascending
         self.coarse = {}  # level <= base -> (items, rows3, stored), items ascending
         self.priced_to = np.minimum(cap, self.base)  # the finest level priced per item
         self.klass = np.full(ni, -1, np.int64)
@@ -329,9 +350,9 @@ class _Pricing:
         who = np.flatnonzero((self.klass >= 0) & (self.items[5] >= lvl) & (self.priced_to < lvl))
         return who, self.klass[who]
 
-    def price(self, lvl: int, classes, progress=None) -> int:
+    def price(self, lvl: int, classes, progress=None, lazy=frozenset()) -> int:
         """Price level ``lvl`` (and the levels between) for every item of ``classes``; returns the
-        micro-triangles baked."""
+        micro-triangles baked. The rows of ``lazy`` levels are only baked (``held``)."""
         cap = self.items[5]
         want = np.isin(self.klass, np.asarray(list(classes), np.int64)) & (self.klass >= 0)
         target = np.where(want, np.minimum(cap, lvl), self.priced_to)
@@ -346,18 +367,60 @@ class _Pricing:
             for L, (pos, r3) in rows.items():
                 sel = part[pos]
                 r3 = self._unknown_c(sel, r3)
-                stored = self._resolve(sel, r3, L)
-                old = self.fine.get(L)
-                if old is not None:
-                    sel, r3, stored = (np.concatenate([old[0], sel]), np.concatenate([old[1], r3]),
-                                       np.concatenate([old[2], stored]))
-                order = np.argsort(sel, kind="stable")
-                self.fine[L] = (sel[order], r3[order], stored[order])
+                if L in lazy:
+                    _add_rows(self.held, L, sel, r3)
+                else:
+                    _add_rows(self.fine, L, sel, r3, self._resolve(sel, r3, L))
         first = int(self.priced_to[who].min()) + 1
         self.priced_to[who] = target[who]
         for L in range(first, self.max_level + 1):
             self._fill_fine(L)
         return work
+
+    def held_contents(self):
+        """Per level of ``held`` rows: the items, the content of each (items of one T/O/C row
+        store one micromap, or once resolved several: never one with another content), their
+        values there, and the bytes of their micromaps: 2-state without a C micro-triangle, else
+        4-state (an all-C row, worth nothing, may also be free: no bound counts it)."""
+        out = []
+        for lvl, (sel, r3) in sorted(self.held.items()):
+            _, content = _unique_rows(r3)
+            known = (r3 != states.C).sum(axis=1)
+            b = np.where(known == 4 ** lvl, _min_bytes(lvl),
+                         omm_format.micromap_bytes(lvl, omm_format.FORMAT_4_STATE) + omm_format.TRIANGLE_RECORD.itemsize)
+            out.append((lvl, sel, content, self._valuer(lvl, sel)[3](r3), b))
+        return out
+
+    def resolve_held(self, lvl: int, contents) -> None:
+        """Resolve the ``held`` rows of level ``lvl`` of ``contents`` (as ``held_contents`` numbers
+        them): the greedy is offered them."""
+        sel, r3 = self.held.pop(lvl)
+        _, content = _unique_rows(r3)
+        now = np.isin(content, np.asarray(list(contents), np.int64))
+        if not now.all():
+            self.held[lvl] = (sel[~now], r3[~now])
+        _add_rows(self.fine, lvl, sel[now], r3[now], self._resolve(sel[now], r3[now], lvl))
+        for L in range(lvl, self.max_level + 1):
+            self._fill_fine(L)
+
+    def _valuer(self, lvl, sel):
+        """For the items ``sel`` (ascending) at level ``lvl``: the position of every item in
+        ``sel`` (-1: none), the view hits on them (position, cell at the level) and the value of
+        rows of theirs (a function of T/O/C rows, one per item of ``sel``)."""
+        nc = 4 ** lvl
+        row = np.full(self.ni, -1, np.int64)
+        row[sel] = np.arange(len(sel))
+        hr = row[self.h_item]
+        hok = hr >= 0
+        h_sel, h_cell = hr[hok], self.hits[hok, 1] >> (2 * (HIT_LEVEL - lvl))
+        wsum = self.wsum
+
+        def values(states_of_sel):  # value of every selected item with these T/O/C rows
+            known = states_of_sel != states.C
+            v = wsum[sel] * known.sum(axis=1) / nc
+            return v + np.bincount(h_sel[known[h_sel, h_cell]], minlength=len(sel))
+
+        return row, h_sel, h_cell, values
 
     def _resolve(self, sel, r3, lvl):
         s = self.settings
@@ -399,17 +462,7 @@ class _Pricing:
 
         if stored is None:
             stored = self._resolve(sel, rows3, lvl)  # what the packer stores
-        row = np.full(ni, -1, np.int64)
-        row[sel] = np.arange(len(sel))
-        hr = row[self.h_item]
-        hok = hr >= 0
-        h_sel, h_cell = hr[hok], self.hits[hok, 1] >> (2 * (HIT_LEVEL - lvl))
-
-        def values(states_of_sel):  # value of every selected item with these T/O/C rows
-            known = states_of_sel != states.C
-            v = wsum[sel] * known.sum(axis=1) / nc
-            return v + np.bincount(h_sel[known[h_sel, h_cell]], minlength=len(sel))
-
+        row, h_sel, h_cell, values = self._valuer(lvl, sel)
         b = price(rows3, stored)
         nbytes[sel, c0] = b
         value[sel, c0] = values(rows3)
@@ -531,11 +584,134 @@ def _stored(gid, gbytes, level) -> int:
     return int(gbytes[ref > 0].sum())
 
 
+def _kept(gid) -> np.ndarray:
+    """Per item, the first of its options in each group (the one the greedy counts and moves to)."""
+    order = np.argsort(gid, axis=1, kind="stable")
+    srt = np.take_along_axis(gid, order, axis=1)
+    first = np.ones(gid.shape, bool)
+    first[:, 1:] = srt[:, 1:] != srt[:, :-1]
+    keep = np.zeros(gid.shape, bool)
+    np.put_along_axis(keep, order, first, axis=1)
+    return keep
+
+
+@njit(cache=True)
+def _greedy_setup(value, gid, keep, level, n_groups):
+    """``_adopt``'s state: per group its members now (``ref``), the sum of the gains of the
+    options in it that gain (``gsum``, summed in the order ``np.bincount`` sums the options: item
+    after item, option after option), and its kept options, in that same order (``first``: the
+    start of each group's, ``members``: item * columns + option)."""
+    n, m = gid.shape
+    ref = np.zeros(n_groups, np.int64)
+    gsum = np.zeros(n_groups)
+    first = np.zeros(n_groups + 1, np.int64)
+    for i in range(n):
+        ref[gid[i, level[i]]] += 1
+        cur = value[i, level[i]]
+        for c in range(m):
+            if keep[i, c]:
+                first[gid[i, c] + 1] += 1
+                gain = value[i, c] - cur
+                if gain > 0:
+                    gsum[gid[i, c]] += gain
+    for g in range(n_groups):
+        first[g + 1] += first[g]
+    members = np.empty(first[n_groups], np.int64)
+    fill = first[:n_groups].copy()
+    for i in range(n):
+        for c in range(m):
+            if keep[i, c]:
+                g = gid[i, c]
+                members[fill[g]] = i * m + c
+                fill[g] += 1
+    return ref, gsum, first, members
+
+
+@njit(cache=True)
+def _greedy_pick(gsum, ref, gbytes, room):
+    """The group the greedy adopts next: the free one (stored already, or of no bytes) that gains
+    the most, else the one that gains the most per byte within ``room``; the first such (as
+    ``np.argmax``). Returns (group, -1 when none gains within the room; whether it is free; its
+    value per byte)."""
+    best_free, best, rate = -1, -1, -np.inf
+    for g in range(len(gsum)):
+        if not gsum[g] > 0:
+            continue
+        cost = 0 if ref[g] > 0 else gbytes[g]
+        if cost > room:
+            continue
+        if cost == 0:
+            if best_free < 0 or gsum[g] > gsum[best_free]:
+                best_free = g
+        elif best_free < 0:
+            r = gsum[g] / cost
+            if r > rate:
+                best, rate = g, r
+    if best_free >= 0:
+        return best_free, True, np.inf
+    return best, False, rate
+
+
+@njit(cache=True)
+def _greedy_move(chosen, value, gid, keep, level, ref, gsum, gbytes, first, members, seen):
+    """Every item with an option in group ``chosen`` that gains moves to it (its kept option
+    there); the sums of the groups whose gains that changed (every kept option of a mover) are
+    summed again, each in ``np.bincount``'s order, so they are exactly what summing them all
+    anew gives. Returns the change in bytes stored."""
+    m = gid.shape[1]
+    delta = 0
+    movers = []
+    for e in range(first[chosen], first[chosen + 1]):
+        i, c = members[e] // m, members[e] % m
+        if value[i, c] - value[i, level[i]] > 0:
+            movers.append((i, c))
+    touched = []
+    for i, c in movers:
+        old = gid[i, level[i]]
+        ref[old] -= 1
+        if ref[old] == 0:
+            delta -= gbytes[old]
+        level[i] = c
+        ref[chosen] += 1
+        if ref[chosen] == 1:
+            delta += gbytes[chosen]
+        for k in range(m):
+            g = gid[i, k]
+            if keep[i, k] and not seen[g]:
+                seen[g] = True
+                touched.append(g)
+    for g in touched:
+        seen[g] = False
+        s = 0.0
+        for e in range(first[g], first[g + 1]):
+            i, c = members[e] // m, members[e] % m
+            gain = value[i, c] - value[i, level[i]]
+            if gain > 0:
+                s += gain
+        gsum[g] = s
+    return delta
+
+
+def _doubt(watch, cur, room: int, rate: float, doubt: dict) -> None:
+    """The certificate at one step of the greedy (``_adopt``'s ``watch``): adds to ``doubt`` the
+    classes whose best case, against the items' values now (``cur``), reaches ``rate`` per byte
+    within ``room`` bytes."""
+    for key, least, who, cls, best in watch:
+        if least > room or not len(who):
+            continue
+        bound = np.bincount(cls, np.maximum(best - cur[who], 0.0))
+        bad = np.flatnonzero((bound > 0) & (bound >= rate * least * (1 - 1e-9)))
+        if len(bad):
+            doubt.setdefault(key, set()).update(bad.tolist())
+
+
 def _adopt(value, gid, gbytes, budget: int, start=None, watch=()) -> tuple[np.ndarray, int, dict]:
     """Greedy over groups: repeatedly move every item that gains by it to the group with the most
     value per new byte (a group already stored, or free, first), while the bytes stored -- each
     group with a member once -- stay within the budget. Items only ever gain. (An item's options
     in one group store the same micromap, so they are worth the same: one of them counts.)
+    Only the groups a move changes are summed again (``_greedy_move``): the steps are those of
+    summing every group anew at each (``tests/test_omm_budget_greedy.py`` keeps that one).
 
     ``watch``: options not priced, as (key, fewest bytes, items, their classes, best value per
     item): a class's options at the key's level are one new micromap each (at least those
@@ -544,47 +720,29 @@ def _adopt(value, gid, gbytes, budget: int, start=None, watch=()) -> tuple[np.nd
     byte, or stayed affordable when the greedy ended (the choice may then differ from the one
     with them priced), empty when the choice is the same."""
     n_items, n_cols = value.shape
+    value = np.ascontiguousarray(value, np.float64)
+    gid = np.ascontiguousarray(gid, np.int64)
+    gbytes = np.ascontiguousarray(gbytes, np.int64)
     level = np.zeros(n_items, np.int64) if start is None else np.array(start, np.int64)
     rows = np.arange(n_items)
-    order = np.argsort(gid, axis=1, kind="stable")
-    srt = np.take_along_axis(gid, order, axis=1)
-    first = np.ones(gid.shape, bool)
-    first[:, 1:] = srt[:, 1:] != srt[:, :-1]
-    keep = np.zeros(gid.shape, bool)
-    np.put_along_axis(keep, order, first, axis=1)
+    keep = _kept(gid)
     doubt: dict = {}
 
-    def check(room, rate):  # classes whose best case reaches ``rate`` per byte within ``room`` bytes
-        if not watch:
-            return
-        cur = value[rows, level]
-        for key, least, who, cls, best in watch:
-            if least > room or not len(who):
-                continue
-            bound = np.bincount(cls, np.maximum(best - cur[who], 0.0))
-            bad = np.flatnonzero((bound > 0) & (bound >= rate * least * (1 - 1e-9)))
-            if len(bad):
-                doubt.setdefault(key, set()).update(bad.tolist())
+    def check(room, rate):
+        if watch:
+            _doubt(watch, value[rows, level], room, rate, doubt)
 
+    ref, gsum, starts, members = _greedy_setup(value, gid, keep, level, len(gbytes))
+    stored = int(gbytes[ref > 0].sum())
+    seen = np.zeros(len(gbytes), bool)
     while True:
-        ref = np.bincount(gid[rows, level], minlength=len(gbytes))
-        stored = int(gbytes[ref > 0].sum())
-        gain = value - value[rows, level][:, None]
-        up = keep & (gain > 0)
-        gsum = np.bincount(gid[up], gain[up], minlength=len(gbytes))
-        cost = np.where(ref > 0, 0, gbytes)
-        ok = (gsum > 0) & (cost <= budget - stored)
-        if not ok.any():
+        chosen, free, rate = _greedy_pick(gsum, ref, gbytes, budget - stored)
+        if chosen < 0:
             check(budget - stored, 0.0)
             return level, stored, doubt
-        free = ok & (cost == 0)
-        score = np.where(free, gsum, -np.inf) if free.any() else np.where(ok, gsum / np.maximum(cost, 1), -np.inf)
-        chosen = int(np.argmax(score))
-        if not free.any():
-            check(budget - stored, float(score[chosen]))
-        movers = up & (gid == chosen)
-        moved = movers.any(axis=1)
-        level[moved] = np.argmax(movers[moved], axis=1)  # its one option in the group
+        if not free:
+            check(budget - stored, float(rate))
+        stored += int(_greedy_move(chosen, value, gid, keep, level, ref, gsum, gbytes, starts, members, seen))
 
 
 def _choose(pricings, budget: int) -> tuple:
@@ -607,13 +765,27 @@ def _choose(pricings, budget: int) -> tuple:
             for lvl in p.fine_levels:
                 who, cls = p.unpriced(lvl)
                 watch.append(((gi, lvl), _min_bytes(lvl), who + base, cls, best[who]))
+            # baked, not resolved: each content's micromap, once resolved, is one or more groups,
+            # each worth at most the content's items' values there, for those bytes
+            for lvl, who, content, worth, b in p.held_contents():
+                for least in np.unique(b):
+                    m = b == least
+                    watch.append((("resolve", gi, lvl), int(least), who[m] + base, content[m], worth[m]))
             base += p.ni
         # a uniform column at a level is a start only where every item there fits: a level whose
         # classes alone need more than the budget is out (its unpriced items could only add bytes)
+        top = max((p.max_level for p in pricings), default=-1)
         out_levels = set()
-        for lvl in range(max((p.max_level for p in pricings), default=-1) + 1):
+        for lvl in range(top + 1):
             if sum(p.lower_bound_bytes(lvl) for p in pricings if lvl in p.fine_levels) > budget:
                 out_levels.add(lvl)
+        # levels from which every column up is out start no greedy, nor do their rows change a
+        # column that may start one: they are resolved only where the certificate asks (``held``)
+        lazy = set()
+        for lvl in range(top, -1, -1):
+            if lvl not in out_levels:
+                break
+            lazy.add(lvl)
         need = {(gi, lvl): set(range(p.n_classes)) for gi, p in enumerate(pricings) for lvl in p.fine_levels
                 if lvl not in out_levels and len(p.unpriced(lvl)[0])}
         if not need:
@@ -629,8 +801,14 @@ def _choose(pricings, budget: int) -> tuple:
             need = doubt
         if not need:
             return nbytes, value, best, stored
+        for key, contents in need.items():  # (before any bake: the contents are numbered by the rows held now)
+            if key[0] == "resolve":
+                pricings[key[1]].resolve_held(key[2], contents)
         finest: dict = {}  # (geometry, class) -> the finest level asked: one bake prices it and the levels between
-        for (gi, lvl), classes in need.items():
+        for key, classes in need.items():
+            if key[0] == "resolve":
+                continue
+            gi, lvl = key
             for c in classes:
                 finest[gi, c] = max(finest.get((gi, c), lvl), lvl)
         jobs = {}
@@ -638,7 +816,7 @@ def _choose(pricings, budget: int) -> tuple:
             jobs.setdefault((gi, lvl), set()).add(c)
         jobs = [(gi, lvl, classes) for (gi, lvl), classes in sorted(jobs.items())]
         for gi, lvl, classes in jobs:  # (not counted by the progress: its total is known before the first)
-            pricings[gi].price(lvl, classes)
+            pricings[gi].price(lvl, classes, lazy=lazy)
 
 
 class GeometryBudget(NamedTuple):
