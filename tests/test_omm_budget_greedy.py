@@ -1,8 +1,8 @@
 """The budget's greedy (``omaps.omm.budget._adopt``), which sums again only the groups a move
 changes, against the plain one that sums every group anew at each step, and its agglomeration of
-contents, whose losses stop at the best so far, against the one that sums every loss whole (both
-references in tests/reference_budget.py): the same levels, bytes, certificate and merges, ties
-included."""
+contents (losses that stop at the best so far; cell weights summed once per content), against the
+one that sums every loss whole (references in tests/reference_budget.py): the same levels, bytes,
+certificate, merges and merged variants, ties included."""
 
 from __future__ import annotations
 
@@ -126,3 +126,24 @@ def test_agglomeration_is_the_plain_one(seed, k, n, weights):
     else:  # (no weight is negative in a plan; the losses are then summed whole)
         w = rng.normal(size=(k, n))
     np.testing.assert_array_equal(omm_budget._agglomerate(cont, w), reference._agglomerate(cont, w))
+
+
+@settings(max_examples=150, deadline=None)
+@given(st.integers(0, 2 ** 32 - 1), st.integers(1, 3), st.integers(4, 40))
+def test_merged_clusters_are_the_plain_ones(seed, lvl, n_rows):
+    """The merged variants of a level's rows (``_merged``: contents weighted by their rows'
+    weights spread over the cells, plus the view hits on them) are those of the plain pricing."""
+    rng = np.random.default_rng(seed)
+    nc = 4 ** lvl
+    kinds = rng.integers(0, 3, (int(rng.integers(2, 12)), nc)).astype(np.uint8)
+    rows3 = kinds[rng.integers(0, len(kinds), n_rows)]
+    nbytes = np.where(rng.random(n_rows) < 0.15, 0, 24)
+    w = rng.random(n_rows) * rng.choice([1e-2, 1.0, 1e4], n_rows)
+    n_hits = int(rng.integers(0, 40))
+    h_row, h_cell = rng.integers(0, n_rows, n_hits), rng.integers(0, nc, n_hits)
+    got = omm_budget._merged(rows3, None, nbytes, w, h_row, h_cell, lvl)
+    ref = reference._merged(rows3, None, nbytes, w, h_row, h_cell, lvl)
+    assert len(got) == len(ref)
+    for (label, meets), (label_ref, meets_ref) in zip(got, ref):
+        np.testing.assert_array_equal(label, label_ref)
+        np.testing.assert_array_equal(meets, meets_ref)

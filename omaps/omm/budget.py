@@ -541,8 +541,9 @@ def _merged(rows3, stored, nbytes, w, h_row, h_cell, lvl) -> list:
     cont[cinv] = rows3[paid]
     if k < 4 or float(k) * k * nc > MERGE_MAX_WORK:
         return []
-    cw = np.zeros((k, nc))
-    np.add.at(cw, cinv, (w[paid] / nc)[:, None])
+    # each content's rows' weights spread over its cells: every cell the same sum, in the rows'
+    # order (as ``np.add.at`` of the rows adds them), so one per content, repeated
+    cw = np.repeat(np.bincount(cinv, w[paid] / nc, minlength=k)[:, None], nc, axis=1)
     of_row = np.full(len(rows3), -1, np.int64)
     of_row[paid] = cinv
     hc = of_row[h_row]
