@@ -353,6 +353,9 @@ class _Pricing:
     def price(self, lvl: int, classes, progress=None, lazy=frozenset()) -> int:
         """Price level ``lvl`` (and the levels between) for every item of ``classes``; returns the
         micro-triangles baked. The rows of ``lazy`` levels are only baked (``held``)."""
+        # held rows are bounded per T/O/C content (``held_contents``): in 4-state two stored rows are
+        # equal only where their contents are (a C micro-triangle stays unknown), not in 2-state
+        assert not lazy or self.settings.format_code == omm_format.FORMAT_4_STATE, "--budget stores 4-state"
         cap = self.items[5]
         want = np.isin(self.klass, np.asarray(list(classes), np.int64)) & (self.klass >= 0)
         target = np.where(want, np.minimum(cap, lvl), self.priced_to)
