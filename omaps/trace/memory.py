@@ -126,18 +126,19 @@ def _align(n: int) -> int:
 
 def _standard_omm(sm) -> tuple[np.ndarray, np.ndarray, int]:
     """Per triangle its index buffer entry, per record its data offset, and the data bytes of the
-    triL maps as ``omaps omm``'s pack stage (``omm.pipeline.Packer``) stores them: 4-state data
-    (C as unknown-transparent), uniform micromaps as special indices with no record or data,
-    identical micromaps once, records in the order of the distinct micromaps (``sm``'s rows)."""
+    triL maps written by the rules of ``omaps omm``'s pack stage (docs/FORMAT.md, "Standard opacity
+    micromaps"): 4-state data (C as unknown-transparent), a uniform micromap a special index (-1
+    T, -2 O, -3 C) with no record or data, identical micromaps once; records in the order of the
+    distinct micromaps (``sm``'s rows, already distinct), data packed in record order."""
     from ..codecs import unpack_states
-    from ..omm.pipeline import OmmSettings, Packer
 
     n_rows = len(sm.data) // sm.row_bytes
-    st = unpack_states(sm.data.reshape(n_rows, sm.row_bytes), 4 ** sm.param)  # T 0, O 1, C 2: OMM states
-    packer = Packer(OmmSettings(format="4state"))
-    entry = packer.add(st, int(sm.param))
-    offs = packer.record_array()["data_offset"].astype(np.int64)
-    return entry[sm.rows].astype(np.int64), offs, len(packer.data())
+    st = unpack_states(sm.data.reshape(n_rows, sm.row_bytes), 4 ** sm.param)
+    uniform = (st == st[:, :1]).all(axis=1)
+    entry = np.where(uniform, -1 - st[:, 0].astype(np.int64), np.cumsum(~uniform) - 1)
+    n_rec = int(np.count_nonzero(~uniform))
+    offs = sm.row_bytes * np.arange(n_rec, dtype=np.int64)
+    return entry[sm.rows].astype(np.int64), offs, n_rec * sm.row_bytes
 
 
 def layouts(sm, at) -> dict[str, Layout]:
