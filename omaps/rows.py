@@ -20,7 +20,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-__all__ = ["row_hashes", "unique_rows", "first_occurrences", "RowIndex"]
+__all__ = ["row_hashes", "unique_rows", "first_occurrences", "first_uses", "RowIndex"]
 
 _CHUNK_BYTES = 1 << 24  # rows hashed this many bytes at a time (bounded temporaries)
 _MIX = np.uint64(0xBF58476D1CE4E5B9)  # splitmix64's finaliser multipliers
@@ -185,5 +185,12 @@ def first_occurrences(rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     if len(flat) == 0:
         return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
     ids = RowIndex(flat.shape[1]).add(flat)
-    seen = np.maximum.accumulate(np.concatenate([[-1], ids[:-1]]))  # the largest id before each row
-    return np.flatnonzero(ids > seen).astype(np.int64), ids
+    return first_uses(ids), ids
+
+
+def first_uses(ids: np.ndarray, before: int = 0) -> np.ndarray:
+    """The positions of the rows that ``RowIndex.add`` gave a new id (``before``: the index's
+    ``n`` before the call), in order: new ids count up from ``before``, so a row is the first of
+    its id exactly when its id exceeds every id before it."""
+    seen = np.maximum.accumulate(np.concatenate([[before - 1], ids[:-1]]))  # the largest id before each row
+    return np.flatnonzero(ids > seen).astype(np.int64)

@@ -211,8 +211,7 @@ class Packer:
             index = omaps_rows.RowIndex(packed.shape[1])
         before = index.n
         ids = index.add(packed)
-        # the first row of each micromap not stored before, in order (new ids count up from ``before``)
-        fresh = np.flatnonzero(ids > np.maximum.accumulate(np.concatenate([[before - 1], ids[:-1]])))
+        fresh = omaps_rows.first_uses(ids, before)  # the first row of each micromap not stored before
         nbytes = packed.shape[1]
         if len(fresh):
             if self.size + len(fresh) * nbytes > 0xFFFFFFFF:
