@@ -48,6 +48,31 @@ def micro_vertices(index, level):
     return p0, p1, p2
 
 
+TABLE_LEVELS = 6  # ``vertex_table`` holds levels 0 .. 5 (1365 micro-triangles, 64 KiB)
+_TABLE: list[np.ndarray] = []
+
+
+def vertex_table() -> np.ndarray:
+    """The vertices of every micro-triangle of levels 0 .. TABLE_LEVELS - 1, one level after the
+    other (level L from row (4**L - 1) / 3), as (b1, b2) of p0, p1, p2 per row: the values of
+    ``micro_vertices`` (dyadic, so exact either way), computed once, for kernels that visit
+    micro-triangles in no order (decoding the curve's digits costs a branch per level). Read it
+    with ``table_vertices``."""
+    if not _TABLE:
+        _TABLE.append(np.ascontiguousarray(np.concatenate([micro_triangles(level).reshape(-1, 6)
+                                                           for level in range(TABLE_LEVELS)])))
+    return _TABLE[0]
+
+
+@njit(cache=True, inline="always")
+def table_vertices(table, index, level):
+    """``micro_vertices(index, level)``, from ``vertex_table()`` where it holds the level."""
+    if level < TABLE_LEVELS:
+        j = ((1 << (2 * level)) - 1) // 3 + index
+        return (table[j, 0], table[j, 1]), (table[j, 2], table[j, 3]), (table[j, 4], table[j, 5])
+    return micro_vertices(index, level)
+
+
 @njit(cache=True, inline="always")
 def bary_point(b1, b2, x0, x1, x2):
     """One coordinate of the point of barycentric (b1, b2) -- the weights of p1 and p2 -- on a

@@ -46,21 +46,24 @@ CELL_SAMPLES = 4  # K x K points per square cell
 def micro_corners(tri_texel, index, level):
     """Texel coordinates (ax, ay, bx, by, cx, cy) of micro-triangle ``index``'s vertices."""
     t = tri_texel
-    return _corners(t[0, 0], t[0, 1], t[1, 0], t[1, 1], t[2, 0], t[2, 1], index, level)
-
-
-@njit(cache=True, inline="always")
-def micro_corners_of(tris_texel, t, index, level):
-    """``micro_corners`` of triangle ``t`` of ``tris_texel`` (T, 3, 2), for kernels that hold
-    every triangle (no view of one is made)."""
-    return _corners(tris_texel[t, 0, 0], tris_texel[t, 0, 1], tris_texel[t, 1, 0], tris_texel[t, 1, 1],
-                    tris_texel[t, 2, 0], tris_texel[t, 2, 1], index, level)
-
-
-@njit(cache=True, inline="always")
-def _corners(t0x, t0y, t1x, t1y, t2x, t2y, index, level):
-    """``micro_corners`` of the texel-space triangle (t0, t1, t2) given as scalars."""
     (a1, a2), (b1, b2), (c1, c2) = birdcurve.micro_vertices(index, level)
+    return _corners(t[0, 0], t[0, 1], t[1, 0], t[1, 1], t[2, 0], t[2, 1], a1, a2, b1, b2, c1, c2)
+
+
+@njit(cache=True, inline="always")
+def micro_corners_of(tris_texel, t, index, level, table):
+    """``micro_corners`` of triangle ``t`` of ``tris_texel`` (T, 3, 2), for kernels that hold
+    every triangle (no view of one is made) and visit its micro-triangles in no order: the
+    barycentric vertices come from ``table`` (``birdcurve.vertex_table()``)."""
+    (a1, a2), (b1, b2), (c1, c2) = birdcurve.table_vertices(table, index, level)
+    return _corners(tris_texel[t, 0, 0], tris_texel[t, 0, 1], tris_texel[t, 1, 0], tris_texel[t, 1, 1],
+                    tris_texel[t, 2, 0], tris_texel[t, 2, 1], a1, a2, b1, b2, c1, c2)
+
+
+@njit(cache=True, inline="always")
+def _corners(t0x, t0y, t1x, t1y, t2x, t2y, a1, a2, b1, b2, c1, c2):
+    """Texel coordinates of barycentric vertices (a1, a2), (b1, b2), (c1, c2) of the texel-space
+    triangle (t0, t1, t2) given as scalars."""
     return (bary_point(a1, a2, t0x, t1x, t2x), bary_point(a1, a2, t0y, t1y, t2y),
             bary_point(b1, b2, t0x, t1x, t2x), bary_point(b1, b2, t0y, t1y, t2y),
             bary_point(c1, c2, t0x, t1x, t2x), bary_point(c1, c2, t0y, t1y, t2y))

@@ -1,3 +1,4 @@
+import numba
 import numpy as np
 import pytest
 from hypothesis import given, settings
@@ -96,3 +97,16 @@ def test_micro_vertices_walk_is_the_subdivision(level, data):
         mid = lambda a, b: ((a[0] + b[0]) // 2, (a[1] + b[1]) // 2)  # noqa: E731
         p0, p1, p2 = birdcurve.child((k >> (2 * d)) & 3, p0, p1, p2, mid(p0, p1), mid(p1, p2), mid(p0, p2))
     np.testing.assert_array_equal(np.array([p0, p1, p2]) / n, want)
+
+
+def test_vertex_table_is_the_digit_walk():
+    """``table_vertices`` (the resolve's lookup) gives every micro-triangle's vertices as the
+    digit walk ``micro_vertices`` does, bit for bit, in the table's levels and past them."""
+    table = birdcurve.vertex_table()
+    lookup = numba.njit(lambda tb, k, lv: birdcurve.table_vertices(tb, k, lv))
+    walk = numba.njit(lambda k, lv: birdcurve.micro_vertices(k, lv))
+    for level in range(birdcurve.TABLE_LEVELS + 2):
+        ks = {0, 1, 4 ** level // 3, 4 ** level - 1} | set(range(0, 4 ** level, 7 ** (level // 2 + 1)))
+        for k in sorted(k for k in ks if k < 4 ** level):
+            assert lookup(table, k, level) == walk(k, level), (level, k)
+    assert len(table) == (4 ** birdcurve.TABLE_LEVELS - 1) // 3

@@ -13,6 +13,7 @@ import numpy as np
 from numba import njit, prange
 
 from ..alpha_test import AlphaTest
+from ..birdcurve import vertex_table
 from ..coverage import TAPS, micro_corners_of, micro_hits_with, sample_levels, sample_points, texel_triangles
 from ..promotion import HASHED, hashed_threshold, hits_needed, promotion_code
 from . import format as omm_format
@@ -22,9 +23,10 @@ __all__ = ["resolve", "resolve_counted"]
 
 @njit(cache=True, _nrt=False)
 def _resolve_one(states3, base, end, level, two_state, mode, seed, value, thr, inclusive, filt, mu, mv, tris, t,
-                 samples, sample_k, out, counts, taps):
+                 samples, sample_k, out, counts, taps, table):
     """Triangle ``t``'s micro-triangles ``states3[base:end]`` into ``out``, its counts into
-    ``counts[t]`` (no reference counting: it allocates nothing)."""
+    ``counts[t]`` (no reference counting: it allocates nothing). ``table``:
+    ``birdcurve.vertex_table()``."""
     n_s = 1 << (2 * sample_k)
     # first every state copied and the known ones counted, with no branch (the compiler
     # vectorises it): most micro-triangles are known, most triangles hold no C one
@@ -43,7 +45,7 @@ def _resolve_one(states3, base, end, level, two_state, mode, seed, value, thr, i
                 continue
             need = need0
             if 0 < need <= n_s:  # the opaque fraction decides: O iff at least ``need`` sample points pass
-                q = micro_corners_of(tris, t, i - base, level)
+                q = micro_corners_of(tris, t, i - base, level, table)
                 if mode == HASHED:  # the cut is the threshold hashed from the centroid
                     need = hits_needed(mode, hashed_threshold((q[0] + q[2] + q[4]) / 3.0,
                                                               (q[1] + q[3] + q[5]) / 3.0, seed), n_s)
@@ -73,13 +75,18 @@ def _resolve_one(states3, base, end, level, two_state, mode, seed, value, thr, i
     counts[t, 6] = r3
 
 
+CHUNK = 16  # triangles per parallel work item
+
+
 @njit(cache=True, parallel=True)
 def _resolve(states3, starts, levels, two_state, mode, seed, value, thr, inclusive, filt, mu, mv, tris,
-             samples, sample_k, out, counts):
-    for t in prange(tris.shape[0]):
-        taps = np.empty((TAPS, TAPS))
-        _resolve_one(states3, starts[t], starts[t + 1], levels[t], two_state, mode, seed, value, thr, inclusive, filt,
-                     mu, mv, tris, t, samples, sample_k[t], out, counts, taps)
+             samples, sample_k, out, counts, table):
+    n = tris.shape[0]
+    for c in prange((n + CHUNK - 1) // CHUNK):
+        taps = np.empty((TAPS, TAPS))  # one scratch per work item, not per triangle
+        for t in range(c * CHUNK, min((c + 1) * CHUNK, n)):
+            _resolve_one(states3, starts[t], starts[t + 1], levels[t], two_state, mode, seed, value, thr, inclusive,
+                         filt, mu, mv, tris, t, samples, sample_k[t], out, counts, taps, table)
 
 
 def resolve_counted(states3: np.ndarray, starts: np.ndarray, levels, test: AlphaTest, tris_uv, fmt: int,
@@ -92,10 +99,10 @@ def resolve_counted(states3: np.ndarray, starts: np.ndarray, levels, test: Alpha
     out = np.empty_like(states3)
     counts = np.empty((len(tris), 7), dtype=np.int64)
     filt, mu, mv = test.codes()
-    with numba.parallel_chunksize(16):  # triangles differ a lot in cost: hand them out dynamically
+    with numba.parallel_chunksize(1):  # triangles differ a lot in cost: hand the work items out dynamically
         _resolve(states3, np.asarray(starts, dtype=np.int64), lv, fmt == omm_format.FORMAT_2_STATE, mode, int(seed),
                  test.value, float(test.threshold), bool(test.inclusive), filt, mu, mv, tris, sample_points(),
-                 sample_levels(tris, lv), out, counts)
+                 sample_levels(tris, lv), out, counts, vertex_table())
     return out, counts
 
 
