@@ -22,7 +22,6 @@ from numba import njit
 
 __all__ = ["row_hashes", "unique_rows", "first_occurrences", "first_uses", "RowIndex"]
 
-_CHUNK_BYTES = 1 << 24  # rows hashed this many bytes at a time (bounded temporaries)
 _MIX = np.uint64(0xBF58476D1CE4E5B9)  # splitmix64's finaliser multipliers
 _MIX2 = np.uint64(0x94D049BB133111EB)
 
@@ -50,23 +49,28 @@ def row_hashes(rows: np.ndarray) -> np.ndarray:
     """A 64-bit hash of each row's bytes (M, ...) -> (M,) uint64: equal rows, equal hashes (rows
     with equal hashes may still differ: callers compare them)."""
     words = _words(_as_bytes(rows))
-    m = len(words)
-    keys = _keys(words.shape[1])
-    out = np.empty(m, dtype=np.uint64)
-    step = max(1, _CHUNK_BYTES // max(1, words.shape[1] * 8))
-    with np.errstate(over="ignore"):
-        for s in range(0, m, step):
-            # each word mixed on its own (splitmix64's finaliser) before the sum: a plain weighted
-            # sum is linear, and rows that differ only in the top bit of two words (2**63 + 2**63
-            # = 0 modulo 2**64) always collided -- 4 of the oak leaf's 36,715 micromaps did
-            x = words[s:s + step] ^ keys
+    out = np.empty(len(words), dtype=np.uint64)
+    _hash_rows(words, _keys(words.shape[1]), out)
+    return out
+
+
+@njit(cache=True)
+def _hash_rows(words, keys, out):
+    # each word mixed on its own (splitmix64's finaliser) before the sum: a plain weighted sum is
+    # linear, and rows that differ only in the top bit of two words (2**63 + 2**63 = 0 modulo
+    # 2**64) always collided -- 4 of the oak leaf's 36,715 micromaps did. One pass over the rows
+    # (numpy's one operation at a time read the words seven times).
+    for i in range(words.shape[0]):
+        h = np.uint64(0)
+        for w in range(words.shape[1]):
+            x = words[i, w] ^ keys[w]
             x ^= x >> np.uint64(30)
             x *= _MIX
             x ^= x >> np.uint64(27)
             x *= _MIX2
             x ^= x >> np.uint64(31)
-            out[s:s + step] = x.sum(axis=1, dtype=np.uint64)  # wraps modulo 2**64
-    return out
+            h += x  # wraps modulo 2**64
+        out[i] = h
 
 
 @njit(cache=True)
