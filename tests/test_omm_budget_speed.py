@@ -42,17 +42,6 @@ def test_meet_of_the_finer_level_is_the_bake(seed, filt, level, size):
     np.testing.assert_array_equal(omm_budget._meet(fine.reshape(len(tris), -1)), coarse.reshape(len(tris), -1))
 
 
-@settings(max_examples=30, deadline=None)
-@given(st.lists(st.binary(min_size=1, max_size=6), min_size=0, max_size=40))
-def test_unique_rows_is_numpys(rows):
-    m = np.array([list(r.ljust(6, b"\0")) for r in rows], np.uint8).reshape(-1, 6)
-    k, inv = omm_budget._unique_rows(m)
-    if len(m):
-        u, ref = np.unique(m, axis=0, return_inverse=True)
-        assert k == len(u)
-        np.testing.assert_array_equal(inv, ref.ravel())
-
-
 def _geometry(seed, n=60, size=64, period=(2, 6), filt="nearest"):
     rng = np.random.default_rng(seed)
     yy, xx = np.mgrid[:size, :size]

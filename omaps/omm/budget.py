@@ -31,6 +31,7 @@ from ..budget import HIT_LEVEL
 from ..errors import InputError
 from ..bake import GROW_TEXEL, bake_micromaps, dynamic_levels
 from ..bake.micromap import check_uv_triangles, flag_table
+from ..rows import unique_rows
 from ..scene.alpha import distinct_rows
 from . import format as omm_format
 from .resolve import resolve
@@ -128,27 +129,6 @@ def _labels(k: int, merges: np.ndarray, clusters: int) -> np.ndarray:
             break
         parent = nxt
     return np.unique(parent, return_inverse=True)[1].ravel()
-
-
-def _unique_rows(rows: np.ndarray) -> tuple[int, np.ndarray]:
-    """``np.unique(rows, axis=0, return_inverse=True)`` of uint8 rows (n, m), labels in the same
-    (lexicographic) order, fast: rows are grouped by two 64-bit hashes, every row checked equal
-    to its group's first, and only the distinct rows sorted. Returns (count, label per row)."""
-    n = len(rows)
-    if n == 0:
-        return 0, np.zeros(0, np.int64)
-    rows = np.ascontiguousarray(rows, dtype=np.uint8)
-    rng = np.random.default_rng(0x0A11CE)
-    w = rng.integers(1, np.iinfo(np.int64).max, (rows.shape[1], 2), dtype=np.int64).astype(np.uint64) | np.uint64(1)
-    h = rows.astype(np.uint64) @ w  # wraps modulo 2**64
-    _, first, inv = np.unique(h.view(np.dtype((np.void, 16))).ravel(), return_index=True, return_inverse=True)
-    inv = inv.ravel()
-    if not (rows == rows[first[inv]]).all():  # a hash collision: the slow way
-        _, inv = np.unique(rows, axis=0, return_inverse=True)
-        inv = inv.ravel()
-        return int(inv.max()) + 1, inv
-    _, rank = np.unique(rows[first].view(np.dtype((np.void, rows.shape[1]))).ravel(), return_inverse=True)
-    return len(first), rank.ravel()[inv]
 
 
 def _items(g, settings) -> tuple:
@@ -319,7 +299,8 @@ class _Pricing:
         known_uniform = (r3 == r3[:, :1]).all(axis=1) & (r3[:, 0] != states.C)
         ok = (cap[sel] > self.base) & ~known_uniform
         if ok.any():
-            self.n_classes, cls = _unique_rows(r3[ok])
+            uniq, cls = unique_rows(r3[ok])
+            self.n_classes = len(uniq)
             self.klass[sel[ok]] = cls
             first = np.zeros(self.n_classes, np.int64)
             first[cls[::-1]] = np.arange(len(cls))[::-1]
@@ -387,7 +368,7 @@ class _Pricing:
         4-state (an all-C row, worth nothing, may also be free: no bound counts it)."""
         out = []
         for lvl, (sel, r3) in sorted(self.held.items()):
-            _, content = _unique_rows(r3)
+            content = unique_rows(r3)[1]
             known = (r3 != states.C).sum(axis=1)
             b = np.where(known == 4 ** lvl, _min_bytes(lvl),
                          omm_format.micromap_bytes(lvl, omm_format.FORMAT_4_STATE) + omm_format.TRIANGLE_RECORD.itemsize)
@@ -398,7 +379,7 @@ class _Pricing:
         """Resolve the ``held`` rows of level ``lvl`` of ``contents`` (as ``held_contents`` numbers
         them): the greedy is offered them."""
         sel, r3 = self.held.pop(lvl)
-        _, content = _unique_rows(r3)
+        content = unique_rows(r3)[1]
         now = np.isin(content, np.asarray(list(contents), np.int64))
         if not now.all():
             self.held[lvl] = (sel[~now], r3[~now])
@@ -539,7 +520,8 @@ def _merged(rows3, stored, nbytes, w, h_row, h_cell, lvl) -> list:
     paid = np.flatnonzero(nbytes > 0)
     if len(paid) < 4:
         return []
-    k, cinv = _unique_rows(rows3[paid])
+    uniq, cinv = unique_rows(rows3[paid])
+    k = len(uniq)
     cont = np.empty((k, nc), np.uint8)
     cont[cinv] = rows3[paid]
     if k < 4 or float(k) * k * nc > MERGE_MAX_WORK:

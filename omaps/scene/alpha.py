@@ -8,13 +8,13 @@ BLAS, and hardware pairs within a geometry); within a primitive they follow
 
 from __future__ import annotations
 
-import hashlib
 from dataclasses import dataclass
 
 import numpy as np
 
 from ..alpha_test import MaterialRules
 from ..pair import corner_uvs
+from ..rows import first_occurrences
 from .model import Scene
 from .pairing import pair_triangles
 
@@ -94,17 +94,8 @@ def pair_corner_uvs(at: AlphaTriangles) -> tuple[np.ndarray, np.ndarray, np.ndar
 
 
 def distinct_rows(*arrays) -> tuple[np.ndarray, np.ndarray]:
-    """Indices of the first occurrence of each distinct row across the arrays, and for every row
-    the index of its distinct representative (0..D-1)."""
-    parts = [np.ascontiguousarray(a).reshape(len(a), -1) for a in arrays]
-    n = len(parts[0])
-    seen: dict[bytes, int] = {}
-    reps, inverse = [], np.empty(n, np.int64)
-    for i in range(n):
-        k = hashlib.blake2b(b"".join(p[i].tobytes() for p in parts), digest_size=16).digest()
-        j = seen.get(k)
-        if j is None:
-            j = seen[k] = len(reps)
-            reps.append(i)
-        inverse[i] = j
-    return np.array(reps, np.int64), inverse
+    """Indices of the first occurrence of each distinct row across the arrays (their bytes side by
+    side), and for every row the index of its distinct representative (0..D-1, in the order of
+    first use): ``rows.first_occurrences``."""
+    parts = [np.ascontiguousarray(a).reshape(len(a), -1).view(np.uint8) for a in arrays]
+    return first_occurrences(np.concatenate(parts, axis=1) if len(parts) > 1 else parts[0])
