@@ -67,7 +67,7 @@ from common import TEXTURES  # ../shared/data/textures, one place
 
 from omaps import birdcurve
 from omaps.omm import files as omm_files
-from omaps.omm import format as omm_format
+from omaps import omm_format
 from omaps.texture import load_alpha
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -34,7 +34,7 @@ from bench_bilinear import CUTOFF, LEAF, issue_triangles  # the oak case's trian
 
 from omaps.alpha_test import StateRule
 from omaps.bake.micromap import GROW_TEXEL, bake_micromaps, flag_table
-from omaps.omm import format as omm_format
+from omaps import omm_format
 from omaps.omm.pipeline import Geometry, OmmSettings, build
 from omaps.omm.resolve import resolve_counted
 from omaps.texture import load_alpha

@@ -25,7 +25,7 @@ from numba import njit, prange
 from omaps import birdcurve, pair
 from omaps.alpha_test import StateRule, sample_passes
 from omaps.bake import bake_micromaps
-from omaps.omm import format as omm_format
+from omaps import omm_format
 from omaps.omm import resolve
 from omaps.promotion import PROMOTIONS
 from omaps.texture import load_alpha

@@ -250,7 +250,7 @@ def bake_omms(inputs, output=None, *, level: int | None = None, dynamic: float |
     """
     from .atomic import Outputs
     from .omm import files, gltf_io
-    from .omm import format as omm_format
+    from . import omm_format
     from .omm import inputs as omm_inputs
     from .omm.pipeline import build
 

@@ -1,7 +1,7 @@
 """The names the command line offers, defined once and without numpy or numba, so that parsing a
 command line (and ``omaps omm --help``) loads no kernels. The modules that give the names their
 meaning import them from here: ``sampling`` (filters, wrap modes), ``alpha_test`` (corpus and
-BLEND rules), ``promotion``, ``codecs.options`` (encoders, efforts), ``omm.format`` (OMM formats).
+BLEND rules), ``promotion``, ``codecs.options`` (encoders, efforts), ``omm_format`` (OMM formats).
 
 Example::
 
@@ -20,5 +20,5 @@ BLEND_RULES = ("levels", "cutoff", "skip")  # glTF BLEND materials (``alpha_test
 PROMOTIONS = ("nearest", "opaque", "transparent", "hashed")  # what a C region becomes (``promotion``)
 ENCODERS = ("paper", "best")  # the deck's compressor, and our search (``codecs.options``)
 EFFORTS = {"fast": 0, "medium": 1, "thorough": 2}  # our encoder's search effort (``codecs.options``)
-OMM_FORMATS = {"2state": 1, "4state": 2}  # standard OMM formats and their codes (``omm.format``)
+OMM_FORMATS = {"2state": 1, "4state": 2}  # standard OMM formats and their codes (``omm_format``)
 BUDGET_WEIGHTS = ("area", "view")  # a byte budget's weights: world area x instances, or ``view``

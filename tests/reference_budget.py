@@ -34,7 +34,7 @@ from omaps.errors import InputError
 from omaps.bake import GROW_TEXEL, bake_micromaps, dynamic_levels
 from omaps.bake.micromap import check_uv_triangles, flag_table
 from omaps.scene.alpha import distinct_rows
-from omaps.omm import format as omm_format
+from omaps import omm_format
 from omaps.omm.budget import _doubt
 from omaps.omm.resolve import resolve
 

@@ -220,7 +220,7 @@ def test_omm_budget_no_special_below_one_micromap_is_an_input_error(tmp_path):
 def _recount(summary_dir):
     """Bytes of the micromaps an OMM folder stores, from its records alone."""
     from omaps.omm import files
-    from omaps.omm import format as omm_format
+    from omaps import omm_format
 
     res = files.read(str(summary_dir))
     return sum(omm_format.micromap_bytes(int(r["level"]), int(r["format"])) + omm_format.TRIANGLE_RECORD.itemsize

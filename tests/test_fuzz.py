@@ -46,7 +46,7 @@ from omaps.alpha_test import MaterialRules
 from omaps.cli.main import main
 from omaps.codecs import get_codec
 from omaps.errors import InputError
-from omaps.omm import format as omm_format
+from omaps import omm_format
 from omaps.omm.inputs import gltf_spec, load_geometries, load_uvs, texture_spec
 from omaps.omm.pipeline import OmmSettings, build
 from omaps.omm.verify import verify

@@ -18,7 +18,7 @@ from omaps.bake import GROW_TEXEL, bake_micromap_rows, bake_micromaps, bake_squa
 from omaps.coverage import cell_fractions, micro_fractions
 from omaps.errors import InputError
 from omaps.omm import files, resolve
-from omaps.omm import format as omm_format
+from omaps import omm_format
 from omaps.omm.pipeline import Geometry, OmmSettings, build
 from omaps.texture import AlphaTexture
 

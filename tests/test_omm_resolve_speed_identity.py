@@ -12,7 +12,7 @@ from conftest import TEXTURES, needs_shared
 from omaps import coverage, promotion
 from omaps.alpha_test import AlphaTest, StateRule, sample_passes
 from omaps.bake import GROW_TEXEL, bake_micromaps
-from omaps.omm import format as omm_format
+from omaps import omm_format
 from omaps.omm import resolve
 from omaps.sampling import FILTERS, WRAP_MODES
 from omaps.texture import load_alpha

@@ -33,7 +33,7 @@ COMMAND_FAMILIES = {
     "square": (("omaps.flag_table", "omaps.raster", "omaps.bake.square"), 10),
     "micromap": (("omaps.flag_table", "omaps.bake.micromap"), 9),
     "trace": (("omaps.trace.rays", "omaps.scene.pairing", "omaps.rows"), 10),
-    "omm": (("omaps.omm.resolve", "omaps.omm.format", "omaps.coverage", "omaps.rows"), 6),
+    "omm": (("omaps.omm.resolve", "omaps.omm_format", "omaps.coverage", "omaps.rows"), 6),
     "budget": (("omaps.allocate", "omaps.omm.budget"), 10),
 }
 

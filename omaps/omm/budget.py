@@ -33,7 +33,7 @@ from ..bake import GROW_TEXEL, bake_micromaps, dynamic_levels
 from ..bake.micromap import check_uv_triangles, flag_table
 from ..rows import unique_rows
 from ..scene.alpha import distinct_rows
-from . import format as omm_format
+from .. import omm_format
 from .resolve import resolve
 
 __all__ = ["budget_levels", "GeometryBudget", "FINEST_TEXELS"]

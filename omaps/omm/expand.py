@@ -13,10 +13,11 @@ import numpy as np
 from .. import states
 from ..codecs import get_codec
 from . import pairs, resolve
-from . import format as omm_format
+from .. import omm_format
 from .files import settings_from_summary
 from .inputs import load_geometries
-from .pipeline import OmmResult, Packer
+from ..omm_format import Packer
+from .pipeline import OmmResult
 
 __all__ = ["decoded_blocks", "expand_result"]
 
@@ -41,7 +42,7 @@ def expand_result(res: OmmResult, **assets) -> OmmResult:
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         geoms, _, _ = load_geometries(res.summary["input"], **assets)  # (root, allow_outside: load_scene's)
-    packer = Packer(settings)
+    packer = Packer(settings.format_code, settings.special, settings.dedup)
     parts, first = [], 0
     for g in geoms:
         n = len(g.tris_uv)

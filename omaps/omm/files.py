@@ -16,7 +16,7 @@ import numpy as np
 
 from .. import atomic
 from ..errors import InputError
-from . import format as omm_format
+from .. import omm_format
 from .inputs import check_spec
 from .pipeline import OmmResult, OmmSettings
 

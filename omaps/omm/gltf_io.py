@@ -18,7 +18,7 @@ import numpy as np
 
 from ..errors import InputError
 from ..scene.files import SCENE_SUFFIXES
-from . import format as omm_format
+from .. import omm_format
 from .pipeline import OmmResult
 
 __all__ = ["GLTF_SUFFIXES", "is_gltf", "write_gltf_result", "read_gltf", "OMAPS_KEY"]

@@ -34,8 +34,9 @@ from ..bake.micromap import (GROW_TEXEL, bake_micromaps, check_level, check_uv_t
                              micro_starts, texel_areas)
 from ..errors import InputError
 from ..names import PROMOTIONS
+from .. import omm_format
 from .. import rows as omaps_rows
-from . import format as omm_format
+from ..omm_format import Packer
 from . import resolve
 
 # The square sources (--from SCHEME: the pair baker, the codecs, the encoding workers, the
@@ -166,93 +167,6 @@ class OmmResult:
         if i >= 0:
             return self.micromap_states(i)
         return np.array([-1 - i], dtype=np.uint8)
-
-
-class Packer:
-    """The pack stage: collects micromaps, turning uniform ones into special indices and sharing
-    duplicates (``rows.RowIndex`` per level and format: hashed, then compared word by word).
-
-    Preconditions of ``add``: rows of OMM states (0..3, ``omm.format``) of one level, every row
-    ``4**level`` long, 2-state rows holding only 0 and 1. ``record_array`` and ``data`` give the
-    packed buffers in the order micromaps were first added."""
-
-    def __init__(self, settings: OmmSettings):
-        self.s = settings
-        self.chunks: list[bytes] = []
-        self.size = 0
-        self.records: list[np.ndarray] = []  # TRIANGLE_RECORD arrays, in order
-        self.singles: list[tuple[int, int, int]] = []  # records added one by one, after those
-        self.n_records = 0
-        # per (level, format): the distinct micromaps stored, and each one's record
-        self.stored: dict[tuple[int, int], tuple[omaps_rows.RowIndex, np.ndarray]] = {}
-        self.needing = 0  # micromaps before reuse of identical ones
-
-    def add(self, omm_states: np.ndarray, level: int, fmt: int | None = None, weights=None) -> np.ndarray:
-        """Index buffer entries for micromaps (n, 4**level) of one level (and format: default the
-        settings'); ``weights``: how many triangles each row stands for (default one)."""
-        fmt = self.s.format_code if fmt is None else fmt
-        idx = np.empty(len(omm_states), dtype=np.int32)
-        need = np.ones(len(omm_states), dtype=bool)
-        if self.s.special:
-            uniform = omm_format.uniform_rows(omm_states)
-            idx[uniform] = omm_format.SPECIAL_INDEX[omm_states[uniform, 0]]
-            need = ~uniform
-        rows = np.flatnonzero(need)
-        self.needing += len(rows) if weights is None else int(np.sum(weights[rows]))
-        if len(rows) == 0:
-            return idx
-        packed = omm_format.pack(omm_states[rows], fmt)
-        if not self.s.dedup:
-            for r, row in zip(rows, packed):
-                idx[r] = self._new(row.tobytes(), level, fmt)
-            return idx
-        index, record_of = self.stored.get((level, fmt), (None, np.zeros(0, np.int32)))
-        if index is None:
-            index = omaps_rows.RowIndex(packed.shape[1])
-        before = index.n
-        ids = index.add(packed)
-        fresh = omaps_rows.first_uses(ids, before)  # the first row of each micromap not stored before
-        nbytes = packed.shape[1]
-        if len(fresh):
-            if self.size + len(fresh) * nbytes > 0xFFFFFFFF:
-                raise InputError("micromap data exceeds the 4 GiB a 32-bit data offset can address; lower the level")
-            rec = np.empty(len(fresh), dtype=omm_format.TRIANGLE_RECORD)
-            rec["data_offset"] = self.size + nbytes * np.arange(len(fresh), dtype=np.int64)
-            rec["level"], rec["format"] = level, fmt
-            self._flush_singles()  # (they came first)
-            self.records.append(rec)
-            record_of = np.concatenate([record_of, self.n_records + np.arange(len(fresh), dtype=np.int32)])
-            self.n_records += len(fresh)
-            self.chunks.append(packed[fresh].tobytes())
-            self.size += len(fresh) * nbytes
-        self.stored[(level, fmt)] = (index, record_of)
-        idx[rows] = record_of[ids]
-        return idx
-
-    def _flush_singles(self) -> None:
-        if self.singles:
-            self.records.append(np.array(self.singles, dtype=omm_format.TRIANGLE_RECORD))
-            self.singles = []
-
-    def record_array(self) -> np.ndarray:
-        """Every record so far, as one TRIANGLE_RECORD array."""
-        self._flush_singles()
-        if len(self.records) != 1:
-            self.records = [np.concatenate(self.records) if self.records else np.zeros(0, omm_format.TRIANGLE_RECORD)]
-        return self.records[0]
-
-    def data(self) -> np.ndarray:
-        """Every micromap's packed states so far, as one uint8 array (record ``data_offset`` into it)."""
-        return np.frombuffer(b"".join(self.chunks), dtype=np.uint8).copy()
-
-    def _new(self, raw: bytes, level: int, fmt: int) -> int:
-        self.singles.append((self.size, level, fmt))
-        self.n_records += 1
-        self.chunks.append(raw)
-        self.size += len(raw)
-        if self.size > 0xFFFFFFFF:
-            raise InputError("micromap data exceeds the 4 GiB a 32-bit data offset can address; lower the level")
-        return self.n_records - 1
 
 
 def chunk_ranges(levels: np.ndarray):
@@ -407,7 +321,7 @@ def build(geometries: list[Geometry], settings: OmmSettings = OmmSettings(),
     scheme = settings.scheme
     n_map = scheme.codec.map_size if scheme is not None else None
     fmt = settings.format_code
-    packer = Packer(settings)
+    packer = Packer(fmt, settings.special, settings.dedup)
     index_parts, blocks_all, records_all, geo_info = [], [], [], []
     n_blocks_total = 0
     counts3 = np.zeros(3, dtype=np.int64)

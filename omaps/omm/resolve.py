@@ -16,7 +16,7 @@ from ..alpha_test import AlphaTest
 from ..birdcurve import vertex_table
 from ..coverage import TAPS, micro_corners_of, micro_hits_with, sample_levels, sample_points, texel_triangles
 from ..promotion import HASHED, hashed_threshold, hits_needed, promotion_code
-from . import format as omm_format
+from .. import omm_format
 
 __all__ = ["resolve", "resolve_counted"]
 

@@ -14,7 +14,7 @@ from ..coverage import micro_fractions
 from ..errors import InputError
 from . import files, pairs
 from .files import settings_from_summary
-from . import format as omm_format
+from .. import omm_format
 from .inputs import load_geometries
 from .pipeline import OmmResult, build
 

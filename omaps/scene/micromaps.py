@@ -10,7 +10,7 @@ InputError naming the file. Writing (``write_gltf``) works on the file's JSON an
 as the scene reader) directly (no glTF library round trip), so every mesh, material, image,
 node, animation, camera and unknown extension or extra of the input is kept as it was: the new
 data is appended as buffer views (and accessors for the per-primitive indices). The OMM format's
-facts (record layout, level limit, sizes, record checks) are ``omm.format``'s.
+facts (record layout, level limit, sizes, record checks) are ``omm_format``'s.
 """
 
 from __future__ import annotations
@@ -22,7 +22,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..errors import InputError
-from ..omm.format import MAX_LEVEL, PAIR_RECORD, TRIANGLE_RECORD, record_problem
+from ..omm_format import MAX_LEVEL, PAIR_RECORD, TRIANGLE_RECORD, record_problem
 from .container import AssetPolicy, read_container, relocated_uri, write_glb, write_json
 
 __all__ = ["EXT_OMM", "EXT_PAIRS", "MicromapArray", "PrimitiveMicromap", "PairMaps", "PrimitivePairs",
@@ -30,7 +30,7 @@ __all__ = ["EXT_OMM", "EXT_PAIRS", "MicromapArray", "PrimitiveMicromap", "PairMa
 
 EXT_OMM = "EXT_mesh_opacity_micromap"
 EXT_PAIRS = "OMAPS_pair_opacity_maps"
-RECORD = TRIANGLE_RECORD  # VkMicromapTriangleKHR (omm.format's)
+RECORD = TRIANGLE_RECORD  # VkMicromapTriangleKHR (omm_format's)
 _UNSIGNED = {5121: 8, 5123: 16, 5125: 32}
 _SIGNED = {5122: 16, 5124: 32}
 

@@ -40,7 +40,7 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
-from .. import birdcurve, pair
+from .. import birdcurve, omm_format, pair
 from ..codecs import bit_length, get_bits
 
 __all__ = ["LINE_BYTES", "TILE", "Lookups", "Layout", "record_lookups", "layouts", "touches", "measure",
@@ -49,7 +49,7 @@ __all__ = ["LINE_BYTES", "TILE", "Lookups", "Layout", "record_lookups", "layouts
 LINE_BYTES = 64
 TILE = 8  # pixels per side of the tile of rays that shares a cache
 INDEX_BYTES = 4  # an index buffer entry or a byte offset
-RECORD_BYTES = 8  # a standard OMM triangle record (u32 data offset, u16 level, u16 format)
+RECORD_BYTES = omm_format.TRIANGLE_RECORD.itemsize  # a standard OMM triangle record
 
 # layout kinds (the walks below)
 K_NONE, K_ROWS, K_OMM, K_BLOCK, K_SUCCINCT, K_CSM = 0, 1, 2, 3, 4, 5
@@ -126,19 +126,16 @@ def _align(n: int) -> int:
 
 def _standard_omm(sm) -> tuple[np.ndarray, np.ndarray, int]:
     """Per triangle its index buffer entry, per record its data offset, and the data bytes of the
-    triL maps written by the rules of ``omaps omm``'s pack stage (docs/FORMAT.md, "Standard opacity
-    micromaps"): 4-state data (C as unknown-transparent), a uniform micromap a special index (-1
-    T, -2 O, -3 C) with no record or data, identical micromaps once; records in the order of the
-    distinct micromaps (``sm``'s rows, already distinct), data packed in record order."""
+    triL maps as ``omaps omm`` packs them (``omm_format.Packer``; docs/FORMAT.md, "Standard
+    opacity micromaps"): 4-state data (C as unknown-transparent), a uniform micromap a special
+    index with no record or data, identical micromaps once (``sm``'s rows are already distinct)."""
     from ..codecs import unpack_states
 
     n_rows = len(sm.data) // sm.row_bytes
-    st = unpack_states(sm.data.reshape(n_rows, sm.row_bytes), 4 ** sm.param)
-    uniform = (st == st[:, :1]).all(axis=1)
-    entry = np.where(uniform, -1 - st[:, 0].astype(np.int64), np.cumsum(~uniform) - 1)
-    n_rec = int(np.count_nonzero(~uniform))
-    offs = sm.row_bytes * np.arange(n_rec, dtype=np.int64)
-    return entry[sm.rows].astype(np.int64), offs, n_rec * sm.row_bytes
+    packer = omm_format.Packer(omm_format.FORMAT_4_STATE)
+    entry = packer.add(unpack_states(sm.data.reshape(n_rows, sm.row_bytes), 4 ** sm.param), sm.param)
+    offs = packer.record_array()["data_offset"].astype(np.int64)
+    return entry[sm.rows].astype(np.int64), offs, packer.size
 
 
 def layouts(sm, at) -> dict[str, Layout]:

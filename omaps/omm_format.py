@@ -19,9 +19,11 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from ..birdcurve import MAX_LEVEL  # the APIs' largest subdivision level
-from ..codecs import pack_states, row_bytes, unpack_states
-from ..names import OMM_FORMATS
+from . import rows as rows_mod
+from .birdcurve import MAX_LEVEL  # the APIs' largest subdivision level
+from .codecs import pack_states, row_bytes, unpack_states
+from .errors import InputError
+from .names import OMM_FORMATS
 
 FORMAT_2_STATE = 1
 FORMAT_4_STATE = 2
@@ -139,3 +141,105 @@ def uniform_rows(omm_states: np.ndarray) -> np.ndarray:
     """Per micromap (M, K), whether all its micro-triangles share one state (a special index)."""
     return _uniform_rows(np.ascontiguousarray(omm_states, dtype=np.uint8))
 
+
+class Packer:
+    """The pack stage: collects micromaps, turning uniform ones into special indices and sharing
+    duplicates (``rows.RowIndex`` per level and format: hashed, then compared word by word).
+
+    Preconditions of ``add``: rows of OMM states (0..3, above) of one level, every row ``4**level``
+    long, 2-state rows holding only 0 and 1. ``record_array`` and ``data`` give the packed buffers
+    in the order micromaps were first added. ``omaps omm``'s pack stage, and the tracer's model of
+    the memory its micromaps take (``trace --memory``): one statement of the rules.
+
+    Example::
+
+        >>> import numpy as np
+        >>> from omaps.omm_format import Packer
+        >>> packer = Packer()  # 4-state, special indices, reuse
+        >>> packer.add(np.array([[0, 0, 0, 0], [0, 1, 2, 3], [1, 1, 1, 1], [0, 1, 2, 3]], np.uint8), 1).tolist()
+        [-1, 0, -2, 0]
+        >>> packer.record_array()["data_offset"].tolist(), packer.data().tolist()
+        ([0], [228])
+    """
+
+    def __init__(self, format_code: int = FORMAT_4_STATE, special: bool = True, dedup: bool = True):
+        if format_code not in BITS:
+            raise ValueError(f"unknown OMM format code {format_code!r} (1 or 2)")
+        self.format_code = int(format_code)
+        self.special = bool(special)  # uniform micromaps as special indices
+        self.dedup = bool(dedup)  # identical micromaps stored once
+        self.chunks: list[bytes] = []
+        self.size = 0
+        self.records: list[np.ndarray] = []  # TRIANGLE_RECORD arrays, in order
+        self.singles: list[tuple[int, int, int]] = []  # records added one by one, after those
+        self.n_records = 0
+        # per (level, format): the distinct micromaps stored, and each one's record
+        self.stored: dict[tuple[int, int], tuple[rows_mod.RowIndex, np.ndarray]] = {}
+        self.needing = 0  # micromaps before reuse of identical ones
+
+    def add(self, omm_states: np.ndarray, level: int, fmt: int | None = None, weights=None) -> np.ndarray:
+        """Index buffer entries for micromaps (n, 4**level) of one level (and format: default the
+        packer's); ``weights``: how many triangles each row stands for (default one)."""
+        fmt = self.format_code if fmt is None else fmt
+        idx = np.empty(len(omm_states), dtype=np.int32)
+        need = np.ones(len(omm_states), dtype=bool)
+        if self.special:
+            uniform = uniform_rows(omm_states)
+            idx[uniform] = SPECIAL_INDEX[omm_states[uniform, 0]]
+            need = ~uniform
+        rows = np.flatnonzero(need)
+        self.needing += len(rows) if weights is None else int(np.sum(weights[rows]))
+        if len(rows) == 0:
+            return idx
+        packed = pack(omm_states[rows], fmt)
+        if not self.dedup:
+            for r, row in zip(rows, packed):
+                idx[r] = self._new(row.tobytes(), level, fmt)
+            return idx
+        index, record_of = self.stored.get((level, fmt), (None, np.zeros(0, np.int32)))
+        if index is None:
+            index = rows_mod.RowIndex(packed.shape[1])
+        before = index.n
+        ids = index.add(packed)
+        fresh = rows_mod.first_uses(ids, before)  # the first row of each micromap not stored before
+        nbytes = packed.shape[1]
+        if len(fresh):
+            if self.size + len(fresh) * nbytes > 0xFFFFFFFF:
+                raise InputError("micromap data exceeds the 4 GiB a 32-bit data offset can address; lower the level")
+            rec = np.empty(len(fresh), dtype=TRIANGLE_RECORD)
+            rec["data_offset"] = self.size + nbytes * np.arange(len(fresh), dtype=np.int64)
+            rec["level"], rec["format"] = level, fmt
+            self._flush_singles()  # (they came first)
+            self.records.append(rec)
+            record_of = np.concatenate([record_of, self.n_records + np.arange(len(fresh), dtype=np.int32)])
+            self.n_records += len(fresh)
+            self.chunks.append(packed[fresh].tobytes())
+            self.size += len(fresh) * nbytes
+        self.stored[(level, fmt)] = (index, record_of)
+        idx[rows] = record_of[ids]
+        return idx
+
+    def _flush_singles(self) -> None:
+        if self.singles:
+            self.records.append(np.array(self.singles, dtype=TRIANGLE_RECORD))
+            self.singles = []
+
+    def record_array(self) -> np.ndarray:
+        """Every record so far, as one TRIANGLE_RECORD array."""
+        self._flush_singles()
+        if len(self.records) != 1:
+            self.records = [np.concatenate(self.records) if self.records else np.zeros(0, TRIANGLE_RECORD)]
+        return self.records[0]
+
+    def data(self) -> np.ndarray:
+        """Every micromap's packed states so far, as one uint8 array (record ``data_offset`` into it)."""
+        return np.frombuffer(b"".join(self.chunks), dtype=np.uint8).copy()
+
+    def _new(self, raw: bytes, level: int, fmt: int) -> int:
+        self.singles.append((self.size, level, fmt))
+        self.n_records += 1
+        self.chunks.append(raw)
+        self.size += len(raw)
+        if self.size > 0xFFFFFFFF:
+            raise InputError("micromap data exceeds the 4 GiB a 32-bit data offset can address; lower the level")
+        return self.n_records - 1
