@@ -66,11 +66,28 @@ def vertex_table() -> np.ndarray:
 
 @njit(cache=True, inline="always")
 def table_vertices(table, index, level):
-    """``micro_vertices(index, level)``, from ``vertex_table()`` where it holds the level."""
+    """``micro_vertices(index, level)`` from ``vertex_table()``: one row where the table holds the
+    level; deeper, the curve's digits a group of TABLE_LEVELS - 1 levels at a time, each group's
+    micro-triangle placed inside the one before (p0 + b1 (p1 - p0) + b2 (p2 - p0)). Every value
+    is a multiple of 2**-level with at most 2 * MAX_LEVEL significant bits, so each step is exact
+    and the result is the digit walk's to the last bit."""
     if level < TABLE_LEVELS:
         j = ((1 << (2 * level)) - 1) // 3 + index
         return (table[j, 0], table[j, 1]), (table[j, 2], table[j, 3]), (table[j, 4], table[j, 5])
-    return micro_vertices(index, level)
+    p0x, p0y, p1x, p1y, p2x, p2y = 0.0, 0.0, 1.0, 0.0, 0.0, 1.0
+    rest = level
+    while rest > 0:
+        g = min(rest, TABLE_LEVELS - 1)
+        rest -= g
+        j = ((1 << (2 * g)) - 1) // 3 + ((index >> (2 * rest)) & ((1 << (2 * g)) - 1))
+        ex, ey, fx, fy = p1x - p0x, p1y - p0y, p2x - p0x, p2y - p0y
+        p0x, p0y, p1x, p1y, p2x, p2y = (p0x + table[j, 0] * ex + table[j, 1] * fx,
+                                        p0y + table[j, 0] * ey + table[j, 1] * fy,
+                                        p0x + table[j, 2] * ex + table[j, 3] * fx,
+                                        p0y + table[j, 2] * ey + table[j, 3] * fy,
+                                        p0x + table[j, 4] * ex + table[j, 5] * fx,
+                                        p0y + table[j, 4] * ey + table[j, 5] * fy)
+    return (p0x, p0y), (p1x, p1y), (p2x, p2y)
 
 
 @njit(cache=True, inline="always")
