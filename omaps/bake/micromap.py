@@ -26,9 +26,9 @@ are computed once; a grown leaf then reads its own box from the table before its
 kernels and ``bilinear``'s cell kernels run without numba's reference counting (they allocate
 nothing; the atomic counts of their array arguments took about a tenth of the bake).
 
-Triangles run in parallel (numba ``prange``), in ``locality_order`` (neighbours in the texture one
-after another, so the grid's cells stay in the caches); ``numba.set_num_threads`` picks the thread
-count.
+Triangles run in parallel, in ``locality_order`` (neighbours in the texture one after another, so
+the grid's cells stay in the caches), in chunks each thread takes as it becomes free
+(``omaps.parallel``); ``numba.set_num_threads`` picks the thread count.
 
 Example::
 
@@ -46,7 +46,6 @@ from __future__ import annotations
 
 import math
 
-import numba
 import numpy as np
 from numba import njit, prange
 
@@ -54,6 +53,7 @@ from ..bilinear import POLY_MAX, point_flag
 from ..birdcurve import CHILD_VERTS, MAX_LEVEL, bary_point, child
 from ..errors import InputError
 from ..flag_table import MARGIN, box_flag, flag_table
+from ..parallel import fetch_add, workers
 from ..raster import rows_flag
 from ..sampling import FootprintGrid
 
@@ -313,11 +313,12 @@ def locality_order(tris_uv: np.ndarray, width: int, height: int) -> np.ndarray:
 
 
 @njit(cache=True, parallel=True)
-def _bake_all(sat, grid, tris, order, levels, starts, w, h, offset, grow, out):
+def _bake_all(sat, grid, tris, order, levels, starts, w, h, offset, grow, n_workers, out):
     flags, mixed, values, bounds, period_x, period_y = grid
     empty = np.zeros(tris.shape[0], dtype=np.int64)
     n_chunks = (tris.shape[0] + CHUNK - 1) // CHUNK
-    for c in prange(n_chunks):
+    next_chunk = np.zeros(1, dtype=np.int64)
+    for _ in prange(n_workers):  # one loop per thread, each taking the next chunk (``omaps.parallel``)
         st_l = np.empty(STACK, dtype=np.int64)
         st_k = np.empty(STACK, dtype=np.int64)
         st_v = np.empty((STACK, 6), dtype=np.int64)
@@ -328,13 +329,17 @@ def _bake_all(sat, grid, tris, order, levels, starts, w, h, offset, grow, out):
         ptri = np.empty((3, 2))
         buf_a = np.empty((POLY_MAX, 2))
         buf_b = np.empty((POLY_MAX, 2))
-        for i in range(c * CHUNK, min((c + 1) * CHUNK, tris.shape[0])):
-            t = order[i]
-            for v in range(3):
-                tri[v, 0] = tris[t, v, 0]
-                tri[v, 1] = tris[t, v, 1]
-            empty[t] = _bake_one(sat, flags, mixed, values, bounds, period_x, period_y, tri, levels[t], w, h, offset,
-                                 grow, out, starts[t], st_l, st_k, st_v, st_f, vx, vf, ptri, buf_a, buf_b)
+        while True:
+            c = fetch_add(next_chunk, 1)
+            if c >= n_chunks:
+                break
+            for i in range(c * CHUNK, min((c + 1) * CHUNK, tris.shape[0])):
+                t = order[i]
+                for v in range(3):
+                    tri[v, 0] = tris[t, v, 0]
+                    tri[v, 1] = tris[t, v, 1]
+                empty[t] = _bake_one(sat, flags, mixed, values, bounds, period_x, period_y, tri, levels[t], w, h,
+                                     offset, grow, out, starts[t], st_l, st_k, st_v, st_f, vx, vf, ptri, buf_a, buf_b)
     return empty
 
 
@@ -364,9 +369,8 @@ def bake_micromaps(grid: FootprintGrid, tris_uv, levels, grow: float = 0.0,
     out = np.empty(int(starts[-1]), dtype=np.uint8)
     if len(t):
         sat = flag_table(grid) if sat is None else sat
-        with numba.parallel_chunksize(1):  # hand out chunks dynamically: threads may be slowed unevenly
-            empty = _bake_all(sat, grid.kernel_args(), t, locality_order(t, grid.width, grid.height), lv, starts,
-                              float(grid.width), float(grid.height), float(grid.offset), float(grow), out)
+        empty = _bake_all(sat, grid.kernel_args(), t, locality_order(t, grid.width, grid.height), lv, starts,
+                          float(grid.width), float(grid.height), float(grid.offset), float(grow), workers(), out)
         if empty.any():
             bad = int(np.flatnonzero(empty)[0])
             raise InputError(f"UV triangle {bad} has micro-triangles with no area")

@@ -8,12 +8,12 @@ output has no unknown: C becomes O or T outright (no longer conservative). The c
 
 from __future__ import annotations
 
-import numba
 import numpy as np
 from numba import njit, prange
 
 from ..alpha_test import AlphaTest
 from ..birdcurve import vertex_table
+from ..parallel import fetch_add, workers
 from ..coverage import TAPS, micro_corners_of, micro_hits_with, sample_levels, sample_points, texel_triangles
 from ..promotion import HASHED, hashed_threshold, hits_needed, promotion_code
 from .. import omm_format
@@ -75,18 +75,24 @@ def _resolve_one(states3, base, end, level, two_state, mode, seed, value, thr, i
     counts[t, 6] = r3
 
 
-CHUNK = 16  # triangles per parallel work item
+CHUNK = 16  # triangles per work item (triangles differ a lot in cost: items are taken as threads free up)
 
 
 @njit(cache=True, parallel=True)
 def _resolve(states3, starts, levels, two_state, mode, seed, value, thr, inclusive, filt, mu, mv, tris,
-             samples, sample_k, out, counts, table):
+             samples, sample_k, n_workers, out, counts, table):
     n = tris.shape[0]
-    for c in prange((n + CHUNK - 1) // CHUNK):
-        taps = np.empty((TAPS, TAPS))  # one scratch per work item, not per triangle
-        for t in range(c * CHUNK, min((c + 1) * CHUNK, n)):
-            _resolve_one(states3, starts[t], starts[t + 1], levels[t], two_state, mode, seed, value, thr, inclusive,
-                         filt, mu, mv, tris, t, samples, sample_k[t], out, counts, taps, table)
+    n_chunks = (n + CHUNK - 1) // CHUNK
+    next_chunk = np.zeros(1, dtype=np.int64)
+    for _ in prange(n_workers):  # one loop per thread, each taking the next chunk (``omaps.parallel``)
+        taps = np.empty((TAPS, TAPS))
+        while True:
+            c = fetch_add(next_chunk, 1)
+            if c >= n_chunks:
+                break
+            for t in range(c * CHUNK, min((c + 1) * CHUNK, n)):
+                _resolve_one(states3, starts[t], starts[t + 1], levels[t], two_state, mode, seed, value, thr,
+                             inclusive, filt, mu, mv, tris, t, samples, sample_k[t], out, counts, taps, table)
 
 
 def resolve_counted(states3: np.ndarray, starts: np.ndarray, levels, test: AlphaTest, tris_uv, fmt: int,
@@ -99,10 +105,9 @@ def resolve_counted(states3: np.ndarray, starts: np.ndarray, levels, test: Alpha
     out = np.empty_like(states3)
     counts = np.empty((len(tris), 7), dtype=np.int64)
     filt, mu, mv = test.codes()
-    with numba.parallel_chunksize(1):  # triangles differ a lot in cost: hand the work items out dynamically
-        _resolve(states3, np.asarray(starts, dtype=np.int64), lv, fmt == omm_format.FORMAT_2_STATE, mode, int(seed),
-                 test.value, float(test.threshold), bool(test.inclusive), filt, mu, mv, tris, sample_points(),
-                 sample_levels(tris, lv), out, counts, vertex_table())
+    _resolve(states3, np.asarray(starts, dtype=np.int64), lv, fmt == omm_format.FORMAT_2_STATE, mode, int(seed),
+             test.value, float(test.threshold), bool(test.inclusive), filt, mu, mv, tris, sample_points(),
+             sample_levels(tris, lv), workers(), out, counts, vertex_table())
     return out, counts
 
 
