@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import math
 
+import numba
 import numpy as np
 from numba import njit, prange
 
@@ -32,6 +33,7 @@ from . import birdcurve
 from .birdcurve import bary_point
 from .alpha_test import AlphaTest, passes, sample_passes
 from .pair import square_uv
+from .parallel import fetch_add
 from .sampling import address, blend
 
 __all__ = ["micro_fractions", "cell_fractions", "micro_corners", "micro_corners_of", "micro_hits_with", "SAMPLES_PER_TEXEL",
@@ -172,13 +174,18 @@ def sample_levels(tris_texel: np.ndarray, levels: np.ndarray) -> np.ndarray:
 
 
 @njit(cache=True, parallel=True)
-def _fractions(value, threshold, inclusive, filt, mu, mv, tris, levels, starts, samples, sample_k, out):
-    for t in prange(tris.shape[0]):
-        taps = np.empty((TAPS, TAPS))
-        for k in range(starts[t + 1] - starts[t]):
-            f, _, _ = micro_fraction(value, threshold, inclusive, filt, mu, mv, tris[t], k, levels[t], samples,
-                                     sample_k[t], taps)
-            out[starts[t] + k] = f
+def _fractions(value, threshold, inclusive, filt, mu, mv, tris, levels, starts, samples, sample_k, out, n_workers):
+    next_t = np.zeros(1, np.int64)
+    for worker in prange(n_workers):  # each thread takes the next t as it frees up (``omaps.parallel``)
+        while True:
+            t = fetch_add(next_t, 1)
+            if t >= tris.shape[0]:
+                break
+            taps = np.empty((TAPS, TAPS))
+            for k in range(starts[t + 1] - starts[t]):
+                f, _, _ = micro_fraction(value, threshold, inclusive, filt, mu, mv, tris[t], k, levels[t], samples,
+                                         sample_k[t], taps)
+                out[starts[t] + k] = f
 
 
 def micro_fractions(test: AlphaTest, tris_uv, levels, starts=None) -> np.ndarray:
@@ -193,7 +200,7 @@ def micro_fractions(test: AlphaTest, tris_uv, levels, starts=None) -> np.ndarray
     out = np.empty(int(starts[-1]), dtype=np.float64)
     filt, mu, mv = test.codes()
     _fractions(test.value, float(test.threshold), bool(test.inclusive), filt, mu, mv, tris, lv, starts,
-               sample_points(), sample_levels(tris, lv), out)
+               sample_points(), sample_levels(tris, lv), out, numba.get_num_threads())
     return out
 
 
@@ -208,28 +215,33 @@ def _st_to_uv(uv6, has_b, s, t):
 
 
 @njit(cache=True, parallel=True)
-def _cell_fractions(uv, has_b, n, k, value, thr, inclusive, filt, mode_u, mode_v, frac, centre):
+def _cell_fractions(uv, has_b, n, k, value, thr, inclusive, filt, mode_u, mode_v, frac, centre, n_workers):
     h, w = value.shape
-    for p in prange(uv.shape[0]):
-        for j in range(n):
-            for i in range(n):
-                hits = 0
-                total = 0
-                for b in range(k):
-                    for a in range(k):
-                        s = (i + (a + 0.5) / k) / n
-                        t = (j + (b + 0.5) / k) / n
-                        u, v, ok = _st_to_uv(uv[p], has_b[p], s, t)
-                        if ok:
-                            total += 1
-                            if sample_passes(value, thr, inclusive, filt, mode_u, mode_v, u * w, v * h):
-                                hits += 1
-                frac[p, j, i] = hits / total if total else 0.0
-                u, v, ok = _st_to_uv(uv[p], has_b[p], (i + 0.5) / n, (j + 0.5) / n)
-                if not ok:  # a lone triangle's missing half: its cells are never hit
-                    u, v, ok = _st_to_uv(uv[p], has_b[p], (j + 0.5) / n, (j + 0.5) / n)
-                centre[p, j, i, 0] = u * w
-                centre[p, j, i, 1] = v * h
+    next_p = np.zeros(1, np.int64)
+    for worker in prange(n_workers):  # each thread takes the next p as it frees up (``omaps.parallel``)
+        while True:
+            p = fetch_add(next_p, 1)
+            if p >= uv.shape[0]:
+                break
+            for j in range(n):
+                for i in range(n):
+                    hits = 0
+                    total = 0
+                    for b in range(k):
+                        for a in range(k):
+                            s = (i + (a + 0.5) / k) / n
+                            t = (j + (b + 0.5) / k) / n
+                            u, v, ok = _st_to_uv(uv[p], has_b[p], s, t)
+                            if ok:
+                                total += 1
+                                if sample_passes(value, thr, inclusive, filt, mode_u, mode_v, u * w, v * h):
+                                    hits += 1
+                    frac[p, j, i] = hits / total if total else 0.0
+                    u, v, ok = _st_to_uv(uv[p], has_b[p], (i + 0.5) / n, (j + 0.5) / n)
+                    if not ok:  # a lone triangle's missing half: its cells are never hit
+                        u, v, ok = _st_to_uv(uv[p], has_b[p], (j + 0.5) / n, (j + 0.5) / n)
+                    centre[p, j, i, 0] = u * w
+                    centre[p, j, i, 1] = v * h
 
 
 def cell_fractions(test: AlphaTest, corner_uv: np.ndarray, has_b: np.ndarray, n: int,
@@ -242,5 +254,5 @@ def cell_fractions(test: AlphaTest, corner_uv: np.ndarray, has_b: np.ndarray, n:
     filt, mu, mv = test.codes()
     _cell_fractions(np.ascontiguousarray(corner_uv, dtype=np.float64), np.ascontiguousarray(has_b, dtype=np.bool_),
                     n, k, np.ascontiguousarray(test.value), float(test.threshold), bool(test.inclusive), filt, mu, mv,
-                    frac, centre)
+                    frac, centre, numba.get_num_threads())
     return frac, centre

@@ -4,38 +4,40 @@ numba's ``prange`` splits its iterations into one contiguous range per thread, w
 ``numba.parallel_chunksize`` asks for under the OpenMP threading layer (measured: a loop whose
 first half costs ten times its second ran no faster on two threads than on one). The bakers
 visit triangles in texture order (``bake.micromap.locality_order``), where cost follows the
-texture, so a static split left one thread waiting for the other. A kernel instead runs one
-``prange`` iteration per thread, and each takes the next work item from a shared counter
+texture (and the tracer rows of an image, whose cost follows the picture), so a static split
+left one thread waiting for the other. A kernel instead runs one ``prange`` iteration per thread
+(``numba.get_num_threads()``), and each takes the next work item from a shared counter
 (``fetch_add``, an atomic add) until none is left: the items keep their order, a thread that is
 slowed (by the image or by the machine) takes fewer, and no thread waits longer than one item.
+(numba may fold a read of the counter after the loop to its initial value: only ``fetch_add``
+reads it.)
 
 Example::
 
     >>> import numba, numpy as np
-    >>> from omaps.parallel import fetch_add, workers
+    >>> from omaps.parallel import fetch_add
     >>> @numba.njit(parallel=True)
-    ... def squares(n, n_workers):
+    ... def squares(n):
     ...     out = np.zeros(n, np.int64)
     ...     counter = np.zeros(1, np.int64)
-    ...     for w in numba.prange(n_workers):
+    ...     for w in numba.prange(numba.get_num_threads()):
     ...         while True:
     ...             i = fetch_add(counter, 1)
     ...             if i >= n:
     ...                 break
     ...             out[i] = i * i
     ...     return out
-    >>> squares(5, workers()).tolist()
+    >>> squares(5).tolist()
     [0, 1, 4, 9, 16]
 """
 
 from __future__ import annotations
 
-import numba
 from numba import types
 from numba.core import cgutils
 from numba.extending import intrinsic
 
-__all__ = ["fetch_add", "workers"]
+__all__ = ["fetch_add"]
 
 
 @intrinsic
@@ -55,9 +57,3 @@ def fetch_add(typingctx, counter, step):
         return builder.atomic_rmw("add", ptr, value, "monotonic")
 
     return sig, codegen
-
-
-def workers() -> int:
-    """How many work-taking loops a kernel runs: the threads numba runs a parallel loop on now
-    (``numba.set_num_threads``), one loop each."""
-    return int(numba.get_num_threads())

@@ -7,7 +7,7 @@ import pytest
 
 from omaps.alpha_test import StateRule
 from omaps.bake.micromap import GROW_TEXEL, bake_micromaps
-from omaps.parallel import fetch_add, workers
+from omaps.parallel import fetch_add
 from omaps.texture import load_alpha
 
 
@@ -31,7 +31,7 @@ def test_every_item_taken_once(threads, n, step):
     before = numba.get_num_threads()
     numba.set_num_threads(min(threads, numba.config.NUMBA_NUM_THREADS))
     try:
-        n_workers = workers()
+        n_workers = numba.get_num_threads()
         taken, counter = _take_all(n, n_workers, step)
         final = int(counter[0])
     finally:

@@ -46,6 +46,7 @@ from __future__ import annotations
 
 import math
 
+import numba
 import numpy as np
 from numba import njit, prange
 
@@ -53,7 +54,7 @@ from ..bilinear import POLY_MAX, point_flag
 from ..birdcurve import CHILD_VERTS, MAX_LEVEL, bary_point, child
 from ..errors import InputError
 from ..flag_table import MARGIN, box_flag, flag_table
-from ..parallel import fetch_add, workers
+from ..parallel import fetch_add
 from ..raster import rows_flag
 from ..sampling import FootprintGrid
 
@@ -313,12 +314,12 @@ def locality_order(tris_uv: np.ndarray, width: int, height: int) -> np.ndarray:
 
 
 @njit(cache=True, parallel=True)
-def _bake_all(sat, grid, tris, order, levels, starts, w, h, offset, grow, n_workers, out):
+def _bake_all(sat, grid, tris, order, levels, starts, w, h, offset, grow, out, n_workers):
     flags, mixed, values, bounds, period_x, period_y = grid
     empty = np.zeros(tris.shape[0], dtype=np.int64)
     n_chunks = (tris.shape[0] + CHUNK - 1) // CHUNK
     next_chunk = np.zeros(1, dtype=np.int64)
-    for _ in prange(n_workers):  # one loop per thread, each taking the next chunk (``omaps.parallel``)
+    for worker in prange(n_workers):  # each thread takes the next chunk as it frees up (``omaps.parallel``)
         st_l = np.empty(STACK, dtype=np.int64)
         st_k = np.empty(STACK, dtype=np.int64)
         st_v = np.empty((STACK, 6), dtype=np.int64)
@@ -370,7 +371,8 @@ def bake_micromaps(grid: FootprintGrid, tris_uv, levels, grow: float = 0.0,
     if len(t):
         sat = flag_table(grid) if sat is None else sat
         empty = _bake_all(sat, grid.kernel_args(), t, locality_order(t, grid.width, grid.height), lv, starts,
-                          float(grid.width), float(grid.height), float(grid.offset), float(grow), workers(), out)
+                          float(grid.width), float(grid.height), float(grid.offset), float(grow), out,
+                          numba.get_num_threads())
         if empty.any():
             bad = int(np.flatnonzero(empty)[0])
             raise InputError(f"UV triangle {bad} has micro-triangles with no area")

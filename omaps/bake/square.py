@@ -27,6 +27,7 @@ Example::
 
 from __future__ import annotations
 
+import numba
 import numpy as np
 from numba import njit, prange
 
@@ -36,6 +37,7 @@ from ..errors import InputError
 from ..pair import square_uv
 from ..sampling import FootprintGrid
 from ..flag_table import MARGIN, box_flag, flag_table
+from ..parallel import fetch_add
 
 __all__ = ["bake_pair_squares", "bake_pair_flags", "or_downsample", "flags_to_states", "MAX_SQUARE",
            "check_square_size"]
@@ -243,9 +245,10 @@ CHUNK = 16  # pairs per parallel work item (one set of scratch arrays each)
 
 
 @njit(cache=True, parallel=True)
-def _bake_pairs(sat, grid, off, w, h, uv, has_b, n, grow, out):
+def _bake_pairs(sat, grid, off, w, h, uv, has_b, n, grow, out, n_workers):
     n_chunks = (uv.shape[0] + CHUNK - 1) // CHUNK
-    for c in prange(n_chunks):
+    next_chunk = np.zeros(1, np.int64)
+    for worker in prange(n_workers):  # each thread takes the next chunk as it frees up (``omaps.parallel``)
         rect = np.empty((4, 2))
         poly = np.empty((8, 2))
         pts = np.empty((8, 2))
@@ -256,9 +259,13 @@ def _bake_pairs(sat, grid, off, w, h, uv, has_b, n, grow, out):
         st_i = np.empty(STACK, np.int64)
         st_j = np.empty(STACK, np.int64)
         st_n = np.empty(STACK, np.int64)
-        for p in range(c * CHUNK, min((c + 1) * CHUNK, uv.shape[0])):
-            _pair_flags(sat, grid, off, w, h, uv[p], has_b[p], n, grow, out[p], rect, poly, pts, gp, vf, buf_a,
-                        buf_b, st_i, st_j, st_n)
+        while True:
+            c = fetch_add(next_chunk, 1)
+            if c >= n_chunks:
+                break
+            for p in range(c * CHUNK, min((c + 1) * CHUNK, uv.shape[0])):
+                _pair_flags(sat, grid, off, w, h, uv[p], has_b[p], n, grow, out[p], rect, poly, pts, gp, vf, buf_a,
+                            buf_b, st_i, st_j, st_n)
 
 
 def bake_pair_flags(grid: FootprintGrid, corner_uv, has_b, n: int, grow: float = 0.0) -> np.ndarray:
@@ -271,7 +278,7 @@ def bake_pair_flags(grid: FootprintGrid, corner_uv, has_b, n: int, grow: float =
     out = np.zeros((len(uv), n, n), np.uint8)
     if len(uv):
         _bake_pairs(flag_table(grid), grid.kernel_args(), float(grid.offset), float(grid.width),
-                    float(grid.height), uv, hb, n, float(grow), out)
+                    float(grid.height), uv, hb, n, float(grow), out, numba.get_num_threads())
     return out
 
 

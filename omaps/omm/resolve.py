@@ -8,12 +8,13 @@ output has no unknown: C becomes O or T outright (no longer conservative). The c
 
 from __future__ import annotations
 
+import numba
 import numpy as np
 from numba import njit, prange
 
 from ..alpha_test import AlphaTest
 from ..birdcurve import vertex_table
-from ..parallel import fetch_add, workers
+from ..parallel import fetch_add
 from ..coverage import TAPS, micro_corners_of, micro_hits_with, sample_levels, sample_points, texel_triangles
 from ..promotion import HASHED, hashed_threshold, hits_needed, promotion_code
 from .. import omm_format
@@ -80,11 +81,11 @@ CHUNK = 16  # triangles per work item (triangles differ a lot in cost: items are
 
 @njit(cache=True, parallel=True)
 def _resolve(states3, starts, levels, two_state, mode, seed, value, thr, inclusive, filt, mu, mv, tris,
-             samples, sample_k, n_workers, out, counts, table):
+             samples, sample_k, out, counts, table, n_workers):
     n = tris.shape[0]
     n_chunks = (n + CHUNK - 1) // CHUNK
     next_chunk = np.zeros(1, dtype=np.int64)
-    for _ in prange(n_workers):  # one loop per thread, each taking the next chunk (``omaps.parallel``)
+    for worker in prange(n_workers):  # each thread takes the next chunk as it frees up (``omaps.parallel``)
         taps = np.empty((TAPS, TAPS))
         while True:
             c = fetch_add(next_chunk, 1)
@@ -107,7 +108,7 @@ def resolve_counted(states3: np.ndarray, starts: np.ndarray, levels, test: Alpha
     filt, mu, mv = test.codes()
     _resolve(states3, np.asarray(starts, dtype=np.int64), lv, fmt == omm_format.FORMAT_2_STATE, mode, int(seed),
              test.value, float(test.threshold), bool(test.inclusive), filt, mu, mv, tris, sample_points(),
-             sample_levels(tris, lv), workers(), out, counts, vertex_table())
+             sample_levels(tris, lv), out, counts, vertex_table(), numba.get_num_threads())
     return out, counts
 
 

@@ -12,11 +12,13 @@ import math
 import time
 from dataclasses import dataclass
 
+import numba
 import numpy as np
 from numba import njit, prange
 
 from .embree import (ARGS_WORDS, RAYHIT_WORDS, RTC_FEATURE_FLAG_ALL, RTC_INVALID_GEOMETRY_ID, W_GEOM, W_INST,
                      W_PRIM, W_TFAR, W_U, W_V, call3, i64_ptr)
+from ..parallel import fetch_add
 from .lookups import shader_alpha_test
 from .tables import (C_CALLS, C_CAND, C_MODE, C_REC_BARY, C_REC_CAP, C_REC_N, C_REC_TRI, C_SET_FULL, C_SET_KEYS,
                      C_SET_STAMPS, C_STAMP, C_TABLE, C_TESTS, CONTEXT_WORDS, MODE_NORMAL, MODE_RECORD, REC_CAP,
@@ -88,99 +90,110 @@ def _start_ray(ctx, mode, stamp):
 
 
 @njit(parallel=True, cache=True)
-def trace_primary(fn, scene, filt, table_addr, cam, w, h, inst, geom, prim, dist, bu, bv, cand, tests, calls, full):
+def trace_primary(fn, scene, filt, table_addr, cam, w, h, inst, geom, prim, dist, bu, bv, cand, tests, calls, full,
+                  n_workers):
     """Closest hits of the camera's rays; per pixel the hit (instance, geometry, primitive,
     distance, barycentrics) and the counts of distinct candidates and alpha tests."""
-    for y in prange(h):
-        rh = _aligned(RAYHIT_WORDS // 2).view(np.uint32)
-        rf = rh.view(np.float32)
-        keys = np.zeros(SET_SIZE, np.int64)
-        stamps = np.full(SET_SIZE, -1, np.int64)
-        ctx = _new_context(table_addr, keys, stamps, np.zeros(1, np.int64), np.zeros(2, np.float64))
-        args = _aligned(ARGS_WORDS)
-        args[0] = np.int64(RTC_FEATURE_FLAG_ALL) << 32
-        args[1] = ctx.ctypes.data
-        args[2] = filt
-        for x in range(w):
-            dx, dy, dz = _camera_dir(cam, x, y, w, h)
-            _set_ray(rh, cam[0], cam[1], cam[2], dx, dy, dz, 0.0, np.inf)
-            _start_ray(ctx, MODE_NORMAL, y * w + x)
-            ctx[C_CALLS] = 0
-            call3(fn, scene, rh.ctypes.data, args.ctypes.data)
-            g = rh[W_GEOM]
-            if g == RTC_INVALID_GEOMETRY_ID:
-                inst[y, x] = -1
-                geom[y, x] = -1
-                prim[y, x] = -1
-                dist[y, x] = np.inf
-            else:
-                inst[y, x] = rh[W_INST]
-                geom[y, x] = g
-                prim[y, x] = rh[W_PRIM]
-                dist[y, x] = rf[W_TFAR]
-                bu[y, x] = rf[W_U]
-                bv[y, x] = rf[W_V]
-            cand[y, x] = ctx[C_CAND]
-            tests[y, x] = ctx[C_TESTS]
-            calls[y, x] = ctx[C_CALLS]
-        full[y] = ctx[C_SET_FULL]
+    next_y = np.zeros(1, np.int64)
+    for worker in prange(n_workers):  # each thread takes the next y as it frees up (``omaps.parallel``)
+        while True:
+            y = fetch_add(next_y, 1)
+            if y >= h:
+                break
+            rh = _aligned(RAYHIT_WORDS // 2).view(np.uint32)
+            rf = rh.view(np.float32)
+            keys = np.zeros(SET_SIZE, np.int64)
+            stamps = np.full(SET_SIZE, -1, np.int64)
+            ctx = _new_context(table_addr, keys, stamps, np.zeros(1, np.int64), np.zeros(2, np.float64))
+            args = _aligned(ARGS_WORDS)
+            args[0] = np.int64(RTC_FEATURE_FLAG_ALL) << 32
+            args[1] = ctx.ctypes.data
+            args[2] = filt
+            for x in range(w):
+                dx, dy, dz = _camera_dir(cam, x, y, w, h)
+                _set_ray(rh, cam[0], cam[1], cam[2], dx, dy, dz, 0.0, np.inf)
+                _start_ray(ctx, MODE_NORMAL, y * w + x)
+                ctx[C_CALLS] = 0
+                call3(fn, scene, rh.ctypes.data, args.ctypes.data)
+                g = rh[W_GEOM]
+                if g == RTC_INVALID_GEOMETRY_ID:
+                    inst[y, x] = -1
+                    geom[y, x] = -1
+                    prim[y, x] = -1
+                    dist[y, x] = np.inf
+                else:
+                    inst[y, x] = rh[W_INST]
+                    geom[y, x] = g
+                    prim[y, x] = rh[W_PRIM]
+                    dist[y, x] = rf[W_TFAR]
+                    bu[y, x] = rf[W_U]
+                    bv[y, x] = rf[W_V]
+                cand[y, x] = ctx[C_CAND]
+                tests[y, x] = ctx[C_TESTS]
+                calls[y, x] = ctx[C_CALLS]
+            full[y] = ctx[C_SET_FULL]
 
 
 @njit(parallel=True, cache=True)
 def trace_shadow(fn, scene, filt, table_addr, cam, light, tnear, deferred, w, h, dist, occluded, cand, tests,
-                 overflow):
+                 overflow, n_workers):
     """Occlusion rays towards the light (direction ``light``) from every primary hit. Deferred:
     first an occlusion query that records C candidates untested; if it finds no O hit, the
     recorded candidates are alpha-tested in order until one is opaque."""
-    for y in prange(h):
-        rh = _aligned(RAYHIT_WORDS // 2).view(np.uint32)
-        rf = rh.view(np.float32)
-        keys = np.zeros(SET_SIZE, np.int64)
-        stamps = np.full(SET_SIZE, -1, np.int64)
-        rec_tri = np.zeros(REC_CAP, np.int64)
-        rec_bary = np.zeros(2 * REC_CAP, np.float64)
-        ctx = _new_context(table_addr, keys, stamps, rec_tri, rec_bary)
-        table = i64_ptr(table_addr)
-        args = _aligned(ARGS_WORDS)
-        args[0] = np.int64(RTC_FEATURE_FLAG_ALL) << 32
-        args[1] = ctx.ctypes.data
-        args[2] = filt
-        for x in range(w):
-            occluded[y, x] = 0
-            cand[y, x] = 0
-            tests[y, x] = 0
-            t = dist[y, x]
-            if not np.isfinite(t):
-                continue
-            dx, dy, dz = _camera_dir(cam, x, y, w, h)
-            ox = cam[0] + t * dx
-            oy = cam[1] + t * dy
-            oz = cam[2] + t * dz
-            stamp = 2 * (y * w + x)
-            _set_ray(rh, ox, oy, oz, light[0], light[1], light[2], tnear, np.inf)
-            _start_ray(ctx, MODE_RECORD if deferred else MODE_NORMAL, stamp)
-            call3(fn, scene, rh.ctypes.data, args.ctypes.data)
-            occ = rf[W_TFAR] == -np.inf
-            n_cand = ctx[C_CAND]
-            n_tests = ctx[C_TESTS]
-            if deferred and not occ:
-                nrec = ctx[C_REC_N]
-                if nrec > REC_CAP:  # too many to remember: trace again the ordinary way
-                    overflow[y] += 1
-                    _set_ray(rh, ox, oy, oz, light[0], light[1], light[2], tnear, np.inf)
-                    _start_ray(ctx, MODE_NORMAL, stamp + 1)
-                    call3(fn, scene, rh.ctypes.data, args.ctypes.data)
-                    occ = rf[W_TFAR] == -np.inf
-                    n_tests += ctx[C_TESTS]
-                else:
-                    for k in range(nrec):
-                        n_tests += 1
-                        if shader_alpha_test(table, rec_tri[k], rec_bary[2 * k], rec_bary[2 * k + 1]):
-                            occ = True
-                            break
-            occluded[y, x] = 1 if occ else 0
-            cand[y, x] = n_cand
-            tests[y, x] = n_tests
+    next_y = np.zeros(1, np.int64)
+    for worker in prange(n_workers):  # each thread takes the next y as it frees up (``omaps.parallel``)
+        while True:
+            y = fetch_add(next_y, 1)
+            if y >= h:
+                break
+            rh = _aligned(RAYHIT_WORDS // 2).view(np.uint32)
+            rf = rh.view(np.float32)
+            keys = np.zeros(SET_SIZE, np.int64)
+            stamps = np.full(SET_SIZE, -1, np.int64)
+            rec_tri = np.zeros(REC_CAP, np.int64)
+            rec_bary = np.zeros(2 * REC_CAP, np.float64)
+            ctx = _new_context(table_addr, keys, stamps, rec_tri, rec_bary)
+            table = i64_ptr(table_addr)
+            args = _aligned(ARGS_WORDS)
+            args[0] = np.int64(RTC_FEATURE_FLAG_ALL) << 32
+            args[1] = ctx.ctypes.data
+            args[2] = filt
+            for x in range(w):
+                occluded[y, x] = 0
+                cand[y, x] = 0
+                tests[y, x] = 0
+                t = dist[y, x]
+                if not np.isfinite(t):
+                    continue
+                dx, dy, dz = _camera_dir(cam, x, y, w, h)
+                ox = cam[0] + t * dx
+                oy = cam[1] + t * dy
+                oz = cam[2] + t * dz
+                stamp = 2 * (y * w + x)
+                _set_ray(rh, ox, oy, oz, light[0], light[1], light[2], tnear, np.inf)
+                _start_ray(ctx, MODE_RECORD if deferred else MODE_NORMAL, stamp)
+                call3(fn, scene, rh.ctypes.data, args.ctypes.data)
+                occ = rf[W_TFAR] == -np.inf
+                n_cand = ctx[C_CAND]
+                n_tests = ctx[C_TESTS]
+                if deferred and not occ:
+                    nrec = ctx[C_REC_N]
+                    if nrec > REC_CAP:  # too many to remember: trace again the ordinary way
+                        overflow[y] += 1
+                        _set_ray(rh, ox, oy, oz, light[0], light[1], light[2], tnear, np.inf)
+                        _start_ray(ctx, MODE_NORMAL, stamp + 1)
+                        call3(fn, scene, rh.ctypes.data, args.ctypes.data)
+                        occ = rf[W_TFAR] == -np.inf
+                        n_tests += ctx[C_TESTS]
+                    else:
+                        for k in range(nrec):
+                            n_tests += 1
+                            if shader_alpha_test(table, rec_tri[k], rec_bary[2 * k], rec_bary[2 * k + 1]):
+                                occ = True
+                                break
+                occluded[y, x] = 1 if occ else 0
+                cand[y, x] = n_cand
+                tests[y, x] = n_tests
 
 
 @dataclass
@@ -225,7 +238,7 @@ def run_primary(bvh, tables: TraceTables | None, filt_addr: int, cam: np.ndarray
     table_addr = tables.address if tables is not None else 0
     t0 = time.perf_counter()
     trace_primary(lib().intersect1, bvh.handle, filt_addr, table_addr, cam, w, h, inst, geom, prim, dist, bu, bv,
-                  cand, tests, calls, full)
+                  cand, tests, calls, full, numba.get_num_threads())
     dt = time.perf_counter() - t0
     return PrimaryResult(inst, geom, prim, dist, bu, bv, cand, tests, calls, dt, int(full.sum()))
 
@@ -242,6 +255,6 @@ def run_shadow(bvh, tables: TraceTables | None, filt_addr: int, cam: np.ndarray,
     table_addr = tables.address if tables is not None else 0
     t0 = time.perf_counter()
     trace_shadow(lib().occluded1, bvh.handle, filt_addr, table_addr, cam, np.asarray(light, np.float64), tnear,
-                 deferred, w, h, dist, occ, cand, tests, overflow)
+                 deferred, w, h, dist, occ, cand, tests, overflow, numba.get_num_threads())
     dt = time.perf_counter() - t0
     return ShadowResult(occ, cand, tests, int(np.isfinite(dist).sum()), dt, int(overflow.sum()))
