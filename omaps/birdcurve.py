@@ -14,6 +14,8 @@ Everything here is in barycentric (u, v) space; ``uv_micro_triangles`` maps to t
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 from numba import njit
 
@@ -49,19 +51,17 @@ def micro_vertices(index, level):
 
 
 TABLE_LEVELS = 6  # ``vertex_table`` holds levels 0 .. 5 (1365 micro-triangles, 64 KiB)
-_TABLE: list[np.ndarray] = []
 
 
+@functools.cache
 def vertex_table() -> np.ndarray:
     """The vertices of every micro-triangle of levels 0 .. TABLE_LEVELS - 1, one level after the
     other (level L from row (4**L - 1) / 3), as (b1, b2) of p0, p1, p2 per row: the values of
     ``micro_vertices`` (dyadic, so exact either way), computed once, for kernels that visit
     micro-triangles in no order (decoding the curve's digits costs a branch per level). Read it
     with ``table_vertices``."""
-    if not _TABLE:
-        _TABLE.append(np.ascontiguousarray(np.concatenate([micro_triangles(level).reshape(-1, 6)
-                                                           for level in range(TABLE_LEVELS)])))
-    return _TABLE[0]
+    return np.ascontiguousarray(np.concatenate([micro_triangles(level).reshape(-1, 6)
+                                                for level in range(TABLE_LEVELS)]))
 
 
 @njit(cache=True, inline="always")

@@ -10,13 +10,12 @@ import warnings
 
 import numpy as np
 
-from .. import states
+from .. import omm_format, states
 from ..codecs import get_codec
+from ..omm_format import Packer
 from . import pairs, resolve
-from .. import omm_format
 from .files import settings_from_summary
 from .inputs import load_geometries
-from ..omm_format import Packer
 from .pipeline import OmmResult
 
 __all__ = ["decoded_blocks", "expand_result"]

@@ -28,14 +28,13 @@ from typing import Protocol
 
 import numpy as np
 
-from .. import __version__, states
+from .. import __version__, omm_format, states
+from .. import rows as omaps_rows
 from ..alpha_test import AlphaTest
 from ..bake.micromap import (GROW_TEXEL, bake_micromaps, check_level, check_uv_triangles, dynamic_levels, flag_table,
                              micro_starts, texel_areas)
 from ..errors import InputError
 from ..names import PROMOTIONS
-from .. import omm_format
-from .. import rows as omaps_rows
 from ..omm_format import Packer
 from . import resolve
 

@@ -12,12 +12,12 @@ import numba
 import numpy as np
 from numba import njit, prange
 
+from .. import omm_format
 from ..alpha_test import AlphaTest
 from ..birdcurve import vertex_table
-from ..parallel import fetch_add
 from ..coverage import TAPS, micro_corners_of, micro_hits_with, sample_levels, sample_points, texel_triangles
+from ..parallel import fetch_add
 from ..promotion import HASHED, hashed_threshold, hits_needed, promotion_code
-from .. import omm_format
 
 __all__ = ["resolve", "resolve_counted"]
 

@@ -16,9 +16,9 @@ import numba
 import numpy as np
 from numba import njit, prange
 
+from ..parallel import fetch_add
 from .embree import (ARGS_WORDS, RAYHIT_WORDS, RTC_FEATURE_FLAG_ALL, RTC_INVALID_GEOMETRY_ID, W_GEOM, W_INST,
                      W_PRIM, W_TFAR, W_U, W_V, call3, i64_ptr)
-from ..parallel import fetch_add
 from .lookups import shader_alpha_test
 from .tables import (C_CALLS, C_CAND, C_MODE, C_REC_BARY, C_REC_CAP, C_REC_N, C_REC_TRI, C_SET_FULL, C_SET_KEYS,
                      C_SET_STAMPS, C_STAMP, C_TABLE, C_TESTS, CONTEXT_WORDS, MODE_NORMAL, MODE_RECORD, REC_CAP,
