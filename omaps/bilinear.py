@@ -165,11 +165,15 @@ def region_extremes(poly, k, ox, oy, lo, hi, a00, a01, a10, a11, buf_a, buf_b):
     return mn, mx
 
 
-@njit(cache=True, _nrt=False)
+@njit(cache=True, inline="always")
 def cell_flag(values, bounds, period_x, period_y, row, col, poly, k, c, r, grow, buf_a, buf_b):
     """Flag (1 T, 2 O, 3 C) of convex polygon poly[:k] (grid coordinates), grown by ``grow``,
     within the cell of unaddressed index (r, c), stored at (row, col). ``buf_*``: scratch
-    (POLY_MAX, 2). See the module docstring for the allowances."""
+    (POLY_MAX, 2). See the module docstring for the allowances.
+
+    Inlined where it is called: the region's bounding box decides most calls in a few
+    operations, and a call with these arguments (numba passes an array as its nine fields)
+    cost as much; the clipped polygon's extremes (``_clipped_flag``) stay a call of their own."""
     a00, a01, a10, a11 = cell_taps(values, period_x, period_y, row, col)
     # first the region's bounding box within the cell: f's extremes over a box are at its
     # corners, and a box that is known makes the region inside it known (most regions are)
@@ -196,6 +200,12 @@ def cell_flag(values, bounds, period_x, period_y, row, col, poly, k, c, r, grow,
                       grow)
         if f != 3:
             return f
+    return _clipped_flag(bounds, poly, k, c, r, lo, hi, a00, a01, a10, a11, grow, buf_a, buf_b)
+
+
+@njit(cache=True, _nrt=False)
+def _clipped_flag(bounds, poly, k, c, r, lo, hi, a00, a01, a10, a11, grow, buf_a, buf_b):
+    """``cell_flag`` from the extremes over the polygon clipped to the cell [lo, hi]² (local)."""
     mn, mx = region_extremes(poly, k, float(c), float(r), lo, hi, a00, a01, a10, a11, buf_a, buf_b)
     if mn > mx:  # the region misses the cell by rounding: count all of it
         return 3
@@ -222,12 +232,13 @@ def _classify(mn, mx, a00, a01, a10, a11, bounds, grow):
     return 3
 
 
-@njit(cache=True, _nrt=False)
+@njit(cache=True, inline="always")
 def point_flag(flags, mixed, values, bounds, period_x, period_y, x, y, grow):
     """Flag of one point (x, y) (grid coordinates) of a region: part of the region's own flag,
     so a region whose points' flags OR to 3 is C without clipping it to any cell (a quick
     answer for regions across the cut-off). A point in a cell whose taps agree has its cell's
-    flag."""
+    flag (inlined where it is called: that read costs less than a call); in a mixed cell, the
+    bilinear alpha there (``_mixed_point_flag``)."""
     c = math.floor(x)
     r = math.floor(y)
     hc, wc = flags.shape
@@ -235,7 +246,13 @@ def point_flag(flags, mixed, values, bounds, period_x, period_y, x, y, grow):
     col = cell_index(c, wc, period_x)
     if not mixed[row, col]:
         return flags[row, col]
+    return _mixed_point_flag(values, bounds, period_x, period_y, row, col, x - c, y - r, grow)
+
+
+@njit(cache=True, _nrt=False)
+def _mixed_point_flag(values, bounds, period_x, period_y, row, col, fx, fy, grow):
+    """``point_flag`` at local (fx, fy) of the mixed cell stored at (row, col)."""
     a00, a01, a10, a11 = cell_taps(values, period_x, period_y, row, col)
     b, cc, d = _coefficients(a00, a01, a10, a11)
-    v = _at(a00, b, cc, d, x - c, y - r)
+    v = _at(a00, b, cc, d, fx, fy)
     return _classify(v, v, a00, a01, a10, a11, bounds, grow)

@@ -20,6 +20,9 @@ from .flag_table import box_counts, flag_table, unmixed_flag
 from .sampling import cell_index
 
 
+DIRECT_SPAN = 4  # a row span of at most this many cells is read cell by cell, not counted from the table
+
+
 @njit(cache=True, inline="always")
 def edge_extent(ax, ay, bx, by, y0, y1, xmin, xmax):
     """(xmin, xmax) widened by the x-extent of edge (a, b) within the row band [y0, y1]; exact
@@ -60,7 +63,7 @@ def row_span(poly, k, r, grow, ymin, ymax):
     return int(math.floor(xmin)), int(math.ceil(xmax))
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, _nrt=False)
 def _vertex_flags(grid, poly, k, grow):
     flags, mixed, values, bounds, period_x, period_y = grid
     acc = 0
@@ -111,9 +114,27 @@ def rows_flag(sat, grid, poly, k, grow, points, buf_a, buf_b):
         acc = points if points >= 0 else _vertex_flags(grid, poly, k, grow)
         if acc == 3:
             return 3
+    hc, wc = flags.shape
+    has_mixed = mixed.shape[0] > 0
     for r in range(int(math.floor(ymin - grow)), int(math.ceil(ymax + grow))):
         c0, c1 = row_span(poly, k, r, grow, ymin, ymax)
         if c1 <= c0:
+            continue
+        row = cell_index(r, hc, period_y)
+        if c1 - c0 <= DIRECT_SPAN:  # a few cells: read them, cheaper than the table's twelve counts
+            for c in range(c0, c1):
+                col = cell_index(c, wc, period_x)
+                if has_mixed and mixed[row, col]:  # decided on its own, after the vertices' own flags
+                    if not points_done:
+                        points_done = True
+                        acc |= points if points >= 0 else _vertex_flags(grid, poly, k, grow)
+                        if acc == 3:
+                            return 3
+                    acc |= cell_flag(values, bounds, period_x, period_y, row, col, poly, k, c, r, grow, buf_a, buf_b)
+                else:
+                    acc |= flags[row, col]
+                if acc == 3:
+                    return 3
             continue
         nt, no, nm, n = box_counts(sat, r, r + 1, c0, c1, period_y, period_x)
         acc |= unmixed_flag(nt, no, nm)
@@ -123,16 +144,26 @@ def rows_flag(sat, grid, poly, k, grow, points, buf_a, buf_b):
                 acc |= points if points >= 0 else _vertex_flags(grid, poly, k, grow)
                 if acc == 3:
                     return 3
-            hc, wc = flags.shape
-            row = cell_index(r, hc, period_y)
-            for c in range(c0, c1):
-                col = cell_index(c, wc, period_x)
-                if mixed[row, col]:
-                    acc |= cell_flag(values, bounds, period_x, period_y, row, col, poly, k, c, r, grow, buf_a, buf_b)
-                    if acc == 3:
-                        return 3
+            acc |= _mixed_cells_flag(grid, poly, k, grow, r, row, c0, c1, buf_a, buf_b)
         if acc == 3:
             return 3
+    return acc
+
+
+@njit(cache=True, _nrt=False)
+def _mixed_cells_flag(grid, poly, k, grow, r, row, c0, c1, buf_a, buf_b):
+    """OR of ``bilinear.cell_flag`` over the mixed cells of columns [c0, c1) of row band r
+    (stored row ``row``), stopping at 3: a long span's (rare: a call of its own, so that the
+    inlined ``cell_flag`` is compiled once here)."""
+    flags, mixed, values, bounds, period_x, period_y = grid
+    wc = flags.shape[1]
+    acc = 0
+    for c in range(c0, c1):
+        col = cell_index(c, wc, period_x)
+        if mixed[row, col]:
+            acc |= cell_flag(values, bounds, period_x, period_y, row, col, poly, k, c, r, grow, buf_a, buf_b)
+            if acc == 3:
+                return 3
     return acc
 
 
