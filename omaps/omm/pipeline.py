@@ -378,8 +378,9 @@ def build(geometries: list[Geometry], settings: OmmSettings = OmmSettings(),
                 mine = [t for t in merged if a <= t < b]  # --budget: micromaps shared by merging (their meet)
                 for t in mine:
                     s3[starts[t - a]:starts[t - a + 1]] = merged[t][0]
+                # in place: the T/O/C states are not read again (square sources: a chunk of their own array)
                 omm, tri_counts = resolve.resolve_counted(s3, starts, lv, g.test, tris[a:b], fmt, settings.promotion,
-                                                          settings.seed)
+                                                          settings.seed, out=s3)
                 for t in mine:  # one stored row for the whole group: its unknowns' hint codes too
                     row = merged[t][1]
                     omm[starts[t - a]:starts[t - a + 1]] = row

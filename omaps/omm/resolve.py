@@ -24,19 +24,25 @@ __all__ = ["resolve", "resolve_counted"]
 
 @njit(cache=True, _nrt=False)
 def _resolve_one(states3, base, end, level, two_state, mode, seed, value, thr, inclusive, filt, mu, mv, tris, t,
-                 samples, sample_k, out, counts, taps, table):
-    """Triangle ``t``'s micro-triangles ``states3[base:end]`` into ``out``, its counts into
-    ``counts[t]`` (no reference counting: it allocates nothing). ``table``:
-    ``birdcurve.vertex_table()``."""
+                 samples, sample_k, out, copy, counts, taps, table):
+    """Triangle ``t``'s micro-triangles ``states3[base:end]`` into ``out`` (``copy`` False: ``out``
+    is ``states3``, only its C entries are written), its counts into ``counts[t]`` (no reference
+    counting: it allocates nothing). ``table``: ``birdcurve.vertex_table()``."""
     n_s = 1 << (2 * sample_k)
     # first every state copied and the known ones counted, with no branch (the compiler
     # vectorises it): most micro-triangles are known, most triangles hold no C one
     n_t = n_o = 0
-    for i in range(base, end):
-        s = states3[i]
-        out[i] = s
-        n_t += s == 0
-        n_o += s == 1
+    if copy:
+        for i in range(base, end):
+            s = states3[i]
+            out[i] = s
+            n_t += s == 0
+            n_o += s == 1
+    else:
+        for i in range(base, end):
+            s = states3[i]
+            n_t += s == 0
+            n_o += s == 1
     n_c = (end - base) - n_t - n_o
     r0 = r1 = r2 = r3 = 0
     if n_c > 0:
@@ -81,7 +87,7 @@ CHUNK = 16  # triangles per work item (triangles differ a lot in cost: items are
 
 @njit(cache=True, parallel=True)
 def _resolve(states3, starts, levels, two_state, mode, seed, value, thr, inclusive, filt, mu, mv, tris,
-             samples, sample_k, out, counts, table, n_workers):
+             samples, sample_k, out, copy, counts, table, n_workers):
     n = tris.shape[0]
     n_chunks = (n + CHUNK - 1) // CHUNK
     next_chunk = np.zeros(1, dtype=np.int64)
@@ -93,22 +99,29 @@ def _resolve(states3, starts, levels, two_state, mode, seed, value, thr, inclusi
                 break
             for t in range(c * CHUNK, min((c + 1) * CHUNK, n)):
                 _resolve_one(states3, starts[t], starts[t + 1], levels[t], two_state, mode, seed, value, thr,
-                             inclusive, filt, mu, mv, tris, t, samples, sample_k[t], out, counts, taps, table)
+                             inclusive, filt, mu, mv, tris, t, samples, sample_k[t], out, copy, counts, taps, table)
 
 
 def resolve_counted(states3: np.ndarray, starts: np.ndarray, levels, test: AlphaTest, tris_uv, fmt: int,
-                    promotion: str = "nearest", seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
+                    promotion: str = "nearest", seed: int = 0, out: np.ndarray | None = None
+                    ) -> tuple[np.ndarray, np.ndarray]:
     """``resolve``, and per triangle (T, 7) int64 counts: its T, O and C micro-triangles
-    (``states3``), then how many C ones became OMM state 0, 1, 2, 3."""
+    (``states3``), then how many C ones became OMM state 0, 1, 2, 3. ``out``: where the OMM
+    states go (default: a new array); ``states3`` itself resolves in place, when the caller no
+    longer needs the T/O/C states (the pipeline: a pass over the states and their copy saved)."""
     mode = promotion_code(promotion)
     tris = texel_triangles(test, tris_uv)
     lv = np.array(np.broadcast_to(np.asarray(levels), (len(tris),)), dtype=np.int64)  # writable: one specialisation
-    out = np.empty_like(states3)
+    copy = out is not states3
+    if out is None:
+        out = np.empty_like(states3)
+    elif out.shape != states3.shape or out.dtype != states3.dtype:
+        raise ValueError(f"out must be {states3.dtype} of shape {states3.shape}, got {out.dtype} {out.shape}")
     counts = np.empty((len(tris), 7), dtype=np.int64)
     filt, mu, mv = test.codes()
     _resolve(states3, np.asarray(starts, dtype=np.int64), lv, fmt == omm_format.FORMAT_2_STATE, mode, int(seed),
              test.value, float(test.threshold), bool(test.inclusive), filt, mu, mv, tris, sample_points(),
-             sample_levels(tris, lv), out, counts, vertex_table(), numba.get_num_threads())
+             sample_levels(tris, lv), out, copy, counts, vertex_table(), numba.get_num_threads())
     return out, counts
 
 

@@ -78,7 +78,7 @@ def bake_piece(test, piece: Piece, fmt: int, promotion: str, seed: int) -> tuple
         sat = flag_table(grid)
         object.__setattr__(test, "_flag_table", sat)
     s3, starts = bake_states(grid, piece.tris, piece.levels, sat, piece.unknown)
-    return resolve_counted(s3, starts, piece.levels, test, piece.tris, fmt, promotion, seed)
+    return resolve_counted(s3, starts, piece.levels, test, piece.tris, fmt, promotion, seed, out=s3)
 
 
 def plan_pieces(geometries: list[Geometry], settings: OmmSettings, pieces: int) -> tuple[list, list[Piece]]:
