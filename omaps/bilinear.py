@@ -72,6 +72,7 @@ def cell_taps(values, period_x, period_y, row, col):
     h, w = values.shape
     ya, yb = _tap_pair(row, h, period_y)
     xa, xb = _tap_pair(col, w, period_x)
+    ya, yb, xa, xb = np.uint64(ya), np.uint64(yb), np.uint64(xa), np.uint64(xb)  # >= 0: no negative-index checks
     return values[ya, xa], values[ya, xb], values[yb, xa], values[yb, xb]
 
 
@@ -244,8 +245,9 @@ def point_flag(flags, mixed, values, bounds, period_x, period_y, x, y, grow):
     hc, wc = flags.shape
     row = cell_index(r, hc, period_y)
     col = cell_index(c, wc, period_x)
-    if not mixed[row, col]:
-        return flags[row, col]
+    urow, ucol = np.uint64(row), np.uint64(col)  # >= 0: the reads skip numba's negative-index checks
+    if not mixed[urow, ucol]:
+        return flags[urow, ucol]
     return _mixed_point_flag(values, bounds, period_x, period_y, row, col, x - c, y - r, grow)
 
 

@@ -108,22 +108,24 @@ def micro_hits_with(value, threshold, inclusive, filt, mode_u, mode_v, corners, 
         if nx <= TAPS and ny <= TAPS:
             nbx = nx - 1  # cells whose four taps are in the block: 0 .. nbx - 1, 0 .. nby - 1
             nby = ny - 1
-            for j in range(ny):
-                row = address(by + j, h, mode_v)
-                for i in range(nx):
-                    taps[j, i] = np.float64(value[row, address(bx + i, w, mode_u)])
+            for j in range(np.uint64(ny)):  # unsigned indices: no negative-index checks
+                row = address(by + np.int64(j), h, mode_v)
+                for i in range(np.uint64(nx)):
+                    taps[j, i] = np.float64(value[row, address(bx + np.int64(i), w, mode_u)])
     hits = 0
     if nbx > 0:
         # every point reads its taps from the block: blocks of points without a branch (the
         # compiler vectorises them), the count checked after each
         step = min(n, BLOCK)
         for b in range(first, first + n, step):
-            for s in range(b, b + step):
+            for s in range(np.uint64(b), np.uint64(b + step)):
                 fx = bary_point(samples[s, 0], samples[s, 1], qax, qbx, qcx) - 0.5
                 fy = bary_point(samples[s, 0], samples[s, 1], qay, qby, qcy) - 0.5
                 i = min(max(int(math.floor(fx)) - bx, 0), nbx - 1)
                 j = min(max(int(math.floor(fy)) - by, 0), nby - 1)
-                a = blend(taps[j, i], taps[j, i + 1], taps[j + 1, i], taps[j + 1, i + 1], fx - (i + bx),
+                ui = np.uint64(i)  # (i, j >= 0: unsigned, the reads skip numba's negative-index checks)
+                uj = np.uint64(j)
+                a = blend(taps[uj, ui], taps[uj, ui + 1], taps[uj + 1, ui], taps[uj + 1, ui + 1], fx - (i + bx),
                           fy - (j + by))
                 hits += passes(a, threshold, inclusive)
             if hits >= need or (need <= n and hits + (first + n - b - step) < need):

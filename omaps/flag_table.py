@@ -69,6 +69,13 @@ def _axis_ranges(c0, c1, size, period):
 
 
 @njit(cache=True, inline="always")
+def _unsigned(r):
+    """Stored ranges (never negative) as unsigned indices: numba then reads the table without its
+    check for negative indices (three per read, twelve reads per box)."""
+    return np.uint64(r[0]), np.uint64(r[1]), np.uint64(r[2]), np.uint64(r[3])
+
+
+@njit(cache=True, inline="always")
 def _rect(sat, y0, y1, x0, x1, k):
     return sat[y1, x1, k] - sat[y0, x1, k] - sat[y1, x0, k] + sat[y0, x0, k]
 
@@ -77,8 +84,8 @@ def _rect(sat, y0, y1, x0, x1, k):
 def box_counts(sat, r0, r1, c0, c1, period_y, period_x):
     """(cells with the T bit, with the O bit, mixed cells, distinct cells) of the box
     [c0,c1)x[r0,r1)."""
-    ya0, yb0, ya1, yb1 = _axis_ranges(r0, r1, sat.shape[0] - 1, period_y)
-    xa0, xb0, xa1, xb1 = _axis_ranges(c0, c1, sat.shape[1] - 1, period_x)
+    ya0, yb0, ya1, yb1 = _unsigned(_axis_ranges(r0, r1, sat.shape[0] - 1, period_y))
+    xa0, xb0, xa1, xb1 = _unsigned(_axis_ranges(c0, c1, sat.shape[1] - 1, period_x))
     nt = _rect(sat, ya0, yb0, xa0, xb0, 0)
     no = _rect(sat, ya0, yb0, xa0, xb0, 1)
     nm = _rect(sat, ya0, yb0, xa0, xb0, 2)
@@ -94,7 +101,7 @@ def box_counts(sat, r0, r1, c0, c1, period_y, period_x):
             nt += _rect(sat, ya1, yb1, xa1, xb1, 0)
             no += _rect(sat, ya1, yb1, xa1, xb1, 1)
             nm += _rect(sat, ya1, yb1, xa1, xb1, 2)
-    n = (yb0 - ya0 + yb1 - ya1) * (xb0 - xa0 + xb1 - xa1)
+    n = (np.int64(yb0 - ya0) + np.int64(yb1 - ya1)) * (np.int64(xb0 - xa0) + np.int64(xb1 - xa1))
     return nt, no, nm, n
 
 

@@ -122,9 +122,11 @@ def rows_flag(sat, grid, poly, k, grow, points, buf_a, buf_b):
             continue
         row = cell_index(r, hc, period_y)
         if c1 - c0 <= DIRECT_SPAN:  # a few cells: read them, cheaper than the table's twelve counts
+            urow = np.uint64(row)  # stored indices are >= 0: the reads skip numba's negative-index checks
             for c in range(c0, c1):
                 col = cell_index(c, wc, period_x)
-                if has_mixed and mixed[row, col]:  # decided on its own, after the vertices' own flags
+                ucol = np.uint64(col)
+                if has_mixed and mixed[urow, ucol]:  # decided on its own, after the vertices' own flags
                     if not points_done:
                         points_done = True
                         acc |= points if points >= 0 else _vertex_flags(grid, poly, k, grow)
@@ -132,7 +134,7 @@ def rows_flag(sat, grid, poly, k, grow, points, buf_a, buf_b):
                             return 3
                     acc |= cell_flag(values, bounds, period_x, period_y, row, col, poly, k, c, r, grow, buf_a, buf_b)
                 else:
-                    acc |= flags[row, col]
+                    acc |= flags[urow, ucol]
                 if acc == 3:
                     return 3
             continue

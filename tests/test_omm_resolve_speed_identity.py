@@ -133,6 +133,12 @@ def test_resolve_is_the_rule_on_sampled_fractions(filt, wrap, promo):
             o = out[starts[t]:starts[t + 1]]
             assert counts[t, :3].tolist() == np.bincount(s3, minlength=3).tolist()
             assert counts[t, 3:].tolist() == np.bincount(o[s3 == 2], minlength=4).tolist()
+        # in place (the pipeline's way): the same states and counts, written over the T/O/C ones
+        inplace = states3.copy()
+        out2, counts2 = resolve.resolve_counted(inplace, starts, level, test, tris, fmt, promo, seed=9, out=inplace)
+        assert out2 is inplace
+        np.testing.assert_array_equal(out2, want)
+        np.testing.assert_array_equal(counts2, counts)
 
 
 @needs_shared
