@@ -88,10 +88,10 @@ def rows_flag(sat, grid, poly, k, grow, points, buf_a, buf_b):
     texel coordinates plus the grid offset); 0 when the polygon has no area. Every baker's
     regions are rasterised here.
 
-    Per row band, the polygon's x-extent (``row_span``) gives a span of cells, counted in O(1)
-    from the summed-area table ``sat`` (``flag_table.flag_table``); only a span holding mixed
-    bilinear cells is walked cell by cell, each mixed cell's part decided by
-    ``bilinear.cell_flag``. ``grid``: ``FootprintGrid.kernel_args()``; ``points``: the OR of the
+    Per row band, the polygon's x-extent (``row_span``) gives a span of cells: a short one (at
+    most DIRECT_SPAN cells, a micro-triangle's) is read cell by cell, a longer one counted in O(1)
+    from the summed-area table ``sat`` (``flag_table.flag_table``) and walked only where it holds
+    mixed bilinear cells; each mixed cell's part is decided by ``bilinear.cell_flag``. ``grid``: ``FootprintGrid.kernel_args()``; ``points``: the OR of the
     vertices' own flags (``bilinear.point_flag``) when the caller has them (vertices shared with
     neighbouring regions), else -1 (read here when needed); ``buf_*`` (POLY_MAX, 2) scratch.
 
