@@ -166,15 +166,13 @@ def region_extremes(poly, k, ox, oy, lo, hi, a00, a01, a10, a11, buf_a, buf_b):
     return mn, mx
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, _nrt=False)
 def cell_flag(values, bounds, period_x, period_y, row, col, poly, k, c, r, grow, buf_a, buf_b):
     """Flag (1 T, 2 O, 3 C) of convex polygon poly[:k] (grid coordinates), grown by ``grow``,
     within the cell of unaddressed index (r, c), stored at (row, col). ``buf_*``: scratch
-    (POLY_MAX, 2). See the module docstring for the allowances.
-
-    Inlined where it is called: the region's bounding box decides most calls in a few
-    operations, and a call with these arguments (numba passes an array as its nine fields)
-    cost as much; the clipped polygon's extremes (``_clipped_flag``) stay a call of their own."""
+    (POLY_MAX, 2). See the module docstring for the allowances. (A call: inlined into the
+    rasteriser it saved about a tenth of the bake's instructions but doubled the compile of the
+    square baker; the clipped polygon's extremes are ``_clipped_flag``.)"""
     a00, a01, a10, a11 = cell_taps(values, period_x, period_y, row, col)
     # first the region's bounding box within the cell: f's extremes over a box are at its
     # corners, and a box that is known makes the region inside it known (most regions are)
