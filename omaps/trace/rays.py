@@ -36,16 +36,43 @@ def _aligned(words):
 
 
 @njit(cache=True)
-def _new_context(table_addr, keys, stamps, rec_tri, rec_bary):
-    ctx = _aligned(CONTEXT_WORDS)
+def _new_context(table_addr, rec_cap):
+    """A ray query context for the filter (``tables``' C_* words) that owns what it points at: one
+    64-byte-aligned buffer holds the context words, the candidate set's keys and stamps and a
+    record of ``rec_cap`` candidates (triangles, then their barycentrics as float64). The
+    filter reaches them through raw addresses, so they must live as long as the context: numba
+    frees an array after its last use in the kernel, and the context is the one array the
+    kernel uses while it traces. Returns (context, record triangles, record barycentrics)."""
+    buf = _aligned(CONTEXT_WORDS + 2 * SET_SIZE + 3 * rec_cap)
+    ctx = buf[:CONTEXT_WORDS]  # a view: it keeps the whole buffer alive
+    keys = buf[CONTEXT_WORDS:CONTEXT_WORDS + SET_SIZE]
+    stamps = buf[CONTEXT_WORDS + SET_SIZE:CONTEXT_WORDS + 2 * SET_SIZE]
+    stamps[:] = -1
+    rec_tri = buf[CONTEXT_WORDS + 2 * SET_SIZE:CONTEXT_WORDS + 2 * SET_SIZE + rec_cap]
+    rec_bary = buf[CONTEXT_WORDS + 2 * SET_SIZE + rec_cap:].view(np.float64)
     ctx[0] = -1  # RTCRayQueryContext: instID[0] (and instPrimID[0]) = RTC_INVALID_GEOMETRY_ID
     ctx[C_TABLE] = table_addr
     ctx[C_SET_KEYS] = keys.ctypes.data
     ctx[C_SET_STAMPS] = stamps.ctypes.data
     ctx[C_REC_TRI] = rec_tri.ctypes.data
     ctx[C_REC_BARY] = rec_bary.ctypes.data
-    ctx[C_REC_CAP] = rec_tri.size
-    return ctx
+    ctx[C_REC_CAP] = rec_cap
+    return ctx, rec_tri, rec_bary
+
+
+@njit(cache=True)
+def _row_query(table_addr, filt, rec_cap):
+    """What a thread traces one image row with: the ray-hit buffer (as uint32 and float32), the
+    query context (``_new_context``) with its record arrays, and the arguments of Embree's
+    intersect / occluded call (feature mask, context, filter)."""
+    rh = _aligned(RAYHIT_WORDS // 2).view(np.uint32)
+    rf = rh.view(np.float32)
+    ctx, rec_tri, rec_bary = _new_context(table_addr, rec_cap)
+    args = _aligned(ARGS_WORDS)
+    args[0] = np.int64(RTC_FEATURE_FLAG_ALL) << 32
+    args[1] = ctx.ctypes.data
+    args[2] = filt
+    return rh, rf, ctx, args, rec_tri, rec_bary
 
 
 @njit(cache=True, inline="always")
@@ -100,15 +127,7 @@ def trace_primary(fn, scene, filt, table_addr, cam, w, h, inst, geom, prim, dist
             y = fetch_add(next_y, 1)
             if y >= h:
                 break
-            rh = _aligned(RAYHIT_WORDS // 2).view(np.uint32)
-            rf = rh.view(np.float32)
-            keys = np.zeros(SET_SIZE, np.int64)
-            stamps = np.full(SET_SIZE, -1, np.int64)
-            ctx = _new_context(table_addr, keys, stamps, np.zeros(1, np.int64), np.zeros(2, np.float64))
-            args = _aligned(ARGS_WORDS)
-            args[0] = np.int64(RTC_FEATURE_FLAG_ALL) << 32
-            args[1] = ctx.ctypes.data
-            args[2] = filt
+            rh, rf, ctx, args, _, _ = _row_query(table_addr, filt, 1)  # (primary rays record nothing)
             for x in range(w):
                 dx, dy, dz = _camera_dir(cam, x, y, w, h)
                 _set_ray(rh, cam[0], cam[1], cam[2], dx, dy, dz, 0.0, np.inf)
@@ -146,18 +165,8 @@ def trace_shadow(fn, scene, filt, table_addr, cam, light, tnear, deferred, w, h,
             y = fetch_add(next_y, 1)
             if y >= h:
                 break
-            rh = _aligned(RAYHIT_WORDS // 2).view(np.uint32)
-            rf = rh.view(np.float32)
-            keys = np.zeros(SET_SIZE, np.int64)
-            stamps = np.full(SET_SIZE, -1, np.int64)
-            rec_tri = np.zeros(REC_CAP, np.int64)
-            rec_bary = np.zeros(2 * REC_CAP, np.float64)
-            ctx = _new_context(table_addr, keys, stamps, rec_tri, rec_bary)
+            rh, rf, ctx, args, rec_tri, rec_bary = _row_query(table_addr, filt, REC_CAP)
             table = i64_ptr(table_addr)
-            args = _aligned(ARGS_WORDS)
-            args[0] = np.int64(RTC_FEATURE_FLAG_ALL) << 32
-            args[1] = ctx.ctypes.data
-            args[2] = filt
             for x in range(w):
                 occluded[y, x] = 0
                 cand[y, x] = 0
