@@ -75,6 +75,39 @@ BLOCK = 16  # points counted between two checks of the count (16 ran 2-6 % faste
 TAPS = 8  # texels per side of the block of taps ``micro_hits_with`` reads first (larger regions: texel by texel)
 
 
+@njit(cache=True, inline="always")
+def _hits_inside(value, threshold, inclusive, qax, qay, qbx, qby, qcx, qcy, samples, first, n, need):
+    """``micro_hits_with`` under the linear filter, every point reading its taps from ``value``
+    directly; -1 when some point's taps leave the texture (they need addressing)."""
+    h, w = value.shape
+    if w < 2 or h < 2:
+        return -1
+    last_x = np.uint64(w - 2)  # the last first tap inside: x0 and x0 + 1 both in [0, w)
+    last_y = np.uint64(h - 2)
+    step = min(n, BLOCK)
+    hits = 0
+    outside = False
+    for b in range(first, first + n, step):
+        for s in range(np.uint64(b), np.uint64(b + step)):
+            fx = bary_point(samples[s, 0], samples[s, 1], qax, qbx, qcx) - 0.5
+            fy = bary_point(samples[s, 0], samples[s, 1], qay, qby, qcy) - 0.5
+            x0 = int(math.floor(fx))
+            y0 = int(math.floor(fy))
+            ux = np.uint64(x0)  # a negative tap wraps to a large one: outside too
+            uy = np.uint64(y0)
+            outside |= (ux > last_x) | (uy > last_y)
+            ux = min(ux, last_x)  # (the reads stay in memory; the count is then not used)
+            uy = min(uy, last_y)
+            a = blend(np.float64(value[uy, ux]), np.float64(value[uy, ux + 1]), np.float64(value[uy + 1, ux]),
+                      np.float64(value[uy + 1, ux + 1]), fx - x0, fy - y0)
+            hits += passes(a, threshold, inclusive)
+        if outside:
+            return -1
+        if hits >= need or (need <= n and hits + (first + n - b - step) < need):
+            break
+    return hits
+
+
 @njit(cache=True, _nrt=False)
 def micro_hits_with(value, threshold, inclusive, filt, mode_u, mode_v, corners, samples, k, need, taps):
     """Sample points of a micro-triangle (``micro_corners``) where the alpha test passes, of its
@@ -85,14 +118,19 @@ def micro_hits_with(value, threshold, inclusive, filt, mode_u, mode_v, corners, 
 
     Each point's answer is ``alpha_test.sample_passes``' -- the shader's fetch
     (``sampling.sample_texture``) compared with the threshold -- with the same arithmetic. This
-    is the 4-state resolve's inner loop, so under the linear filter the texels the points can
-    read (the taps around the corners' box, when they fit in ``taps``) are read first, each
-    addressed once; then the points go in blocks of BLOCK with no branch (the compiler
-    vectorises a block), the count checked after each block."""
+    is the 4-state resolve's inner loop, so under the linear filter the points go in blocks of
+    BLOCK with no branch (the compiler vectorises a block), the count checked after each block:
+    each point reads its four taps from the texture itself while they all lie inside it (where
+    addressing changes nothing); a micro-triangle reaching the texture's edge reads the taps
+    around its corners' box first (when they fit in ``taps``), each addressed once."""
     qax, qay, qbx, qby, qcx, qcy = corners
     first = ((1 << (2 * k)) - 1) // 3
     n = 1 << (2 * k)
     h, w = value.shape
+    if filt == 1:
+        hits = _hits_inside(value, threshold, inclusive, qax, qay, qbx, qby, qcx, qcy, samples, first, n, need)
+        if hits >= 0:
+            return hits
     # the block: taps floor(p - 0.5) and + 1 of every point p of the corners' box widened by e,
     # far beyond the rounding of a point (a convex combination of the corners), so every point's
     # cell is in it (the index clamp below only keeps memory safe); a box over TAPS texels: each
