@@ -202,3 +202,17 @@ def test_show_picture_holds_every_panel(tmp_path):
     for colour in states.COLOURS:
         drawn = sum(int(np.all(p == colour, axis=2).sum()) for p in panels)
         assert drawn > 0 and int(np.all(pic == colour, axis=2).sum()) == drawn, colour
+
+
+@pytest.mark.skipif(not os.path.isdir("/proc/self/task"), reason="counts threads through Linux's /proc")
+def test_command_line_keeps_numpy_to_one_blas_thread():
+    """numpy's OpenBLAS would start a thread per further core that spins about 0.1 s of CPU; the
+    command line asks for one (before numpy loads) unless the caller chose a number."""
+    code = ("import os, sys, omaps.cli; assert 'numpy' not in sys.modules; import numpy; "
+            "print(os.environ['OPENBLAS_NUM_THREADS'], len(os.listdir('/proc/self/task')))")
+    env = {k: v for k, v in os.environ.items() if k != "OPENBLAS_NUM_THREADS"}
+    out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True)
+    assert out.stdout.split() == ["1", "1"]
+    out = subprocess.run([sys.executable, "-c", code], env=dict(env, OPENBLAS_NUM_THREADS="2"), capture_output=True,
+                         text=True, check=True)
+    assert out.stdout.split()[0] == "2"
