@@ -110,6 +110,39 @@ def _insert(words, hashes, table, store, n):
 
 
 @njit(cache=True)
+def _first_ids(words, hashes, table):
+    """``_insert`` of every row of ``words`` (M, W) into an empty ``table`` (S, 2) at once, with
+    no store: a slot holds the position of its row's first occurrence (read from ``words``
+    itself) and the hash. Returns (ids, n)."""
+    m, k = words.shape
+    mask = table.shape[0] - 1
+    ids = np.empty(m, dtype=np.int64)
+    n = 0
+    for i in range(m):
+        h = hashes[i]
+        s = h & mask
+        while True:
+            j = table[s, 0]
+            if j < 0:  # not there: a new row
+                table[s, 0] = i
+                table[s, 1] = h
+                ids[i] = n
+                n += 1
+                break
+            if table[s, 1] == h:
+                same = True
+                for w in range(k):
+                    if words[j, w] != words[i, w]:
+                        same = False
+                        break
+                if same:
+                    ids[i] = ids[j]
+                    break
+            s = (s + 1) & mask
+    return ids, n
+
+
+@njit(cache=True)
 def _rehash(old, table):
     mask = table.shape[0] - 1
     for t in range(old.shape[0]):
@@ -184,11 +217,15 @@ def unique_rows(rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 def first_occurrences(rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(first, inverse) of rows (M, ...): the index of each distinct row's first occurrence, in
     the order of first use, and each row's index among them (``rows[first][inverse]`` equals
-    ``rows``). Found by a ``RowIndex``: hashed, confirmed word by word."""
+    ``rows``). Found as a ``RowIndex`` finds them (hashed, confirmed word by word), with the
+    rows compared in place: nothing is copied to a store."""
     flat = _as_bytes(rows)
     if len(flat) == 0:
         return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
-    ids = RowIndex(flat.shape[1]).add(flat)
+    size = 16
+    while size < 2 * len(flat):
+        size *= 2
+    ids, _ = _first_ids(_words(flat), row_hashes(flat).view(np.int64), np.full((size, 2), -1, np.int64))
     return first_uses(ids), ids
 
 

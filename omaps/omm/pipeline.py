@@ -265,9 +265,11 @@ def plan_geometry(g: Geometry, settings: OmmSettings, n_map: int | None = None, 
     unknown = None if g.unknown is None else np.asarray(g.unknown, dtype=bool)
     inverse = None
     if settings.dedup and n_map is None and budget_plan is None and len(tris):  # (no reuse: a micromap each)
-        key = [np.ascontiguousarray(tris, dtype=np.float64).reshape(len(tris), 6).view(np.uint64),
-               levels.astype(np.uint64)[:, None]] + ([] if unknown is None else [unknown.astype(np.uint64)[:, None]])
-        first_of, inverse = omaps_rows.first_occurrences(np.concatenate(key, axis=1))
+        # (the level and the unknown flag join the key only where they differ between triangles)
+        key = [np.ascontiguousarray(tris, dtype=np.float64).reshape(len(tris), 6).view(np.uint64)]
+        key += [] if (levels == levels[0]).all() else [levels.astype(np.uint64)[:, None]]
+        key += [] if unknown is None or (unknown == unknown[0]).all() else [unknown.astype(np.uint64)[:, None]]
+        first_of, inverse = omaps_rows.first_occurrences(key[0] if len(key) == 1 else np.concatenate(key, axis=1))
         if len(first_of) == len(tris):
             inverse = None
     if inverse is None:
