@@ -207,3 +207,23 @@ def test_ctrl_c_while_a_local_cluster_batch_runs(tmp_path, phase):
         os.killpg(p.pid, signal.SIGINT)
 
     check_interrupted(p, out, interrupt)
+
+
+GC_SCRIPT = """
+import atexit, gc, sys
+from omaps.cli import omm, run
+seen = []
+def command(a):  # the command itself: collection back on, start-up's objects set aside
+    seen.append((gc.isenabled(), gc.get_freeze_count() > 0))
+    return 0
+omm.cmd_omm = command
+atexit.register(lambda: print(gc.isenabled(), seen))
+run(sys.argv[1:])
+"""
+
+
+def test_run_pauses_garbage_collection_for_start_up_only(tmp_path):
+    r = subprocess.run([sys.executable, "-c", GC_SCRIPT, "omm", "leaf.png", "uvs.npy", "-o", "out"],
+                       capture_output=True, text=True, cwd=tmp_path, env=dict(ENV, OMAPS_PRECOMPILE="0"))
+    assert r.returncode == 0, r.stderr
+    assert r.stdout.split("\n")[0] == "True [(True, True)]"

@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import atexit
 import difflib
+import gc
 import os
 import sys
 import threading
@@ -88,6 +89,7 @@ def main(argv=None) -> int:
         ahead = precompile.compile_first(args)  # the command's uncached kernels, on every core, announced
         precompile.finish_ahead(ahead)
         ahead = None
+        _resume_gc()
         with warnings.catch_warnings():
             warnings.showwarning = show_warning
             warnings.simplefilter("always", UserWarning)
@@ -105,6 +107,19 @@ def main(argv=None) -> int:
         precompile.stop_ahead(ahead)
 
 
+_gc_paused = False  # ``run`` paused the cyclic garbage collector for the start-up
+
+
+def _resume_gc() -> None:
+    """The command starts: what start-up made (numpy, numba, the command's modules: about 110,000
+    objects that live to the end) is set aside for good (``gc.freeze``) and collection resumes."""
+    global _gc_paused
+    if _gc_paused:
+        _gc_paused = False
+        gc.freeze()
+        gc.enable()
+
+
 def run(argv=None) -> NoReturn:
     """The ``omaps`` program: ``main``, then exit without tearing the interpreter down.
 
@@ -113,8 +128,18 @@ def run(argv=None) -> NoReturn:
     ``main`` returns (outputs are renamed into place, worker processes joined), so the exit
     handlers registered with ``atexit`` run, the standard streams are flushed, and the process
     ends there with ``main``'s exit code. Under a profiler, tracer or debugger (``python -m
-    cProfile -m omaps ...``, coverage), which reports after the program returns, it exits as usual."""
-    rc = main(argv)
+    cProfile -m omaps ...``, coverage), which reports after the program returns, it exits as usual.
+
+    Start-up (parsing, numpy and numba loading) runs with the cyclic garbage collector paused:
+    collecting its long-lived objects as they came took 0.06-0.09 s of every command."""
+    global _gc_paused
+    if gc.isenabled():
+        gc.disable()
+        _gc_paused = True
+    try:
+        rc = main(argv)
+    finally:
+        _resume_gc()
     # ... and as usual while a non-daemon thread still runs: the interpreter's exit joins it first
     # (an interrupted worker pool's manager thread unlinks its semaphores; cut short between unlink
     # and unregister, multiprocessing's resource tracker printed "leaked semaphore" warnings after
