@@ -32,7 +32,7 @@ from .. import __version__, omm_format, states
 from .. import rows as omaps_rows
 from ..alpha_test import AlphaTest
 from ..bake.micromap import (GROW_TEXEL, bake_micromaps, check_level, check_uv_triangles, dynamic_levels, flag_table,
-                             micro_starts, texel_areas)
+                             locality_order, micro_starts, texel_areas)
 from ..errors import InputError
 from ..names import PROMOTIONS
 from ..omm_format import Packer
@@ -230,7 +230,10 @@ class GeometryPlan:
     distinct ones: instanced and repeated foliage cards are baked and resolved once), each one's
     subdivision level, how many input triangles each stands for, their known-area weights, the
     triangles forced unknown, and which baked triangle each input triangle takes (``inverse``; None:
-    one to one). ``merged``: with a budget, micromaps shared by merging (triangle -> (its 3-state
+    one to one). Baked from a texture with no budget, the distinct triangles come in
+    ``bake.micromap.locality_order`` (neighbours in the texture one after another): the bake,
+    resolve and pack stages then read and write their arrays in order, not at random (about a
+    tenth less CPU at a million triangles). ``merged``: with a budget, micromaps shared by merging (triangle -> (its 3-state
     meet, its stored row)); ``baked``: with a budget, every triangle's micromap as its pricing
     baked and resolved it ((T/O/C states, OMM states), flat at ``micro_starts(levels)``), which the
     bake and resolve stages then take as they are."""
@@ -279,6 +282,13 @@ def plan_geometry(g: Geometry, settings: OmmSettings, n_map: int | None = None, 
         area = np.bincount(inverse, weights=area, minlength=len(first_of))
         tris, levels = tris[first_of], levels[first_of]
         unknown = None if unknown is None else unknown[first_of]
+    if n_map is None and budget_plan is None and len(tris) > 1:  # the bake's order, for all stages
+        order = locality_order(tris, g.test.width, g.test.height)
+        rank = np.empty(len(order), dtype=np.int64)
+        rank[order] = np.arange(len(order))
+        inverse = rank if inverse is None else rank[inverse]
+        tris, levels, weight, area = tris[order], levels[order], weight[order], area[order]
+        unknown = None if unknown is None else unknown[order]
     return GeometryPlan(tris, levels, weight, area, unknown, inverse, merged, n_tris, baked)
 
 
