@@ -141,6 +141,22 @@ def test_dynamic_levels():
         micromap.dynamic_levels(tris, 64, 64, 0.0, 8)
 
 
+@settings(max_examples=60, deadline=None)
+@given(arrays(np.float64, (5, 3, 2), elements=st.floats(-4, 4, allow_nan=False)), st.integers(1, 4096),
+       st.integers(1, 4096))
+def test_texel_areas_are_the_triangles_areas(tris, w, h):
+    """Half the cross product of two edges in texel space, computed in exact fractions: the
+    kernel differs by its float64 rounding only."""
+    from fractions import Fraction
+
+    got = micromap.texel_areas(tris, w, h)
+    for t, a in zip(tris, got):
+        (x0, y0), (x1, y1), (x2, y2) = ((Fraction(u) * w, Fraction(v) * h) for u, v in t)
+        exact = abs((x1 - x0) * (y2 - y0) - (y1 - y0) * (x2 - x0)) / 2
+        big = 1 + max(abs(c) for c in (x0, y0, x1, y1, x2, y2))  # a float64 product's rounding: ~2^-53 big^2
+        assert abs(Fraction(a) - exact) <= Fraction(2) ** -46 * big ** 2
+
+
 def test_bad_levels():
     g = footprint_grid(np.zeros((2, 2), np.uint8))
     tri = np.array([[[0, 0], [1, 0], [0, 1]]], dtype=float)
