@@ -280,14 +280,15 @@ def plan_geometry(g: Geometry, settings: OmmSettings, n_map: int | None = None, 
     else:
         weight = np.bincount(inverse, minlength=len(first_of))
         area = np.bincount(inverse, weights=area, minlength=len(first_of))
-        tris, levels = tris[first_of], levels[first_of]
+        tris, levels = np.take(tris, first_of, axis=0), levels[first_of]
         unknown = None if unknown is None else unknown[first_of]
     if n_map is None and budget_plan is None and len(tris) > 1:  # the bake's order, for all stages
         order = locality_order(tris, g.test.width, g.test.height)
         rank = np.empty(len(order), dtype=np.int64)
         rank[order] = np.arange(len(order))
         inverse = rank if inverse is None else rank[inverse]
-        tris, levels, weight, area = tris[order], levels[order], weight[order], area[order]
+        # (np.take: tris[order] gathered the 48-byte rows one call each, 112 ms against 32 for a million)
+        tris, levels, weight, area = np.take(tris, order, axis=0), levels[order], weight[order], area[order]
         unknown = None if unknown is None else unknown[order]
     return GeometryPlan(tris, levels, weight, area, unknown, inverse, merged, n_tris, baked)
 
