@@ -73,39 +73,46 @@ def _hash_rows(words, keys, out):
         out[i] = h
 
 
+@njit(cache=True, inline="always")
+def _find(table, h, rows, words, i):
+    """The slot of ``table`` for row ``words[i]`` (hash ``h``): the one holding an equal row (its
+    entry indexes ``rows``), or the empty one where it goes. A probe reads one slot (entry and
+    hash together); the words are compared only when the hashes agree."""
+    mask = table.shape[0] - 1
+    s = h & mask
+    while True:
+        j = table[s, 0]
+        if j < 0:
+            return s
+        if table[s, 1] == h:
+            same = True
+            for w in range(words.shape[1]):
+                if rows[j, w] != words[i, w]:
+                    same = False
+                    break
+            if same:
+                return s
+        s = (s + 1) & mask
+
+
 @njit(cache=True)
 def _insert(words, hashes, table, store, n):
     """Each row of ``words`` (M, W) looked up in the open-addressing ``table`` (S, 2): per slot
     the id of a stored row (-1: empty) and its hash (int64 bits), S a power of two at least twice
     the ids it will hold; the stored rows are ``store[:n]``. A row not found is stored under id
-    n, n + 1, ... Returns (ids, new n). A probe reads one slot (id and hash together); a row's
-    words are compared only when the hashes agree."""
-    m, k = words.shape
-    mask = table.shape[0] - 1
-    ids = np.empty(m, dtype=np.int64)
-    for i in range(m):
-        h = hashes[i]
-        s = h & mask
-        while True:
-            j = table[s, 0]
-            if j < 0:  # not there: a new row
-                table[s, 0] = n
-                table[s, 1] = h
-                for w in range(k):
-                    store[n, w] = words[i, w]
-                ids[i] = n
-                n += 1
-                break
-            if table[s, 1] == h:
-                same = True
-                for w in range(k):
-                    if store[j, w] != words[i, w]:
-                        same = False
-                        break
-                if same:
-                    ids[i] = j
-                    break
-            s = (s + 1) & mask
+    n, n + 1, ... Returns (ids, new n)."""
+    ids = np.empty(words.shape[0], dtype=np.int64)
+    for i in range(words.shape[0]):
+        s = _find(table, hashes[i], store, words, i)
+        j = table[s, 0]
+        if j < 0:  # not there: a new row
+            table[s, 0] = n
+            table[s, 1] = hashes[i]
+            store[n] = words[i]
+            ids[i] = n
+            n += 1
+        else:
+            ids[i] = j
     return ids, n
 
 
@@ -114,31 +121,18 @@ def _first_ids(words, hashes, table):
     """``_insert`` of every row of ``words`` (M, W) into an empty ``table`` (S, 2) at once, with
     no store: a slot holds the position of its row's first occurrence (read from ``words``
     itself) and the hash. Returns (ids, n)."""
-    m, k = words.shape
-    mask = table.shape[0] - 1
-    ids = np.empty(m, dtype=np.int64)
+    ids = np.empty(words.shape[0], dtype=np.int64)
     n = 0
-    for i in range(m):
-        h = hashes[i]
-        s = h & mask
-        while True:
-            j = table[s, 0]
-            if j < 0:  # not there: a new row
-                table[s, 0] = i
-                table[s, 1] = h
-                ids[i] = n
-                n += 1
-                break
-            if table[s, 1] == h:
-                same = True
-                for w in range(k):
-                    if words[j, w] != words[i, w]:
-                        same = False
-                        break
-                if same:
-                    ids[i] = ids[j]
-                    break
-            s = (s + 1) & mask
+    for i in range(words.shape[0]):
+        s = _find(table, hashes[i], words, words, i)
+        j = table[s, 0]
+        if j < 0:  # not there: a new row
+            table[s, 0] = i
+            table[s, 1] = hashes[i]
+            ids[i] = n
+            n += 1
+        else:
+            ids[i] = ids[j]
     return ids, n
 
 
