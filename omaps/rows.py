@@ -73,66 +73,43 @@ def _hash_rows(words, keys, out):
         out[i] = h
 
 
-@njit(cache=True, inline="always")
-def _find(table, h, rows, words, i):
-    """The slot of ``table`` for row ``words[i]`` (hash ``h``): the one holding an equal row (its
-    entry indexes ``rows``), or the empty one where it goes. A probe reads one slot (entry and
-    hash together); the words are compared only when the hashes agree."""
+@njit(cache=True)
+def _insert(words, hashes, table, store, n, in_place):
+    """Each row of ``words`` (M, W) looked up in the open-addressing ``table`` (S, 2), S a power
+    of two at least twice the entries it will hold: per slot an entry (-1: empty) and its row's
+    hash (int64 bits). A row not found gets the id n, n + 1, ... Returns (ids, new n). A probe
+    reads one slot (entry and hash together); a row's words are compared only when the hashes
+    agree.
+
+    Not ``in_place``: an entry is an id, whose row is copied to ``store`` (at least n + M rows; a
+    ``RowIndex``, rows added over many calls). ``in_place`` (``first_occurrences``: every row at
+    once, from an empty table, ``store`` is ``words``): an entry is the position of its row's first
+    occurrence in ``words``, nothing is copied."""
     mask = table.shape[0] - 1
-    s = h & mask
-    while True:
-        j = table[s, 0]
-        if j < 0:
-            return s
-        if table[s, 1] == h:
-            same = True
-            for w in range(words.shape[1]):
-                if rows[j, w] != words[i, w]:
-                    same = False
+    ids = np.empty(words.shape[0], dtype=np.int64)
+    for i in range(words.shape[0]):
+        h = hashes[i]
+        s = h & mask
+        while True:
+            j = table[s, 0]
+            if j < 0:  # not there: a new row
+                table[s, 0] = i if in_place else n
+                table[s, 1] = h
+                if not in_place:
+                    store[n] = words[i]
+                ids[i] = n
+                n += 1
+                break
+            if table[s, 1] == h:
+                same = True
+                for w in range(words.shape[1]):
+                    if store[j, w] != words[i, w]:
+                        same = False
+                        break
+                if same:
+                    ids[i] = ids[j] if in_place else j
                     break
-            if same:
-                return s
-        s = (s + 1) & mask
-
-
-@njit(cache=True)
-def _insert(words, hashes, table, store, n):
-    """Each row of ``words`` (M, W) looked up in the open-addressing ``table`` (S, 2): per slot
-    the id of a stored row (-1: empty) and its hash (int64 bits), S a power of two at least twice
-    the ids it will hold; the stored rows are ``store[:n]``. A row not found is stored under id
-    n, n + 1, ... Returns (ids, new n)."""
-    ids = np.empty(words.shape[0], dtype=np.int64)
-    for i in range(words.shape[0]):
-        s = _find(table, hashes[i], store, words, i)
-        j = table[s, 0]
-        if j < 0:  # not there: a new row
-            table[s, 0] = n
-            table[s, 1] = hashes[i]
-            store[n] = words[i]
-            ids[i] = n
-            n += 1
-        else:
-            ids[i] = j
-    return ids, n
-
-
-@njit(cache=True)
-def _first_ids(words, hashes, table):
-    """``_insert`` of every row of ``words`` (M, W) into an empty ``table`` (S, 2) at once, with
-    no store: a slot holds the position of its row's first occurrence (read from ``words``
-    itself) and the hash. Returns (ids, n)."""
-    ids = np.empty(words.shape[0], dtype=np.int64)
-    n = 0
-    for i in range(words.shape[0]):
-        s = _find(table, hashes[i], words, words, i)
-        j = table[s, 0]
-        if j < 0:  # not there: a new row
-            table[s, 0] = i
-            table[s, 1] = hashes[i]
-            ids[i] = n
-            n += 1
-        else:
-            ids[i] = ids[j]
+            s = (s + 1) & mask
     return ids, n
 
 
@@ -189,7 +166,8 @@ class RowIndex:
                 size *= 2
             old, self._table = self._table, np.full((size, 2), -1, np.int64)
             _rehash(old, self._table)
-        ids, self.n = _insert(_words(a), row_hashes(a).view(np.int64), self._table, self._store, self.n)
+        ids, self.n = _insert(_words(a), row_hashes(a).view(np.int64), self._table, self._store, self.n,
+                              False)
         return ids
 
 
@@ -219,7 +197,9 @@ def first_occurrences(rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     size = 16
     while size < 2 * len(flat):
         size *= 2
-    ids, _ = _first_ids(_words(flat), row_hashes(flat).view(np.int64), np.full((size, 2), -1, np.int64))
+    words = _words(flat)
+    ids, _ = _insert(words, row_hashes(flat).view(np.int64), np.full((size, 2), -1, np.int64), words, 0,
+                     True)
     return first_uses(ids), ids
 
 
