@@ -435,7 +435,7 @@ def _texel_areas(t, width, height, out):
 def texel_areas(tris_uv, width: int, height: int) -> np.ndarray:
     """Area in texels of each UV triangle (T, 3, 2) on a width x height texture (one pass: numpy's
     operations one at a time took 80 ms for a million triangles)."""
-    t = np.asarray(tris_uv, dtype=np.float64).reshape(-1, 3, 2)
+    t = np.ascontiguousarray(tris_uv, dtype=np.float64).reshape(-1, 3, 2)  # (one compiled layout)
     out = np.empty(len(t))
     _texel_areas(t, float(width), float(height), out)
     return out

@@ -8,6 +8,6 @@ import os as _os
 # a command starts inherit it.
 _os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
-from .main import main, run
+from .main import main, run  # noqa: E402 (after the variable above, before numpy loads)
 
 __all__ = ["main", "run"]

@@ -233,10 +233,10 @@ class GeometryPlan:
     one to one). Baked from a texture with no budget, the distinct triangles come in
     ``bake.micromap.locality_order`` (neighbours in the texture one after another): the bake,
     resolve and pack stages then read and write their arrays in order, not at random (about a
-    tenth less CPU at a million triangles). ``merged``: with a budget, micromaps shared by merging (triangle -> (its 3-state
-    meet, its stored row)); ``baked``: with a budget, every triangle's micromap as its pricing
-    baked and resolved it ((T/O/C states, OMM states), flat at ``micro_starts(levels)``), which the
-    bake and resolve stages then take as they are."""
+    tenth less CPU at a million triangles). ``merged``: with a budget, micromaps shared by merging
+    (triangle -> (its 3-state meet, its stored row)); ``baked``: with a budget, every triangle's
+    micromap as its pricing baked and resolved it ((T/O/C states, OMM states), flat at
+    ``micro_starts(levels)``), which the bake and resolve stages then take as they are."""
 
     tris: np.ndarray
     levels: np.ndarray
