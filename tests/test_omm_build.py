@@ -377,6 +377,23 @@ def test_chunked_baking_gives_the_same_buffers(rng, monkeypatch, source, dynamic
     assert a == b, {k: (a[k], b[k]) for k in a if a[k] != b[k]}
 
 
+def test_records_follow_the_documented_order(rng):
+    """FORMAT.md, "Order": records come in the order the pack stage first meets each micromap,
+    the triangles visited by the 16 x 16-texel tile of their centroid along a Morton curve, input
+    order within a tile (computed here from that statement, not with omaps' function)."""
+    tris = _tris(rng, 300)
+    res = build([Geometry("g", _cutoff(_alpha(rng, 256, 256), 0.5, "linear"), tris)], OmmSettings(level=3))
+
+    def morton(x, y):
+        return sum(((x >> b) & 1) << (2 * b) | ((y >> b) & 1) << (2 * b + 1) for b in range(8))
+
+    tile = np.clip(np.floor(tris.mean(axis=1) * 256 / 16), 0, 15).astype(int)  # 16 tiles of 16 texels per side
+    visit = sorted(range(len(tris)), key=lambda t: (morton(*tile[t]), t))
+    used = [int(i) for i in res.index[visit] if i >= 0]
+    assert len(res.triangles) > 20
+    assert list(dict.fromkeys(used)) == list(range(len(res.triangles)))
+
+
 @settings(max_examples=40, deadline=None)
 @given(st.integers(0, 2**32 - 1), st.sampled_from(["4state", "2state"]), st.booleans(), st.booleans(),
        st.sampled_from(["nearest", "hashed"]))
