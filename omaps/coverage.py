@@ -76,14 +76,15 @@ TAPS = 8  # texels per side of the block of taps ``micro_hits_with`` reads first
 
 
 @njit(cache=True, inline="always")
-def _hits_inside(value, threshold, inclusive, qax, qay, qbx, qby, qcx, qcy, samples, first, n, need):
-    """``micro_hits_with`` under the linear filter, every point reading its taps from ``value``
-    directly; -1 when some point's taps leave the texture (they need addressing)."""
-    h, w = value.shape
-    if w < 2 or h < 2:
+def _hits_from(taps, ox, oy, nx, ny, threshold, inclusive, qax, qay, qbx, qby, qcx, qcy, samples, first, n, need):
+    """``micro_hits_with`` under the linear filter, every point reading its four taps from
+    ``taps``: texel (x, y) at ``taps[y - oy, x - ox]``, ``nx`` x ``ny`` of them (the texture
+    itself, or a block of it); -1 when some point's taps leave them. Points go in blocks of BLOCK
+    with no branch (the compiler vectorises a block), the count checked after each block."""
+    if nx < 2 or ny < 2:
         return -1
-    last_x = np.uint64(w - 2)  # the last first tap inside: x0 and x0 + 1 both in [0, w)
-    last_y = np.uint64(h - 2)
+    last_x = np.uint64(nx - 2)  # the last first tap inside: x0 and x0 + 1 both in [0, nx)
+    last_y = np.uint64(ny - 2)
     step = min(n, BLOCK)
     hits = 0
     outside = False
@@ -93,13 +94,13 @@ def _hits_inside(value, threshold, inclusive, qax, qay, qbx, qby, qcx, qcy, samp
             fy = bary_point(samples[s, 0], samples[s, 1], qay, qby, qcy) - 0.5
             x0 = int(math.floor(fx))
             y0 = int(math.floor(fy))
-            ux = np.uint64(x0)  # a negative tap wraps to a large one: outside too
-            uy = np.uint64(y0)
+            ux = np.uint64(x0 - ox)  # a tap before the first wraps to a large index: outside too
+            uy = np.uint64(y0 - oy)
             outside |= (ux > last_x) | (uy > last_y)
             ux = min(ux, last_x)  # (the reads stay in memory; the count is then not used)
             uy = min(uy, last_y)
-            a = blend(np.float64(value[uy, ux]), np.float64(value[uy, ux + 1]), np.float64(value[uy + 1, ux]),
-                      np.float64(value[uy + 1, ux + 1]), fx - x0, fy - y0)
+            a = blend(np.float64(taps[uy, ux]), np.float64(taps[uy, ux + 1]), np.float64(taps[uy + 1, ux]),
+                      np.float64(taps[uy + 1, ux + 1]), fx - x0, fy - y0)
             hits += passes(a, threshold, inclusive)
         if outside:
             return -1
@@ -118,57 +119,39 @@ def micro_hits_with(value, threshold, inclusive, filt, mode_u, mode_v, corners, 
 
     Each point's answer is ``alpha_test.sample_passes``' -- the shader's fetch
     (``sampling.sample_texture``) compared with the threshold -- with the same arithmetic. This
-    is the 4-state resolve's inner loop, so under the linear filter the points go in blocks of
-    BLOCK with no branch (the compiler vectorises a block), the count checked after each block:
-    each point reads its four taps from the texture itself while they all lie inside it (where
-    addressing changes nothing); a micro-triangle reaching the texture's edge reads the taps
-    around its corners' box first (when they fit in ``taps``), each addressed once."""
+    is the 4-state resolve's inner loop, so under the linear filter the points go in blocks
+    (``_hits_from``): each point reads its four taps from the texture itself while they all lie
+    inside it (where addressing changes nothing); a micro-triangle reaching the texture's edge
+    reads the taps around its corners' box first (when they fit in ``taps``), each addressed
+    once; else, or when a point's taps would leave that block, every point samples the texture
+    on its own."""
     qax, qay, qbx, qby, qcx, qcy = corners
     first = ((1 << (2 * k)) - 1) // 3
     n = 1 << (2 * k)
     h, w = value.shape
     if filt == 1:
-        hits = _hits_inside(value, threshold, inclusive, qax, qay, qbx, qby, qcx, qcy, samples, first, n, need)
+        hits = _hits_from(value, 0, 0, w, h, threshold, inclusive, qax, qay, qbx, qby, qcx, qcy, samples, first, n,
+                          need)
         if hits >= 0:
             return hits
-    # the block: taps floor(p - 0.5) and + 1 of every point p of the corners' box widened by e,
-    # far beyond the rounding of a point (a convex combination of the corners), so every point's
-    # cell is in it (the index clamp below only keeps memory safe); a box over TAPS texels: each
-    # point reads the texture itself
-    bx = by = 0
-    nbx = nby = 0
-    if filt == 1:
+        # the block: taps floor(p - 0.5) and + 1 of every point p of the corners' box widened by
+        # e, far beyond the rounding of a point (a convex combination of the corners), so every
+        # point's taps are in it
         e = 1e-6 * (1.0 + max(max(abs(qax), abs(qbx)), abs(qcx)) + max(max(abs(qay), abs(qby)), abs(qcy)))
         bx = int(math.floor(min(min(qax, qbx), qcx) - 0.5 - e))
         by = int(math.floor(min(min(qay, qby), qcy) - 0.5 - e))
         nx = int(math.floor(max(max(qax, qbx), qcx) - 0.5 + e)) - bx + 2
         ny = int(math.floor(max(max(qay, qby), qcy) - 0.5 + e)) - by + 2
         if nx <= TAPS and ny <= TAPS:
-            nbx = nx - 1  # cells whose four taps are in the block: 0 .. nbx - 1, 0 .. nby - 1
-            nby = ny - 1
             for j in range(np.uint64(ny)):  # unsigned indices: no negative-index checks
                 row = address(by + np.int64(j), h, mode_v)
                 for i in range(np.uint64(nx)):
                     taps[j, i] = np.float64(value[row, address(bx + np.int64(i), w, mode_u)])
+            hits = _hits_from(taps, bx, by, nx, ny, threshold, inclusive, qax, qay, qbx, qby, qcx, qcy, samples,
+                              first, n, need)
+            if hits >= 0:
+                return hits
     hits = 0
-    if nbx > 0:
-        # every point reads its taps from the block: blocks of points without a branch (the
-        # compiler vectorises them), the count checked after each
-        step = min(n, BLOCK)
-        for b in range(first, first + n, step):
-            for s in range(np.uint64(b), np.uint64(b + step)):
-                fx = bary_point(samples[s, 0], samples[s, 1], qax, qbx, qcx) - 0.5
-                fy = bary_point(samples[s, 0], samples[s, 1], qay, qby, qcy) - 0.5
-                i = min(max(int(math.floor(fx)) - bx, 0), nbx - 1)
-                j = min(max(int(math.floor(fy)) - by, 0), nby - 1)
-                ui = np.uint64(i)  # (i, j >= 0: unsigned, the reads skip numba's negative-index checks)
-                uj = np.uint64(j)
-                a = blend(taps[uj, ui], taps[uj, ui + 1], taps[uj + 1, ui], taps[uj + 1, ui + 1], fx - (i + bx),
-                          fy - (j + by))
-                hits += passes(a, threshold, inclusive)
-            if hits >= need or (need <= n and hits + (first + n - b - step) < need):
-                break
-        return hits
     for s in range(first, first + n):
         w1 = samples[s, 0]
         w2 = samples[s, 1]
