@@ -91,9 +91,10 @@ def rows_flag(sat, grid, poly, k, grow, points, buf_a, buf_b):
     Per row band, the polygon's x-extent (``row_span``) gives a span of cells: a short one (at
     most DIRECT_SPAN cells, a micro-triangle's) is read cell by cell, a longer one counted in O(1)
     from the summed-area table ``sat`` (``flag_table.flag_table``) and walked only where it holds
-    mixed bilinear cells; each mixed cell's part is decided by ``bilinear.cell_flag``. ``grid``: ``FootprintGrid.kernel_args()``; ``points``: the OR of the
-    vertices' own flags (``bilinear.point_flag``) when the caller has them (vertices shared with
-    neighbouring regions), else -1 (read here when needed); ``buf_*`` (POLY_MAX, 2) scratch.
+    mixed bilinear cells; each mixed cell's part is decided by ``bilinear.cell_flag``. ``grid``:
+    ``FootprintGrid.kernel_args()``; ``points``: the OR of the vertices' own flags
+    (``bilinear.point_flag``) when the caller has them (vertices shared with neighbouring
+    regions), else -1 (read here when needed); ``buf_*`` (POLY_MAX, 2) scratch.
 
     ``grow`` > 0: the polygon grown by a square of half-side ``grow`` (its Minkowski sum), which
     has area even when the polygon has none: per band, the polygon's x-extent over the band
@@ -106,7 +107,8 @@ def rows_flag(sat, grid, poly, k, grow, points, buf_a, buf_b):
         ymax = max(ymax, poly[i, 1])
     acc = 0
     points_done = False
-    if grow > 0.0 and mixed.shape[0] > 0:
+    has_mixed = mixed.shape[0] > 0
+    if grow > 0.0 and has_mixed:
         # grown, every vertex's cell is in a row span below, so its flag is part of the OR: read
         # first (cheap), a region across the cut-off is C before any row is counted. (Ungrown, a
         # vertex on a row's lower edge lies outside the spans: then only after a mixed span.)
@@ -115,7 +117,6 @@ def rows_flag(sat, grid, poly, k, grow, points, buf_a, buf_b):
         if acc == 3:
             return 3
     hc, wc = flags.shape
-    has_mixed = mixed.shape[0] > 0
     for r in range(int(math.floor(ymin - grow)), int(math.ceil(ymax + grow))):
         c0, c1 = row_span(poly, k, r, grow, ymin, ymax)
         if c1 <= c0:
@@ -155,8 +156,8 @@ def rows_flag(sat, grid, poly, k, grow, points, buf_a, buf_b):
 @njit(cache=True, _nrt=False)
 def _mixed_cells_flag(grid, poly, k, grow, r, row, c0, c1, buf_a, buf_b):
     """OR of ``bilinear.cell_flag`` over the mixed cells of columns [c0, c1) of row band r
-    (stored row ``row``), stopping at 3: a long span's (rare: a call of its own, so that the
-    inlined ``cell_flag`` is compiled once here)."""
+    (stored row ``row``), stopping at 3: a long span's (rare: a call of its own, which keeps
+    this loop out of every rasteriser ``rows_flag`` is inlined into)."""
     flags, mixed, values, bounds, period_x, period_y = grid
     wc = flags.shape[1]
     acc = 0
