@@ -1,8 +1,8 @@
-"""The fast opaque-fraction sampler (``coverage.micro_hits_with``: taps read without addressing inside the
-texture, or once per region at its edge; points
-counted in branch-free blocks) and the 4-state / 2-state resolve built on it give exactly what
-the definition gives: ``alpha_test.sample_passes`` at every sample point of a micro-triangle,
-one point at a time, and ``omaps.promotion``'s rule on that fraction."""
+"""The fast opaque-fraction sampler (``coverage.micro_hits_with``: taps read without addressing
+inside the texture, or once per region at its edge; points counted in branch-free blocks) and
+the 4-state / 2-state resolve built on it give exactly what the definition gives:
+``alpha_test.sample_passes`` at every sample point of a micro-triangle, one point at a time, and
+``omaps.promotion``'s rule on that fraction."""
 
 import numpy as np
 import pytest
