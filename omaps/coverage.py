@@ -121,7 +121,8 @@ def micro_hits_with(value, threshold, inclusive, filt, mode_u, mode_v, corners, 
     (``sampling.sample_texture``) compared with the threshold -- with the same arithmetic. This
     is the 4-state resolve's inner loop, so under the linear filter the points go in blocks
     (``_hits_from``): each point reads its four taps from the texture itself while they all lie
-    inside it (where addressing changes nothing); a micro-triangle reaching the texture's edge
+    inside it, or on a wrap axis inside one period of it (where addressing changes nothing but
+    the period); a micro-triangle reaching the texture's edge
     reads the taps around its corners' box first (when they fit in ``taps``), each addressed
     once; else, or when a point's taps would leave that block, every point samples the texture
     on its own."""
@@ -130,7 +131,12 @@ def micro_hits_with(value, threshold, inclusive, filt, mode_u, mode_v, corners, 
     n = 1 << (2 * k)
     h, w = value.shape
     if filt == 1:
-        hits = _hits_from(value, 0, 0, w, h, threshold, inclusive, qax, qay, qbx, qby, qcx, qcy, samples, first, n,
+        # on a wrap axis the texture repeats: a region whose taps lie within one period reads the
+        # texture's own texels, whole periods over (the same points and arithmetic; the taps'
+        # indices only skip the addressing)
+        ox = (int(math.floor(min(min(qax, qbx), qcx) - 0.5)) // w) * w if mode_u == 0 else 0
+        oy = (int(math.floor(min(min(qay, qby), qcy) - 0.5)) // h) * h if mode_v == 0 else 0
+        hits = _hits_from(value, ox, oy, w, h, threshold, inclusive, qax, qay, qbx, qby, qcx, qcy, samples, first, n,
                           need)
         if hits >= 0:
             return hits

@@ -1,6 +1,7 @@
 """The fast opaque-fraction sampler (``coverage.micro_hits_with``: taps read without addressing
-inside the texture, or once per region at its edge; points counted in branch-free blocks) and
-the 4-state / 2-state resolve built on it give exactly what the definition gives:
+inside the texture or, on a wrap axis, one period of it, or once per region at its edge; points
+counted in branch-free blocks) and the 4-state / 2-state resolve built on it give exactly what
+the definition gives:
 ``alpha_test.sample_passes`` at every sample point of a micro-triangle, one point at a time, and
 ``omaps.promotion``'s rule on that fraction."""
 
@@ -59,6 +60,8 @@ def test_hits_are_the_shaders_test_point_by_point(h, w, r, filt, wrap_u, wrap_v,
         threshold = float(rng.uniform(0.2, 0.8))
     test = _test(values, threshold, inclusive, filt, wrap_u, wrap_v)
     c = rng.uniform(-1.5, 1.5, 2) * [w, h] + [w / 2, h / 2]
+    if rng.random() < 0.3:  # periods away (a wrap axis reads the texture whole periods over)
+        c += rng.integers(-4, 5, 2) * [w, h]
     corners = tuple(float(v) for v in (c + rng.uniform(-size, size, (3, 2))).ravel())
     if rng.random() < 0.2:  # on texel edges and sample-cell edges
         corners = tuple(float(np.round(v * 2) / 2) for v in corners)
@@ -114,7 +117,7 @@ def _reference_resolve(states3, starts, level, test, tris_uv, fmt, promo, seed):
     return out
 
 
-@pytest.mark.parametrize("filt,wrap", [("linear", "clamp"), ("linear", "mirror"), ("nearest", "wrap")])
+@pytest.mark.parametrize("filt,wrap", [("linear", "clamp"), ("linear", "mirror"), ("linear", "wrap"), ("nearest", "wrap")])
 @pytest.mark.parametrize("promo", ["nearest", "hashed"])
 def test_resolve_is_the_rule_on_sampled_fractions(filt, wrap, promo):
     rng = np.random.default_rng(5)
@@ -122,6 +125,7 @@ def test_resolve_is_the_rule_on_sampled_fractions(filt, wrap, promo):
     alpha[:, :3] = 0
     test = StateRule("cutoff", cutoff=0.5).alpha_test(load_alpha(alpha), filt, wrap)
     tris = rng.uniform(-0.2, 1.2, (12, 1, 2)) + rng.uniform(-0.4, 0.4, (12, 3, 2))
+    tris[::3] += [2.0, -1.0]  # whole periods away
     level = 3
     states3, starts = bake_micromaps(test.grid(), tris, level, GROW_TEXEL)
     assert (states3 == 2).sum() > 50  # the rule is exercised
