@@ -7,10 +7,13 @@ loaded in about a second. A *family* is the set of modules one kind of work comp
 counts as cached when numba's index of at least one of its kernels matches the module's current
 source (what numba itself checks before loading).
 
-The compile runs the real commands on tiny inputs written to a temporary folder (``python -m
-omaps.cli.precompile FAMILY...``; with no family: every one), so it compiles exactly the
-specialisations the commands use; the command then loads them from the cache, and so do its
-worker processes (which would otherwise each compile the same kernels). ``python
+The compile runs the library calls the commands make on tiny inputs written to a temporary
+folder (``python -m omaps.cli.precompile FAMILY...``; with no family: every one), so it compiles
+exactly the specialisations the commands use; the command then loads them from the cache, and so
+do its worker processes (which would otherwise each compile the same kernels). Each family's
+calls compile its own kernels and none of another family's (a codec's encoders encode a made-up
+map, not a baked one; the tracer's filters compile without maps): the families' processes run at
+the same time, and two that compiled the same kernels did that work twice. ``python
 bench/bench_cold.py`` measures a first use.
 """
 
@@ -355,6 +358,17 @@ def _quad_scene(folder: str) -> str:
     return path
 
 
+def _states_map(n: int):
+    """An n x n map of every state, as a baker gives one: an O disc, a ring of C, T around it."""
+    import numpy as np
+
+    from .. import states
+
+    yy, xx = np.mgrid[0:n, 0:n]
+    r = np.hypot(xx - (n - 1) / 2, yy - (n - 1) / 2) / n
+    return np.where(r < 0.25, states.O, np.where(r < 0.35, states.C, states.T)).astype(np.uint8)
+
+
 def warm(families, report=None, evaluation_only: bool = False) -> None:
     """Compile the families' kernels by running the library calls the commands make on tiny
     inputs; ``report``: a stream that gets each family's name when its kernels are compiled;
@@ -386,18 +400,45 @@ def warm(families, report=None, evaluation_only: bool = False) -> None:
         def omm(out, inputs=(scene,), **kw):
             return lambda: bake_omms(list(inputs), os.path.join(tmp, out), threads=1, **kw)
 
+        def enc(*codecs):
+            """The codecs' encoders (every encoder and effort: the deck's encoder and thorough are
+            kernels of their own in vq2) on a made-up map, through ``Codec.encode_many`` as trace,
+            omm --from and eval call them: no square baker (the square family's) and no tracer."""
+            def run():
+                from ..codecs import get_codec
+
+                for name in codecs:
+                    codec = get_codec(name)
+                    for e in codec.encoders:
+                        for f in codec.efforts:
+                            codec.encode_many(_states_map(codec.map_size)[None], e, f)
+
+            run.evaluation = True
+            return run
+
+        def tracer():
+            """What the tracer does with a scheme's maps, with no map baked: the maps' dedupe (on
+            made-up maps) and the filters of baked and stored maps (micromaps, a file's
+            micromaps, square maps of any codec)."""
+            from ..trace import lookups
+            from ..trace.filter import make_filter
+            from ..trace.maps import dedupe_maps
+
+            dedupe_maps(np.stack([_states_map(16)] * 2))
+            for fn in (lookups.micro_map_state, lookups.stored_micromap_state, lookups.pair_map_state):
+                make_filter(fn)
+
         runs = {
             "square": [ev("sq4,sq16")],
             "micromap": [ev("tri2,tri3")],
-            "trace": [tr("none,tri3,sq16", shadows=True, two_state="all")],
-            # the deck's encoder and thorough are kernels of their own (vq4's share one)
-            "vq2": [tr("none,vq2"), ev("vq2,vq2-paper,vq2-thorough")],
-            "vq4": [tr("none,vq4,vq4x64"), ev("vq4,vq4x64")],
+            "trace": [tr("none", shadows=True), tracer],
+            "vq2": [enc("vq2")],
+            "vq4": [enc("vq4", "vq4x64")],
             "omm": [omm("omm"), omm("omm_2", format="2state", promote="hashed"), omm("omm.glb"),
                     lambda: verify_omms(os.path.join(tmp, "omm")),
                     tr("none,omm", path=os.path.join(tmp, "omm.glb"))],
-            "synth": [ev("vq4-synth"), tr("none,vq4-synth")],
-            "wavelet": [ev("wavelet3,wavelet3-fast"), tr("none,wavelet3-fast")],
+            "synth": [enc("vq4-synth")],
+            "wavelet": [enc("wavelet3")],
             "hierarchical": [ev("succinct3,csm3"), tr("none,succinct3,csm3")],
             "budget": [omm("omm_budget", budget=200), tr("none,budget:1KiB"),
                        omm("omm_view", budget=200, weights="view", size=(16, 16)),
