@@ -418,8 +418,8 @@ def warm(families, report=None, evaluation_only: bool = False) -> None:
 
         def tracer():
             """What the tracer does with a scheme's maps, with no map baked: the maps' dedupe (on
-            made-up maps) and the filters of baked and stored maps (micromaps, a file's
-            micromaps, square maps of any codec)."""
+            made-up maps), the filters of baked and stored maps (micromaps, a file's micromaps,
+            square maps of any codec) and the 2-state maps' fractions and promotion."""
             from ..trace import lookups
             from ..trace.filter import make_filter
             from ..trace.maps import dedupe_maps
@@ -427,6 +427,16 @@ def warm(families, report=None, evaluation_only: bool = False) -> None:
             dedupe_maps(np.stack([_states_map(16)] * 2))
             for fn in (lookups.micro_map_state, lookups.stored_micromap_state, lookups.pair_map_state):
                 make_filter(fn)
+            # --two-state: the cells' opaque fractions and the hashed promotion, on a made-up pair
+            # and an 8-bit material's test (a scene's alpha as a PNG decodes it)
+            from ..alpha_test import material_test
+            from ..coverage import cell_fractions
+            from ..promotion import resolve_regions
+
+            test = material_test("t", "MASK", 0.5, 1.0, _states_map(8) * np.uint8(127), 255, "linear", "wrap",
+                                 "wrap")
+            frac, centre = cell_fractions(test, np.random.default_rng(0).random((1, 6, 2)), np.ones(1, bool), 16)
+            resolve_regions(_states_map(16)[None], frac, centre, "hashed")
 
         runs = {
             "square": [ev("sq4,sq16")],
