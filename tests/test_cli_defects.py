@@ -259,7 +259,8 @@ def test_compile_estimate_and_split(monkeypatch):
     assert per[1] - per[0] <= max(fam[f][1] for f in ["square", "micromap", "trace", "omm"])
     assert precompile._groups(["square"], 2) == [["square"]]
     low, high = precompile._ahead_seconds([["square"], ["micromap"]])
-    assert abs(low - fam["square"][1] * precompile.AHEAD_FACTOR) <= 5 and high >= 2 * low - 5
+    assert abs(low - fam["square"][1] * precompile.AHEAD_RANGE[0]) <= 5
+    assert abs(high - fam["square"][1] * precompile.AHEAD_RANGE[1]) <= 5
     busy_low, _ = precompile._ahead_seconds([["square"], ["micromap"]], load=7.0)
     assert busy_low >= 4 * low - 10
 

@@ -22,13 +22,17 @@ def test_families_of_commands():
     assert families_for(ns(command="eval", schemes="vq4-synth,wavelet3-fast")) == ["square", "vq4", "synth", "wavelet"]
     assert families_for(ns(command="trace", schemes="none,vq4")) == ["trace", "square", "vq4"]
     assert families_for(ns(command="trace", schemes="none,file:vq4,omm")) == ["trace"]
-    assert families_for(ns(command="trace", schemes="budget:1MiB")) == ["trace", "square", "vq2", "vq4", "budget"]
+    assert families_for(ns(command="trace", schemes="budget:1MiB")) == ["trace", "square", "vq2", "vq4",
+                                                                         "budget-maps"]
     assert families_for(ns(command="trace", schemes="budget:1MiB:vq4+succinct6")) == [
-        "trace", "square", "vq4", "hierarchical", "budget"]
+        "trace", "square", "vq4", "hierarchical", "budget-maps"]
     assert families_for(ns(command="report", input="palm.glb", schemes="none,tri3")) == ["trace", "micromap"]
     assert families_for(ns(command="report", input="textures", schemes=None)) == ["square", "micromap"]
     assert families_for(ns(command="omm", inputs=["a.glb"], expand=False, source="texture", budget=900)) == [
         "micromap", "omm", "budget"]
+    # the view's hits are traced
+    assert families_for(ns(command="omm", inputs=["a.glb"], expand=False, source="texture", budget=900,
+                           weights="view")) == ["micromap", "omm", "budget", "trace"]
     assert families_for(ns(command="omm", inputs=["a.glb"], expand=False, source="texture")) == ["micromap", "omm"]
     assert families_for(ns(command="omm", inputs=["a.glb"], expand=False, source="vq2")) == [
         "micromap", "omm", "square", "vq2"]
@@ -38,7 +42,8 @@ def test_families_of_commands():
     assert families_for(ns(command="encode", codec="vq4x64")) == ["square", "vq4"]
     assert families_for(ns(command="bake", scheme="tri4")) == ["micromap"]
     assert families_for(ns(command="decode", codec="vq4")) == []
-    assert all(f in FAMILIES for f in ["square", "micromap", "trace", "vq2", "vq4", "omm", "budget", "synth", "wavelet"])
+    assert all(f in FAMILIES for f in ["square", "micromap", "trace", "vq2", "vq4", "omm", "budget", "budget-maps", "synth",
+                                 "wavelet"])
 
 
 def test_a_texture_bake_imports_no_codec_before_it_runs():

@@ -27,30 +27,37 @@ import time
 
 __all__ = ["FAMILIES", "uncached", "families_for", "compile_first", "finish_ahead", "stop_ahead", "warm"]
 
-# family: (modules whose kernels it compiles, seconds to compile them with an empty cache on one
-# core of the 2-core reference machine: numba's compile events, summed per family, of the palm
-# trace command and of omaps eval)
+# family: (modules whose kernels it compiles (``module:function``: that kernel), seconds its
+# compile process took with an empty cache on the 2-core reference machine, two such processes at
+# a time: imports, the warm-up's tiny runs and the cache writes included)
 # (the codecs' own families, vq2, vq4, synth and wavelet, are declared in the codec registry;
 # ``FAMILIES`` is both, read on first use so that parsing a command line imports no codec)
 COMMAND_FAMILIES = {
-    "square": (("omaps.flag_table", "omaps.raster", "omaps.bake.square"), 10),
-    "micromap": (("omaps.flag_table", "omaps.bake.micromap"), 9),
-    "trace": (("omaps.trace.rays", "omaps.scene.pairing", "omaps.rows"), 10),
-    "omm": (("omaps.omm.resolve", "omaps.omm_format", "omaps.coverage", "omaps.rows"), 6),
-    "budget": (("omaps.allocate", "omaps.omm.budget"), 10),
+    "square": (("omaps.flag_table", "omaps.raster", "omaps.bake.square"), 51),
+    "micromap": (("omaps.flag_table", "omaps.bake.micromap"), 26),
+    "trace": (("omaps.trace.rays", "omaps.scene.pairing", "omaps.rows"), 51),
+    "omm": (("omaps.omm.resolve", "omaps.omm_format", "omaps.coverage", "omaps.rows"), 58),
+    "budget": (("omaps.omm.budget",), 13),  # omm --budget's pricing
+    # the tracer's budget:BYTES scheme: its allocation, and its mixed maps' reader (other families
+    # compile other kernels of both modules)
+    "budget-maps": (("omaps.allocate:allocate_arrays", "omaps.trace.lookups:mixed_map_state"), 98),
 }
 
 
 def _module_cached(name: str) -> bool:
+    """Whether numba's cache holds a kernel of module ``name`` (``module:function``: that kernel)."""
     from numba.core.caching import NullCache
     from numba.core.dispatcher import Dispatcher
 
+    name, _, only = name.partition(":")
     try:
         mod = importlib.import_module(name)
     except Exception:  # noqa: BLE001 - a module that cannot be imported compiles nothing here
         return True
-    for obj in vars(mod).values():
+    for attr, obj in vars(mod).items():
         if not isinstance(obj, Dispatcher) or getattr(obj.py_func, "__module__", None) != name:
+            continue
+        if only and attr != only:
             continue
         cache = getattr(obj, "_cache", None)
         if cache is None or isinstance(cache, NullCache):
@@ -104,7 +111,7 @@ def _scheme_families(text) -> list[str]:
         elif s.kind == "budget":
             from ..budget import PAIR_OPTIONS
 
-            out += [f for o in (s.options or PAIR_OPTIONS)[1:] for f in entry(o).families] + ["budget"]
+            out += [f for o in (s.options or PAIR_OPTIONS)[1:] for f in entry(o).families] + ["budget-maps"]
     return out
 
 
@@ -123,6 +130,8 @@ def families_for(args) -> list[str]:
         out = ["micromap", "omm"] + (_scheme_families(source) if source != "texture" else [])
         if getattr(args, "budget", None) is not None:
             out.append("budget")
+            if getattr(args, "weights", None) == "view":  # the view's hits are traced
+                out.append("trace")
     elif cmd == "report":  # a scene is traced, a folder of textures evaluated
         scene = str(getattr(args, "input", "")).lower().endswith((".gltf", ".glb"))
         if scene:
@@ -162,11 +171,10 @@ def _cores() -> int:
         return max(1, os.cpu_count() or 1)
 
 
-# A family's compile process against FAMILIES' figures (numba's compile events only), measured on
-# the 2-core reference machine: ``python -m omaps.cli.precompile square`` took 46 CPU-s and
-# ``micromap`` 34 CPU-s (imports, the tiny runs and the cache writes besides the compile events:
-# 4.6 and 3.8 times the figures), at a load of 13 from other work; the range's top is twice this.
-AHEAD_FACTOR = 3.5
+# The range a compile is announced with, against FAMILIES' figures: the same processes took from
+# about 0.75 to 1.5 times as long on the reference machine, from run to run and with the load of
+# other work.
+AHEAD_RANGE = (0.75, 1.5)
 
 
 def _load() -> float:
@@ -181,8 +189,9 @@ def _ahead_seconds(groups, load: float = 0.0) -> tuple[int, int]:
     """About how long the compile takes, as a range: its slowest process's families, slowed down
     while more processes (its own, other work) than cores share the machine; the measured runs
     spread over a factor of 2."""
-    low = max(_seconds(g) for g in groups) * AHEAD_FACTOR * max(1.0, (len(groups) + load) / _cores())
-    return max(5, int(round(low / 5) * 5)), max(10, int(round(2 * low / 5) * 5))
+    t = max(_seconds(g) for g in groups) * max(1.0, (len(groups) + load) / _cores())
+    low, high = (t * f for f in AHEAD_RANGE)
+    return max(5, int(round(low / 5) * 5)), max(10, int(round(high / 5) * 5))
 
 
 def _groups(families, cores: int) -> list[list[str]]:
@@ -379,13 +388,10 @@ def warm(families, report=None, evaluation_only: bool = False) -> None:
     import numpy as np
 
     from .. import bake_omms, evaluate_corpus, trace_scene, verify_omms
-    from ..alpha_test import MaterialRules
 
     with tempfile.TemporaryDirectory(prefix="omaps-precompile-") as tmp:
         scene = _quad_scene(tmp)
         leaf = os.path.join(tmp, "leaf.png")
-        uvs = os.path.join(tmp, "uvs.npy")
-        np.save(uvs, np.random.default_rng(0).random((48, 3, 2)))
 
         def ev(schemes):
             def run():
@@ -438,8 +444,44 @@ def warm(families, report=None, evaluation_only: bool = False) -> None:
             frac, centre = cell_fractions(test, np.random.default_rng(0).random((1, 6, 2)), np.ones(1, bool), 16)
             resolve_regions(_states_map(16)[None], frac, centre, "hashed")
 
+        def budget():
+            """``omm --budget``'s own kernels on made-up items, with no bake and no trace (the
+            micromap, omm and trace families' work): the pricing's texel areas, merge of contents,
+            greedy over groups and row index, and the view hits' counting filter."""
+            from ..bake.micromap import texel_areas
+            from ..omm.budget import _adopt, _merged
+            from ..rows import RowIndex
+            from ..trace import lookups
+            from ..trace.filter import make_filter
+
+            rng = np.random.default_rng(0)
+            texel_areas(rng.random((8, 3, 2)), 16, 16)
+            rows3 = rng.integers(0, 3, (8, 16)).astype(np.uint8)
+            none = np.zeros(1, np.int64)
+            _merged(rows3, rows3, np.full(8, 12, np.int64), rng.random(8), none, none, 2)
+            _adopt(rng.random((8, 4)), rng.integers(0, 4, (8, 4)), np.full(4, 10, np.int64), 30)
+            RowIndex(8).add(rng.integers(0, 255, (40, 8)).astype(np.uint8))  # (grows its table)
+            make_filter(lookups.counting_state)
+
+        def budget_maps():
+            """The tracer's ``budget:BYTES`` scheme's own kernels: the allocation over a pair's
+            options (made-up ones) and the filter of its mixed maps (every codec's reader)."""
+            from ..allocate import allocate
+            from ..trace import lookups
+            from ..trace.filter import make_filter
+
+            rng = np.random.default_rng(0)
+            allocate(rng.integers(1, 64, (8, 3)), rng.random((8, 3)), 200)
+            make_filter(lookups.mixed_map_state)
+
+        def or_downsample():
+            """Square maps of several sizes baked once (the finest), the coarser OR-ed from it."""
+            from ..bake.square import or_downsample
+
+            or_downsample(np.zeros((1, 4, 4), np.uint8), 2)
+
         runs = {
-            "square": [ev("sq4,sq16")],
+            "square": [ev("sq4,sq16"), or_downsample],
             "micromap": [ev("tri2,tri3")],
             "trace": [tr("none", shadows=True), tracer],
             "vq2": [enc("vq2")],
@@ -450,10 +492,8 @@ def warm(families, report=None, evaluation_only: bool = False) -> None:
             "synth": [enc("vq4-synth")],
             "wavelet": [enc("wavelet3")],
             "hierarchical": [ev("succinct3,csm3"), tr("none,succinct3,csm3")],
-            "budget": [omm("omm_budget", budget=200), tr("none,budget:1KiB"),
-                       omm("omm_view", budget=200, weights="view", size=(16, 16)),
-                       # enough distinct micromaps for the budget's merged options (omaps.omm.budget's kernels)
-                       omm("omm_merge", (leaf, uvs), budget=3000, rules=MaterialRules(filter="linear"))],
+            "budget": [budget],
+            "budget-maps": [budget_maps],
         }
         failed = []
         for f in families:  # one family failing (no Embree, say) leaves the others compiled

@@ -284,15 +284,16 @@ _BY_NAME = {e.name: e for e in ENTRIES}
 _COMPRESSED = tuple(e.name for e in ENTRIES if not e.name.startswith("sq") and not e.variable)
 
 # the compile-ahead families of the codecs' own kernels: (modules whose numba kernels they compile,
-# seconds to compile them with an empty cache on one core of the 2-core reference machine)
+# seconds their compile process took with an empty cache on the 2-core reference machine, as
+# ``omaps.cli.precompile``'s figures)
 COMPILE_FAMILIES = {
-    "vq2": (("omaps.codecs.vq2_encode",), 10),
-    "vq4": (("omaps.codecs.vq4_encode",), 30),
-    "synth": (("omaps.codecs.vq4_synth_encode", "omaps.codecs.vq4_synth_block"), 12),
+    "vq2": (("omaps.codecs.vq2_encode",), 47),
+    "vq4": (("omaps.codecs.vq4_encode",), 51),
+    "synth": (("omaps.codecs.vq4_synth_encode", "omaps.codecs.vq4_synth_block"), 68),
     "wavelet": (("omaps.codecs.wavelet3_encode", "omaps.codecs.wavelet3_block", "omaps.codecs.vec4_search",
-                 "omaps.allocate"), 19),
+                 "omaps.allocate"), 36),
     # the micromaps' lossless tree representations (``succinctL``, ``csmL``; not square codecs)
-    "hierarchical": (("omaps.codecs.succinct", "omaps.codecs.csm"), 8),
+    "hierarchical": (("omaps.codecs.succinct", "omaps.codecs.csm"), 70),
 }
 
 
