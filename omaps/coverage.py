@@ -122,10 +122,9 @@ def micro_hits_with(value, threshold, inclusive, filt, mode_u, mode_v, corners, 
     is the 4-state resolve's inner loop, so under the linear filter the points go in blocks
     (``_hits_from``): each point reads its four taps from the texture itself while they all lie
     inside it, or on a wrap axis inside one period of it (where addressing changes nothing but
-    the period); a micro-triangle reaching the texture's edge
-    reads the taps around its corners' box first (when they fit in ``taps``), each addressed
-    once; else, or when a point's taps would leave that block, every point samples the texture
-    on its own."""
+    the period); a micro-triangle reaching the texture's edge reads the taps around its corners'
+    box first (when they fit in ``taps``), each addressed once; else, or when a point's taps
+    would leave that block, every point samples the texture on its own."""
     qax, qay, qbx, qby, qcx, qcy = corners
     first = ((1 << (2 * k)) - 1) // 3
     n = 1 << (2 * k)
