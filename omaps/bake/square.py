@@ -232,7 +232,9 @@ def _pair_flags(sat, grid, off, w, h, uv, has_b, n, grow, out, rect, poly, pts, 
                         if points == 3:
                             out[j, i] |= 3
                             continue
-                    out[j, i] |= raster.polygon_flags_table(sat, grid, pts, 4, grow, points, buf_a, buf_b)
+                    # (k typed, not a literal: a literal 4 made numba compile a second copy of the
+                    # rasteriser, 15 s of the first command's compile, for no faster bake)
+                    out[j, i] |= raster.polygon_flags_table(sat, grid, pts, np.int64(4), grow, points, buf_a, buf_b)
                 continue
             for c in range(3, -1, -1):
                 st_i[top] = i0 + (c & 1) * half
