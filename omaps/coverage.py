@@ -130,11 +130,13 @@ def micro_hits_with(value, threshold, inclusive, filt, mode_u, mode_v, corners, 
     n = 1 << (2 * k)
     h, w = value.shape
     if filt == 1:
+        xmin, ymin = min(min(qax, qbx), qcx), min(min(qay, qby), qcy)  # the corners' box
+        xmax, ymax = max(max(qax, qbx), qcx), max(max(qay, qby), qcy)
         # on a wrap axis the texture repeats: a region whose taps lie within one period reads the
         # texture's own texels, whole periods over (the same points and arithmetic; the taps'
         # indices only skip the addressing)
-        ox = (int(math.floor(min(min(qax, qbx), qcx) - 0.5)) // w) * w if mode_u == 0 else 0
-        oy = (int(math.floor(min(min(qay, qby), qcy) - 0.5)) // h) * h if mode_v == 0 else 0
+        ox = (int(math.floor(xmin - 0.5)) // w) * w if mode_u == 0 else 0
+        oy = (int(math.floor(ymin - 0.5)) // h) * h if mode_v == 0 else 0
         hits = _hits_from(value, ox, oy, w, h, threshold, inclusive, qax, qay, qbx, qby, qcx, qcy, samples, first, n,
                           need)
         if hits >= 0:
@@ -142,11 +144,11 @@ def micro_hits_with(value, threshold, inclusive, filt, mode_u, mode_v, corners, 
         # the block: taps floor(p - 0.5) and + 1 of every point p of the corners' box widened by
         # e, far beyond the rounding of a point (a convex combination of the corners), so every
         # point's taps are in it
-        e = 1e-6 * (1.0 + max(max(abs(qax), abs(qbx)), abs(qcx)) + max(max(abs(qay), abs(qby)), abs(qcy)))
-        bx = int(math.floor(min(min(qax, qbx), qcx) - 0.5 - e))
-        by = int(math.floor(min(min(qay, qby), qcy) - 0.5 - e))
-        nx = int(math.floor(max(max(qax, qbx), qcx) - 0.5 + e)) - bx + 2
-        ny = int(math.floor(max(max(qay, qby), qcy) - 0.5 + e)) - by + 2
+        e = 1e-6 * (1.0 + max(abs(xmin), abs(xmax)) + max(abs(ymin), abs(ymax)))
+        bx = int(math.floor(xmin - 0.5 - e))
+        by = int(math.floor(ymin - 0.5 - e))
+        nx = int(math.floor(xmax - 0.5 + e)) - bx + 2
+        ny = int(math.floor(ymax - 0.5 + e)) - by + 2
         if nx <= TAPS and ny <= TAPS:
             for j in range(np.uint64(ny)):  # unsigned indices: no negative-index checks
                 row = address(by + np.int64(j), h, mode_v)

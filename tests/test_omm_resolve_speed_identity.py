@@ -1,9 +1,8 @@
 """The fast opaque-fraction sampler (``coverage.micro_hits_with``: taps read without addressing
 inside the texture or, on a wrap axis, one period of it, or once per region at its edge; points
 counted in branch-free blocks) and the 4-state / 2-state resolve built on it give exactly what
-the definition gives:
-``alpha_test.sample_passes`` at every sample point of a micro-triangle, one point at a time, and
-``omaps.promotion``'s rule on that fraction."""
+the definition gives: ``alpha_test.sample_passes`` at every sample point of a micro-triangle,
+one point at a time, and ``omaps.promotion``'s rule on that fraction."""
 
 import numpy as np
 import pytest
@@ -117,7 +116,8 @@ def _reference_resolve(states3, starts, level, test, tris_uv, fmt, promo, seed):
     return out
 
 
-@pytest.mark.parametrize("filt,wrap", [("linear", "clamp"), ("linear", "mirror"), ("linear", "wrap"), ("nearest", "wrap")])
+@pytest.mark.parametrize("filt,wrap", [("linear", "clamp"), ("linear", "mirror"), ("linear", "wrap"),
+                                       ("nearest", "wrap")])
 @pytest.mark.parametrize("promo", ["nearest", "hashed"])
 def test_resolve_is_the_rule_on_sampled_fractions(filt, wrap, promo):
     rng = np.random.default_rng(5)

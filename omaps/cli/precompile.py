@@ -161,7 +161,9 @@ def _seconds(families) -> int:
     return sum(fam[f][1] for f in families)
 
 
-PROGRESS_EVERY = 4.0  # seconds between the lines while a command waits for the compile ahead (a promise of 5, with room)
+# seconds between the lines while a command waits for the compile ahead (at most 5 promised: room
+# for a slow poll)
+PROGRESS_EVERY = 4.0
 
 
 def _cores() -> int:
@@ -426,6 +428,9 @@ def warm(families, report=None, evaluation_only: bool = False) -> None:
             """What the tracer does with a scheme's maps, with no map baked: the maps' dedupe (on
             made-up maps), the filters of baked and stored maps (micromaps, a file's micromaps,
             square maps of any codec) and the 2-state maps' fractions and promotion."""
+            from ..alpha_test import material_test
+            from ..coverage import cell_fractions
+            from ..promotion import resolve_regions
             from ..trace import lookups
             from ..trace.filter import make_filter
             from ..trace.maps import dedupe_maps
@@ -435,10 +440,6 @@ def warm(families, report=None, evaluation_only: bool = False) -> None:
                 make_filter(fn)
             # --two-state: the cells' opaque fractions and the hashed promotion, on a made-up pair
             # and an 8-bit material's test (a scene's alpha as a PNG decodes it)
-            from ..alpha_test import material_test
-            from ..coverage import cell_fractions
-            from ..promotion import resolve_regions
-
             test = material_test("t", "MASK", 0.5, 1.0, _states_map(8) * np.uint8(127), 255, "linear", "wrap",
                                  "wrap")
             frac, centre = cell_fractions(test, np.random.default_rng(0).random((1, 6, 2)), np.ones(1, bool), 16)
