@@ -174,10 +174,8 @@ def cell_flag(values, bounds, period_x, period_y, row, col, poly, k, c, r, grow,
     rasteriser it saved about a tenth of the bake's instructions but doubled the compile of the
     square baker; the clipped polygon's extremes are ``_clipped_flag``.)"""
     a00, a01, a10, a11 = cell_taps(values, period_x, period_y, row, col)
-    # first the region's bounding box within the cell: f's extremes over a box are at its
-    # corners, and a box that is known makes the region inside it known (most regions are)
-    lo = -grow
-    hi = 1.0 + grow
+    # first the region's bounding box within the cell: a box that is known makes the region
+    # inside it known (most regions are)
     x0 = y0 = np.inf
     x1 = y1 = -np.inf
     for i in range(k):
@@ -185,21 +183,38 @@ def cell_flag(values, bounds, period_x, period_y, row, col, poly, k, c, r, grow,
         x1 = max(x1, poly[i, 0] - c)
         y0 = min(y0, poly[i, 1] - r)
         y1 = max(y1, poly[i, 1] - r)
-    x0 = max(x0, lo)
-    y0 = max(y0, lo)
-    x1 = min(x1, hi)
-    y1 = min(y1, hi)
-    if x0 <= x1 and y0 <= y1:
-        b, cc, d = _coefficients(a00, a01, a10, a11)
-        v0 = _at(a00, b, cc, d, x0, y0)
-        v1 = _at(a00, b, cc, d, x1, y0)
-        v2 = _at(a00, b, cc, d, x0, y1)
-        v3 = _at(a00, b, cc, d, x1, y1)
-        f = _classify(min(min(v0, v1), min(v2, v3)), max(max(v0, v1), max(v2, v3)), a00, a01, a10, a11, bounds,
-                      grow)
-        if f != 3:
-            return f
-    return _clipped_flag(bounds, poly, k, c, r, lo, hi, a00, a01, a10, a11, grow, buf_a, buf_b)
+    f = _box_flag(x0, x1, y0, y1, a00, a01, a10, a11, bounds, grow)
+    if f != 3:
+        return f
+    return _clipped_flag(bounds, poly, k, c, r, -grow, 1.0 + grow, a00, a01, a10, a11, grow, buf_a, buf_b)
+
+
+@njit(cache=True, inline="always")
+def _box_flag(x0, x1, y0, y1, a00, a01, a10, a11, bounds, grow):
+    """Flag of the box [x0, x1] x [y0, y1] (local coordinates) within the cell grown by ``grow``
+    ([-grow, 1 + grow]²), the cell's taps a..: f's extremes over a box are at its corners. 3
+    (undecided) when the box misses the cell."""
+    x0 = max(x0, -grow)
+    y0 = max(y0, -grow)
+    x1 = min(x1, 1.0 + grow)
+    y1 = min(y1, 1.0 + grow)
+    if not (x0 <= x1 and y0 <= y1):
+        return 3
+    b, cc, d = _coefficients(a00, a01, a10, a11)
+    v0 = _at(a00, b, cc, d, x0, y0)
+    v1 = _at(a00, b, cc, d, x1, y0)
+    v2 = _at(a00, b, cc, d, x0, y1)
+    v3 = _at(a00, b, cc, d, x1, y1)
+    return _classify(min(min(v0, v1), min(v2, v3)), max(max(v0, v1), max(v2, v3)), a00, a01, a10, a11, bounds, grow)
+
+
+@njit(cache=True, inline="always")
+def box_flag_in_cell(values, bounds, period_x, period_y, row, col, x0, x1, y0, y1, grow):
+    """Flag (1 T, 2 O, 3 C or undecided) of the box [x0, x1] x [y0, y1] (local coordinates of
+    the mixed cell stored at (row, col)), grown by ``grow``: decided from the box's corners, as
+    ``cell_flag`` first decides a region from its bounding box."""
+    a00, a01, a10, a11 = cell_taps(values, period_x, period_y, row, col)
+    return _box_flag(x0, x1, y0, y1, a00, a01, a10, a11, bounds, grow)
 
 
 @njit(cache=True, _nrt=False)

@@ -15,7 +15,7 @@ import numpy as np
 from numba import njit
 
 from . import states
-from .bilinear import POLY_MAX, cell_flag, point_flag
+from .bilinear import POLY_MAX, box_flag_in_cell, cell_flag, point_flag
 from .flag_table import box_counts, flag_table, unmixed_flag
 from .sampling import cell_index
 
@@ -116,6 +116,8 @@ def rows_flag(sat, grid, poly, k, grow, points, buf_a, buf_b):
         acc = points if points >= 0 else _vertex_flags(grid, poly, k, grow)
         if acc == 3:
             return 3
+        if _box_proof(grid, poly, k, grow, acc, ymin, ymax):
+            return acc
     hc, wc = flags.shape
     for r in range(int(math.floor(ymin - grow)), int(math.ceil(ymax + grow))):
         c0, c1 = row_span(poly, k, r, grow, ymin, ymax)
@@ -151,6 +153,43 @@ def rows_flag(sat, grid, poly, k, grow, points, buf_a, buf_b):
         if acc == 3:
             return 3
     return acc
+
+
+BOX_PROOF_CELLS = 16  # a region's bounding box of at most this many cells is tried first
+
+
+@njit(cache=True, inline="always")
+def _box_proof(grid, poly, k, grow, keep, ymin, ymax):
+    """True when the region's grown bounding box (at most BOX_PROOF_CELLS cells) is known to
+    be ``keep`` (1 T or 2 O) in every cell: an unmixed cell by its flag, a mixed one by the
+    box's part of it (``bilinear.box_flag_in_cell``). The region's cells are among the box's,
+    and its part of each within the box's, so the region is then ``keep`` too (with its
+    vertices' own flags ``keep``): most regions whose vertices agree are proven so without
+    their row spans."""
+    flags, mixed, values, bounds, period_x, period_y = grid
+    xmin = poly[0, 0]
+    xmax = poly[0, 0]
+    for i in range(1, k):
+        xmin = min(xmin, poly[i, 0])
+        xmax = max(xmax, poly[i, 0])
+    r0 = int(math.floor(ymin - grow))
+    r1 = int(math.ceil(ymax + grow))
+    c0 = int(math.floor(xmin - grow))
+    c1 = int(math.ceil(xmax + grow))
+    if (r1 - r0) * (c1 - c0) > BOX_PROOF_CELLS:
+        return False
+    hc, wc = flags.shape
+    for r in range(r0, r1):
+        row = np.uint64(cell_index(r, hc, period_y))
+        for c in range(c0, c1):
+            col = np.uint64(cell_index(c, wc, period_x))
+            if mixed[row, col]:
+                if box_flag_in_cell(values, bounds, period_x, period_y, row, col, xmin - c, xmax - c, ymin - r,
+                                    ymax - r, grow) != keep:
+                    return False
+            elif flags[row, col] != keep:
+                return False
+    return True
 
 
 @njit(cache=True, _nrt=False)

@@ -16,7 +16,8 @@ from omaps.bake import micromap
 from omaps.bake.micromap import GROW_TEXEL
 from omaps.errors import InputError
 from omaps.sampling import footprint_grid
-from omaps.texture import load_alpha
+from omaps.alpha_test import StateRule
+from omaps.texture import AlphaTexture, load_alpha
 
 FILTERS = ["nearest", "linear"]
 WRAPS = ["clamp", "wrap", "mirror"]
@@ -72,6 +73,25 @@ def test_identical_to_the_raster(img, tris, level, filter, wrap):
     for grow in (0.0, GROW_TEXEL):
         np.testing.assert_array_equal(micromap.bake_micromap_rows(g, tris, level, grow),
                                       raster_rows(g, tris, level, grow))
+
+
+alpha_images = st.integers(1, 8).flatmap(
+    lambda w: st.integers(1, 8).flatmap(
+        lambda h: arrays(np.uint8, (h, w), elements=st.sampled_from([0, 60, 127, 128, 200, 255]))))
+
+
+@settings(max_examples=120, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(alpha_images, st.one_of(triangle_sets(dyadic), triangle_sets(anyfloat)), st.integers(0, 4),
+       st.sampled_from(WRAPS), st.sampled_from(["cutoff", "levels"]))
+def test_exact_bilinear_grids_identical_to_the_raster(alpha8, tris, level, wrap, mode):
+    """On exact bilinear grids (mixed cells decided by their extremes), with real geometry's
+    growth: the tree walk, the shared vertex flags and the rasteriser's shortcuts (a region
+    proven known from its bounding box, cell by cell) give the cell-by-cell raster's flags."""
+    rule = StateRule("cutoff", cutoff=0.5) if mode == "cutoff" else StateRule("levels", t_max=60.0, o_min=200.0)
+    g = rule.alpha_test(AlphaTexture("t", alpha8, 255), "linear", wrap).grid()
+    assert g.exact
+    np.testing.assert_array_equal(micromap.bake_micromap_rows(g, tris, level, GROW_TEXEL),
+                                  raster_rows(g, tris, level, GROW_TEXEL))
 
 
 @settings(max_examples=30, deadline=None, suppress_health_check=[HealthCheck.too_slow])
