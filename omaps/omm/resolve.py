@@ -22,59 +22,61 @@ from ..promotion import HASHED, hashed_threshold, hits_needed, promotion_code
 __all__ = ["resolve", "resolve_counted"]
 
 
-@njit(cache=True, _nrt=False)
-def _resolve_one(states3, base, end, level, two_state, mode, seed, value, thr, inclusive, filt, mu, mv, tris, t,
-                 samples, sample_k, out, copy, counts, taps, table):
-    """Triangle ``t``'s micro-triangles ``states3[base:end]`` into ``out`` (``copy`` False: ``out``
-    is ``states3``, only its C entries are written), its counts into ``counts[t]`` (no reference
-    counting: it allocates nothing). ``table``: ``birdcurve.vertex_table()``."""
-    n_s = 1 << (2 * sample_k)
-    # first every state copied and the known ones counted, with no branch in the loop and
-    # unsigned indices (numba then drops its negative-index check, and the compiler vectorises
-    # the loop, taking the test of ``copy`` out of it: 18 instructions per micro-triangle
-    # before): most micro-triangles are known, most triangles hold no C one
-    first = np.uint64(base)
-    last = np.uint64(end)
+@njit(cache=True, inline="always")
+def _count_known(states3, base, end, out, copy):
+    """(T, O) micro-triangles of ``states3[base:end]``, copied into ``out`` when ``copy``: with no
+    branch in the loop and unsigned indices (numba then drops its negative-index check, and the
+    compiler vectorises the loop, taking the test of ``copy`` out of it). Most micro-triangles
+    are known, most triangles hold no C one: this pass is the resolve of most triangles, so it
+    runs in the triangles' loop itself (a call per triangle, its arrays passed word by word,
+    cost three times the pass)."""
     n_t = n_o = 0
-    for i in range(first, last):
+    for i in range(np.uint64(base), np.uint64(end)):
         s = states3[i]
         if copy:
             out[i] = s
         n_t += s == 0
         n_o += s == 1
-    n_c = (end - base) - n_t - n_o
+    return n_t, n_o
+
+
+@njit(cache=True, _nrt=False)
+def _resolve_c(states3, base, end, level, two_state, mode, seed, value, thr, inclusive, filt, mu, mv, tris, t,
+               samples, sample_k, out, counts, taps, table):
+    """The C micro-triangles of triangle ``t`` (``states3[base:end]``) into ``out``, and how many
+    became OMM state 0, 1, 2, 3 into ``counts[t, 3:]`` (no reference counting: it allocates
+    nothing). ``table``: ``birdcurve.vertex_table()``."""
+    n_s = 1 << (2 * sample_k)
+    first = np.uint64(base)
+    last = np.uint64(end)
     r0 = r1 = r2 = r3 = 0
-    if n_c > 0:
-        need0 = hits_needed(mode, 0.0, n_s)
-        for i in range(first, last):
-            if states3[i] < 2:
-                continue
-            need = need0
-            if 0 < need <= n_s:  # the opaque fraction decides: O iff at least ``need`` sample points pass
-                q = micro_corners_of(tris, t, np.int64(i - first), level, table)
-                if mode == HASHED:  # the cut is the threshold hashed from the centroid
-                    need = hits_needed(mode, hashed_threshold((q[0] + q[2] + q[4]) / 3.0,
-                                                              (q[1] + q[3] + q[5]) / 3.0, seed), n_s)
-                opaque = micro_hits_with(value, thr, inclusive, filt, mu, mv, q, samples, sample_k, need,
-                                         taps) >= need
-            else:  # opaque or transparent whatever the fraction
-                opaque = need <= 0
-            if two_state:
-                o = 1 if opaque else 0
-            else:
-                o = 3 if opaque else 2
-            out[i] = o
-            if o == 0:
-                r0 += 1
-            elif o == 1:
-                r1 += 1
-            elif o == 2:
-                r2 += 1
-            else:
-                r3 += 1
-    counts[t, 0] = n_t
-    counts[t, 1] = n_o
-    counts[t, 2] = n_c
+    need0 = hits_needed(mode, 0.0, n_s)
+    for i in range(first, last):
+        if states3[i] < 2:
+            continue
+        need = need0
+        if 0 < need <= n_s:  # the opaque fraction decides: O iff at least ``need`` sample points pass
+            q = micro_corners_of(tris, t, np.int64(i - first), level, table)
+            if mode == HASHED:  # the cut is the threshold hashed from the centroid
+                need = hits_needed(mode, hashed_threshold((q[0] + q[2] + q[4]) / 3.0,
+                                                          (q[1] + q[3] + q[5]) / 3.0, seed), n_s)
+            opaque = micro_hits_with(value, thr, inclusive, filt, mu, mv, q, samples, sample_k, need,
+                                     taps) >= need
+        else:  # opaque or transparent whatever the fraction
+            opaque = need <= 0
+        if two_state:
+            o = 1 if opaque else 0
+        else:
+            o = 3 if opaque else 2
+        out[i] = o
+        if o == 0:
+            r0 += 1
+        elif o == 1:
+            r1 += 1
+        elif o == 2:
+            r2 += 1
+        else:
+            r3 += 1
     counts[t, 3] = r0
     counts[t, 4] = r1
     counts[t, 5] = r2
@@ -97,8 +99,16 @@ def _resolve(states3, starts, levels, two_state, mode, seed, value, thr, inclusi
             if c >= n_chunks:
                 break
             for t in range(c * CHUNK, min((c + 1) * CHUNK, n)):
-                _resolve_one(states3, starts[t], starts[t + 1], levels[t], two_state, mode, seed, value, thr,
-                             inclusive, filt, mu, mv, tris, t, samples, sample_k[t], out, copy, counts, taps, table)
+                base, end = starts[t], starts[t + 1]
+                n_t, n_o = _count_known(states3, base, end, out, copy)
+                counts[t, 0] = n_t
+                counts[t, 1] = n_o
+                counts[t, 2] = (end - base) - n_t - n_o
+                if counts[t, 2] > 0:
+                    _resolve_c(states3, base, end, levels[t], two_state, mode, seed, value, thr, inclusive, filt, mu,
+                               mv, tris, t, samples, sample_k[t], out, counts, taps, table)
+                else:
+                    counts[t, 3] = counts[t, 4] = counts[t, 5] = counts[t, 6] = 0
 
 
 def resolve_counted(states3: np.ndarray, starts: np.ndarray, levels, test: AlphaTest, tris_uv, fmt: int,
