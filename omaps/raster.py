@@ -44,6 +44,17 @@ def edge_extent(ax, ay, bx, by, y0, y1, xmin, xmax):
 
 
 @njit(cache=True, inline="always")
+def extent(poly, k, axis):
+    """(min, max) of coordinate ``axis`` over polygon ``poly[:k]``."""
+    lo = poly[0, axis]
+    hi = poly[0, axis]
+    for i in range(1, k):
+        lo = min(lo, poly[i, axis])
+        hi = max(hi, poly[i, axis])
+    return lo, hi
+
+
+@njit(cache=True, inline="always")
 def row_span(poly, k, r, grow, ymin, ymax):
     """Cell columns [c0, c1) that convex polygon ``poly[:k]`` (y-range [ymin, ymax]), grown by
     ``grow``, overlaps in the row band [r, r+1]; (0, 0) when none."""
@@ -96,15 +107,17 @@ def rows_flag(sat, grid, poly, k, grow, points, buf_a, buf_b):
     (``bilinear.point_flag``) when the caller has them (vertices shared with neighbouring
     regions), else -1 (read here when needed); ``buf_*`` (POLY_MAX, 2) scratch.
 
+    Grown on an exact bilinear grid, a region whose vertices agree (all T or all O) is first
+    tried from its bounding box (``_box_proof``): most regions beside the cut-off are known from
+    the box's cells alone, without their row spans.
+
     ``grow`` > 0: the polygon grown by a square of half-side ``grow`` (its Minkowski sum), which
     has area even when the polygon has none: per band, the polygon's x-extent over the band
     widened by ``grow`` above and below, then widened by ``grow`` left and right."""
     flags, mixed, values, bounds, period_x, period_y = grid
-    ymin = poly[0, 1]
-    ymax = poly[0, 1]
-    for i in range(1, k):
-        ymin = min(ymin, poly[i, 1])
-        ymax = max(ymax, poly[i, 1])
+    ymin, ymax = extent(poly, k, 1)
+    r0 = int(math.floor(ymin - grow))  # the row bands it overlaps, grown
+    r1 = int(math.ceil(ymax + grow))
     acc = 0
     points_done = False
     has_mixed = mixed.shape[0] > 0
@@ -116,10 +129,10 @@ def rows_flag(sat, grid, poly, k, grow, points, buf_a, buf_b):
         acc = points if points >= 0 else _vertex_flags(grid, poly, k, grow)
         if acc == 3:
             return 3
-        if _box_proof(grid, poly, k, grow, acc, ymin, ymax):
+        if _box_proof(grid, poly, k, grow, acc, ymin, ymax, r0, r1):
             return acc
     hc, wc = flags.shape
-    for r in range(int(math.floor(ymin - grow)), int(math.ceil(ymax + grow))):
+    for r in range(r0, r1):
         c0, c1 = row_span(poly, k, r, grow, ymin, ymax)
         if c1 <= c0:
             continue
@@ -159,21 +172,15 @@ BOX_PROOF_CELLS = 16  # a region's bounding box of at most this many cells is tr
 
 
 @njit(cache=True, inline="always")
-def _box_proof(grid, poly, k, grow, keep, ymin, ymax):
+def _box_proof(grid, poly, k, grow, keep, ymin, ymax, r0, r1):
     """True when the region's grown bounding box (at most BOX_PROOF_CELLS cells) is known to
     be ``keep`` (1 T or 2 O) in every cell: an unmixed cell by its flag, a mixed one by the
     box's part of it (``bilinear.box_flag_in_cell``). The region's cells are among the box's,
     and its part of each within the box's, so the region is then ``keep`` too (with its
     vertices' own flags ``keep``): most regions whose vertices agree are proven so without
-    their row spans."""
+    their row spans. (ymin, ymax): the region's y-range, rows [r0, r1) its grown rows."""
     flags, mixed, values, bounds, period_x, period_y = grid
-    xmin = poly[0, 0]
-    xmax = poly[0, 0]
-    for i in range(1, k):
-        xmin = min(xmin, poly[i, 0])
-        xmax = max(xmax, poly[i, 0])
-    r0 = int(math.floor(ymin - grow))
-    r1 = int(math.ceil(ymax + grow))
+    xmin, xmax = extent(poly, k, 0)
     c0 = int(math.floor(xmin - grow))
     c1 = int(math.ceil(xmax + grow))
     if (r1 - r0) * (c1 - c0) > BOX_PROOF_CELLS:

@@ -14,7 +14,8 @@ it, with the optional growth ``grow`` (texels, the Minkowski sum with a square; 
 * a leaf (a micro-triangle under a mixed box) is rasterised by ``raster.rows_flag``: each row's
   cell span is read from the same table in O(1); only a span holding mixed bilinear cells
   (``FootprintGrid.mixed``) is walked cell by cell, each mixed cell decided by
-  ``bilinear.cell_flag``.
+  ``bilinear.cell_flag``; a leaf whose vertices agree is first tried from its bounding box
+  (most leaves beside the cut-off are known from the box's few cells).
 
 A box holding a mixed cell is never filled as C from the table: part of it may be known. A small
 one (at most NODE_EXACT_CELLS cells) is rasterised like a leaf first; when the node is known, so

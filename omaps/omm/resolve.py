@@ -28,8 +28,8 @@ def _count_known(states3, base, end, out, copy):
     branch in the loop and unsigned indices (numba then drops its negative-index check, and the
     compiler vectorises the loop, taking the test of ``copy`` out of it). Most micro-triangles
     are known, most triangles hold no C one: this pass is the resolve of most triangles, so it
-    runs in the triangles' loop itself (a call per triangle, its arrays passed word by word,
-    cost three times the pass)."""
+    runs in the triangles' loop itself (a call for every triangle, which passes each array as
+    nine words, made the whole resolve of the oak case about a sixth slower)."""
     n_t = n_o = 0
     for i in range(np.uint64(base), np.uint64(end)):
         s = states3[i]
