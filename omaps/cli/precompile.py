@@ -33,8 +33,8 @@ __all__ = ["FAMILIES", "uncached", "families_for", "compile_first", "finish_ahea
 # (the codecs' own families, vq2, vq4, synth and wavelet, are declared in the codec registry;
 # ``FAMILIES`` is both, read on first use so that parsing a command line imports no codec)
 COMMAND_FAMILIES = {
-    "square": (("omaps.flag_table", "omaps.raster", "omaps.bake.square"), 41),
-    "micromap": (("omaps.flag_table", "omaps.bake.micromap"), 35),
+    "square": (("omaps.flag_table", "omaps.raster", "omaps.bake.square"), 49),
+    "micromap": (("omaps.flag_table", "omaps.bake.micromap"), 39),
     "trace": (("omaps.trace.rays", "omaps.scene.pairing", "omaps.rows"), 51),
     "omm": (("omaps.omm.resolve", "omaps.omm_format", "omaps.coverage", "omaps.rows"), 58),
     "budget": (("omaps.omm.budget",), 13),  # omm --budget's pricing
