@@ -187,14 +187,16 @@ def _box_proof(grid, poly, k, grow, keep, ymin, ymax, r0, r1):
         return False
     hc, wc = flags.shape
     for r in range(r0, r1):
-        row = np.uint64(cell_index(r, hc, period_y))
+        row = cell_index(r, hc, period_y)
+        urow = np.uint64(row)  # stored indices are >= 0: the reads skip numba's negative-index checks
         for c in range(c0, c1):
-            col = np.uint64(cell_index(c, wc, period_x))
-            if mixed[row, col]:
+            col = cell_index(c, wc, period_x)
+            ucol = np.uint64(col)
+            if mixed[urow, ucol]:
                 if box_flag_in_cell(values, bounds, period_x, period_y, row, col, xmin - c, xmax - c, ymin - r,
                                     ymax - r, grow) != keep:
                     return False
-            elif flags[row, col] != keep:
+            elif flags[urow, ucol] != keep:
                 return False
     return True
 
