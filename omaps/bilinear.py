@@ -57,6 +57,17 @@ POLY_MAX = 24  # vertices of a region clipped to a cell: at most the region's (<
 
 
 @njit(cache=True, inline="always")
+def extent(poly, k, axis):
+    """(min, max) of coordinate ``axis`` over polygon ``poly[:k]``."""
+    lo = poly[0, axis]
+    hi = poly[0, axis]
+    for i in range(1, k):
+        lo = min(lo, poly[i, axis])
+        hi = max(hi, poly[i, axis])
+    return lo, hi
+
+
+@njit(cache=True, inline="always")
 def _tap_pair(i, n, period):
     """The two taps (i - 1, i) of stored cell index i on an axis of n texels: periodic (the
     taps of cell 0 wrap to period - 1) or clamped into [0, n)."""
@@ -175,15 +186,10 @@ def cell_flag(values, bounds, period_x, period_y, row, col, poly, k, c, r, grow,
     square baker; the clipped polygon's extremes are ``_clipped_flag``.)"""
     a00, a01, a10, a11 = cell_taps(values, period_x, period_y, row, col)
     # first the region's bounding box within the cell: a box that is known makes the region
-    # inside it known (most regions are)
-    x0 = y0 = np.inf
-    x1 = y1 = -np.inf
-    for i in range(k):
-        x0 = min(x0, poly[i, 0] - c)
-        x1 = max(x1, poly[i, 0] - c)
-        y0 = min(y0, poly[i, 1] - r)
-        y1 = max(y1, poly[i, 1] - r)
-    f = _box_flag(x0, x1, y0, y1, a00, a01, a10, a11, bounds, grow)
+    # inside it known (most regions are). (Rounding is monotone: min(p - c) is min(p) - c.)
+    x0, x1 = extent(poly, k, 0)
+    y0, y1 = extent(poly, k, 1)
+    f = _box_flag(x0 - c, x1 - c, y0 - r, y1 - r, a00, a01, a10, a11, bounds, grow)
     if f != 3:
         return f
     return _clipped_flag(bounds, poly, k, c, r, -grow, 1.0 + grow, a00, a01, a10, a11, grow, buf_a, buf_b)

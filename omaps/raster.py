@@ -15,7 +15,7 @@ import numpy as np
 from numba import njit
 
 from . import states
-from .bilinear import POLY_MAX, box_flag_in_cell, cell_flag, point_flag
+from .bilinear import POLY_MAX, box_flag_in_cell, cell_flag, extent, point_flag
 from .flag_table import box_counts, flag_table, unmixed_flag
 from .sampling import cell_index
 
@@ -41,17 +41,6 @@ def edge_extent(ax, ay, bx, by, y0, y1, xmin, xmax):
     xl = ax if lo == ay else ax + ((lo - ay) * (bx - ax)) / (by - ay)
     xh = bx if hi == by else ax + ((hi - ay) * (bx - ax)) / (by - ay)
     return min(xmin, min(xl, xh)), max(xmax, max(xl, xh))
-
-
-@njit(cache=True, inline="always")
-def extent(poly, k, axis):
-    """(min, max) of coordinate ``axis`` over polygon ``poly[:k]``."""
-    lo = poly[0, axis]
-    hi = poly[0, axis]
-    for i in range(1, k):
-        lo = min(lo, poly[i, axis])
-        hi = max(hi, poly[i, axis])
-    return lo, hi
 
 
 @njit(cache=True, inline="always")

@@ -103,8 +103,9 @@ def _resolve(states3, starts, levels, two_state, mode, seed, value, thr, inclusi
                 n_t, n_o = _count_known(states3, base, end, out, copy)
                 counts[t, 0] = n_t
                 counts[t, 1] = n_o
-                counts[t, 2] = (end - base) - n_t - n_o
-                if counts[t, 2] > 0:
+                n_c = (end - base) - n_t - n_o
+                counts[t, 2] = n_c
+                if n_c > 0:
                     _resolve_c(states3, base, end, levels[t], two_state, mode, seed, value, thr, inclusive, filt, mu,
                                mv, tris, t, samples, sample_k[t], out, counts, taps, table)
                 else:
