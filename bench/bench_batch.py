@@ -5,14 +5,14 @@ outputs are identical.
     python bench/bench_batch.py                 # eval: the library of textures, every scheme family
     python bench/bench_batch.py omm             # omm: dozens of scenes (the palm with transformed UVs)
     python bench/bench_batch.py split           # one large scene (the forest): split into tasks or not
-    python bench/bench_batch.py eval --repeat 2 --variants 8 --max-side 256
+    python bench/bench_batch.py eval --repeat 3 --variants 8 --max-side 384
 
 The library is built at run time in a temporary folder from the shared data (never kept):
 
 * ``eval``: each real texture of at least 64 px, in ``--variants`` of its 8 flips and rotations,
   rescaled so that its longer side is at most ``--max-side`` px (46 textures x 8 = 368 inputs),
   evaluated with ``SCHEMES`` (square maps, micromaps, their lossless trees, the texel map, every
-  codec);
+  codec with its default encoder and the deck's: 27 schemes);
 * ``omm``: ``--scenes`` copies of ``palm.glb`` whose UVs are mirrored, rotated by quarter turns
   and shrunk into one of the texture's quadrants (``omm --level 5``);
 * ``split``: ``forest.glb`` alone (``omm --level 4``): serial, the local cluster with the scene as
@@ -21,7 +21,8 @@ The library is built at run time in a temporary folder from the shared data (nev
 Each round runs serial then local (alternating which goes first), each as a user runs it (a
 process of its own: interpreter, import and cluster start-up are part of both timings); it prints
 each run's seconds and CPU-seconds (its processes', workers included), the local / serial
-speed-up, /proc/loadavg before and after, and whether every output file is identical (eval JSONs
+speed-up (each round's, their median, and that of the best times), /proc/loadavg before and
+after, and whether every output file is identical (eval JSONs
 byte for byte; omm folders byte for byte; the summaries' figures, leaving out timings). No
 assertion on times (the machine may be shared).
 
@@ -38,6 +39,7 @@ import filecmp
 import json
 import os
 import shutil
+import statistics
 import subprocess
 import sys
 import tempfile
@@ -45,8 +47,9 @@ import time
 from pathlib import Path
 
 SHARED = Path(os.environ.get("OMAPS_SHARED", Path(__file__).resolve().parents[2] / "shared")) / "data"
+# every scheme family; each vector-quantisation codec with its default encoder and the deck's (-paper)
 SCHEMES = ("sq1,sq2,sq4,sq8,sq16,sq32,sq64,sq128,tri0,tri1,tri2,tri3,tri4,tri5,tri6,succinct4,csm4,texel,"
-           "vq2,vq4,vq4x64,vq4-synth,wavelet3")
+           "vq2,vq2-paper,vq4,vq4-paper,vq4x64,vq4x64-paper,vq4-synth,vq4-synth-paper,wavelet3")
 
 
 def loadavg() -> str:
@@ -171,7 +174,7 @@ def main() -> None:
     ap.add_argument("job", nargs="?", default="eval", choices=("eval", "omm", "split"))
     ap.add_argument("--repeat", type=int, default=1, help="rounds of serial and local (alternating order)")
     ap.add_argument("--variants", type=int, default=8, help="eval: flips / rotations of each texture (1..8)")
-    ap.add_argument("--max-side", type=int, default=256, help="eval: longer side of each texture, at most")
+    ap.add_argument("--max-side", type=int, default=384, help="eval: longer side of each texture, at most")
     ap.add_argument("--scenes", type=int, default=32, help="omm: transformed copies of the palm")
     ap.add_argument("--schemes", default=SCHEMES, help="eval: the schemes")
     ap.add_argument("--level", type=int, default=None, help="omm and split: the subdivision level (5; split 4)")
@@ -192,6 +195,7 @@ def main() -> None:
         runs = {"none": [], "local": []} if a.job != "split" else {"none": [], "local": [], "local --split": []}
         if a.one_thread:
             runs["none 1-thread"] = []
+        cpus: dict[str, list[float]] = {k: [] for k in runs}
         verdicts = []
         for r in range(a.repeat):
             order = list(runs) if r % 2 == 0 else list(runs)[::-1]
@@ -206,6 +210,7 @@ def main() -> None:
                 before = loadavg()
                 dt, cpu, tot = run(command, paths, opts + extra, sched, out, env)
                 runs[key].append(dt)
+                cpus[key].append(cpu)
                 outs[key] = out
                 print(f"  round {r + 1} --scheduler {key:14s}: {dt:7.2f} s, {cpu:7.1f} CPU-s, {tot['ok']} ok, "
                       f"{tot['error']} errors (loadavg {before} -> {loadavg()})", flush=True)
@@ -220,8 +225,11 @@ def main() -> None:
         best = {k: min(v) for k, v in runs.items()}
         for k in runs:
             if k.startswith("local"):
-                print(f"local/serial speed-up ({k}): {best['none'] / best[k]:.2f}x (best of {a.repeat}: serial "
-                      f"{best['none']:.2f} s, {k} {best[k]:.2f} s)")
+                ratios = [s / t for s, t in zip(runs["none"], runs[k])]
+                print(f"local/serial speed-up ({k}): rounds {', '.join(f'{x:.2f}x' for x in ratios)}, median "
+                      f"{statistics.median(ratios):.2f}x; best times {best['none'] / best[k]:.2f}x (serial "
+                      f"{best['none']:.2f} s, {k} {best[k]:.2f} s); CPU-s {statistics.median(cpus[k]):.1f} against "
+                      f"{statistics.median(cpus['none']):.1f} (medians)")
                 if "none 1-thread" in best:
                     print(f"  against the one-thread serial run: {best['none 1-thread'] / best[k]:.2f}x "
                           f"({best['none 1-thread']:.2f} s)")

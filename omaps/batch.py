@@ -450,8 +450,14 @@ WORKER_ENV = {"NUMBA_NUM_THREADS": "1", "OMP_NUM_THREADS": "1"}
 # profiler (it samples every thread every 10 ms), GIL monitor (every 1 ms) or disk counters, and the
 # event loops' tick (every 20 ms), system monitor (500 ms) and memory monitor (100 ms) slowed: an idle
 # cluster cost a tenth of a core on a loaded 2-core machine (a fifth of a short job's CPU time), a
-# fiftieth with these; nobody reads the dashboard here
+# fiftieth with these; nobody reads the dashboard here. Dask's default worker environment sets
+# MALLOC_TRIM_THRESHOLD_, and any such setting turns off glibc's adaptive mmap threshold: every array
+# over 128 KiB is then mapped fresh and unmapped when freed, its pages faulted in again each time (on
+# the eval library the workers' system time was 5 times the serial run's, each input 1.27 times as
+# long): the workers keep glibc's defaults, as a serial run does (the thread limits are kept)
 LOCAL_CONFIG = {"distributed.worker.daemon": False, "distributed.worker.profile.enabled": False,
+                "distributed.nanny.pre-spawn-environ": {"OMP_NUM_THREADS": 1, "MKL_NUM_THREADS": 1,
+                                                        "OPENBLAS_NUM_THREADS": 1},
                 "distributed.admin.system-monitor.gil.enabled": False,
                 "distributed.admin.system-monitor.disk": False, "distributed.admin.tick.interval": "1s",
                 "distributed.admin.system-monitor.interval": "5s",

@@ -219,3 +219,29 @@ def test_local_cluster_eval_equals_single_eval_on_the_folder(tmp_path):
         assert x["figures"]["savings"] == {k: v["savings"] for k, v in whole[name].items()}
     assert all(x["status"] in ("ok", "skipped") for x in s["inputs"]) or s["totals"]["error"] > 0
     assert s["totals"]["skipped"] == len(s["inputs"]) - len(ok) - s["totals"]["error"]
+
+
+WORKER_ENVIRONMENT = """
+import json
+from omaps.batch import dask_client
+
+def environment():
+    import os
+    return {k: os.environ.get(k) for k in ("MALLOC_TRIM_THRESHOLD_", "NUMBA_NUM_THREADS", "OMP_NUM_THREADS")}
+
+with dask_client("local") as client:
+    print(json.dumps(list(client.run(environment).values())))
+"""
+
+
+@pytest.mark.long
+def test_local_workers_compute_on_one_core_with_the_default_allocator():
+    """Each local worker runs numba and OpenMP on one thread, and glibc's allocator keeps its
+    defaults: Dask's default worker environment sets MALLOC_TRIM_THRESHOLD_, which turns off
+    the adaptive mmap threshold, so every large array would be mapped and faulted in afresh."""
+    r = subprocess.run([sys.executable, "-c", WORKER_ENVIRONMENT], capture_output=True, text=True, timeout=120)
+    assert r.returncode == 0, r.stderr
+    envs = json.loads(r.stdout.strip().splitlines()[-1])
+    assert len(envs) == os.cpu_count()
+    for env in envs:
+        assert env == {"MALLOC_TRIM_THRESHOLD_": None, "NUMBA_NUM_THREADS": "1", "OMP_NUM_THREADS": "1"}
