@@ -5,12 +5,13 @@ outputs are identical.
     python bench/bench_batch.py                 # eval: the library of textures, every scheme family
     python bench/bench_batch.py omm             # omm: dozens of scenes (the palm with transformed UVs)
     python bench/bench_batch.py split           # one large scene (the forest): split into tasks or not
-    python bench/bench_batch.py eval --repeat 3 --variants 8 --max-side 384
+    python bench/bench_batch.py eval --repeat 3 --variants 8 --max-side 384,192
 
 The library is built at run time in a temporary folder from the shared data (never kept):
 
 * ``eval``: each real texture of at least 64 px, in ``--variants`` of its 8 flips and rotations,
-  rescaled so that its longer side is at most ``--max-side`` px (46 textures x 8 = 368 inputs),
+  rescaled so that its longer side is at most ``--max-side`` px, at each size given (by default 384
+  and 192 px, as two mips; one of the 46 textures is too small for the second: 91 x 8 = 728 inputs),
   evaluated with ``SCHEMES`` (square maps, micromaps, their lossless trees, the texel map, every
   codec with its default encoder and the deck's: 27 schemes);
 * ``omm``: ``--scenes`` copies of ``palm.glb`` whose UVs are mirrored, rotated by quarter turns
@@ -59,9 +60,10 @@ def loadavg() -> str:
         return "n/a"
 
 
-def texture_library(folder: Path, variants: int, max_side: int) -> list[str]:
-    """The real textures of at least 64 px, each in ``variants`` of its 8 flips and rotations,
-    rescaled to at most ``max_side`` px on the longer side (bilinear, as an engine's mip)."""
+def texture_library(folder: Path, variants: int, max_sides: list[int]) -> list[str]:
+    """The real textures of at least 64 px, each in ``variants`` of its 8 flips and rotations, at
+    each of ``max_sides`` (rescaled, bilinear as an engine's mips, so that the longer side is at
+    most that; a size that leaves the texture as the larger one did is not repeated)."""
     import numpy as np
     from PIL import Image
 
@@ -70,15 +72,20 @@ def texture_library(folder: Path, variants: int, max_side: int) -> list[str]:
         raise SystemExit(f"no shared textures under {SHARED / 'textures'}")
     folder.mkdir(parents=True)
     for p in src:
-        a = np.asarray(Image.open(p).convert("L"))
-        s = max(a.shape)
-        if s > max_side:
-            h, w = (max(1, round(x * max_side / s)) for x in a.shape)
-            a = np.asarray(Image.fromarray(a).resize((w, h), Image.BILINEAR))
-        for k in range(variants):  # the dihedral group: k % 4 quarter turns, then a mirror for k >= 4
-            v = np.rot90(a, k % 4)
-            v = v[:, ::-1] if k >= 4 else v
-            Image.fromarray(np.ascontiguousarray(v)).save(folder / f"{p.stem}__d{k}.png")
+        full = np.asarray(Image.open(p).convert("L"))
+        done = None
+        for side in sorted(set(max_sides), reverse=True):
+            a, s = full, max(full.shape)
+            if s > side:
+                h, w = (max(1, round(x * side / s)) for x in a.shape)
+                a = np.asarray(Image.fromarray(a).resize((w, h), Image.BILINEAR))
+            if done is not None and a.shape == done.shape:
+                continue  # not smaller than at the larger size: the same texture
+            done = a
+            for k in range(variants):  # the dihedral group: k % 4 quarter turns, then a mirror for k >= 4
+                v = np.rot90(a, k % 4)
+                v = v[:, ::-1] if k >= 4 else v
+                Image.fromarray(np.ascontiguousarray(v)).save(folder / f"{p.stem}__s{side}__d{k}.png")
     return [str(folder)]
 
 
@@ -174,7 +181,8 @@ def main() -> None:
     ap.add_argument("job", nargs="?", default="eval", choices=("eval", "omm", "split"))
     ap.add_argument("--repeat", type=int, default=1, help="rounds of serial and local (alternating order)")
     ap.add_argument("--variants", type=int, default=8, help="eval: flips / rotations of each texture (1..8)")
-    ap.add_argument("--max-side", type=int, default=384, help="eval: longer side of each texture, at most")
+    ap.add_argument("--max-side", default="384,192",
+                    help="eval: longer side of each texture, at most; several (comma-separated): each texture at each")
     ap.add_argument("--scenes", type=int, default=32, help="omm: transformed copies of the palm")
     ap.add_argument("--schemes", default=SCHEMES, help="eval: the schemes")
     ap.add_argument("--level", type=int, default=None, help="omm and split: the subdivision level (5; split 4)")
@@ -185,7 +193,7 @@ def main() -> None:
     tmp = Path(a.keep) if a.keep else Path(tempfile.mkdtemp(prefix="omaps-bench-batch-"))
     try:
         if a.job == "eval":
-            command, paths, opts = "eval", texture_library(tmp / "lib", a.variants, a.max_side), ["--schemes", a.schemes]
+            command, paths, opts = "eval", texture_library(tmp / "lib", a.variants, [int(x) for x in a.max_side.split(",")]), ["--schemes", a.schemes]
         elif a.job == "omm":
             command, paths, opts = "omm", scene_library(tmp / "lib", a.scenes), ["--level", str(a.level or 5)]
         else:

@@ -453,11 +453,11 @@ WORKER_ENV = {"NUMBA_NUM_THREADS": "1", "OMP_NUM_THREADS": "1"}
 # fiftieth with these; nobody reads the dashboard here. Dask's default worker environment sets
 # MALLOC_TRIM_THRESHOLD_, and any such setting turns off glibc's adaptive mmap threshold: every array
 # over 128 KiB is then mapped fresh and unmapped when freed, its pages faulted in again each time (on
-# the eval library the workers' system time was 5 times the serial run's, each input 1.27 times as
-# long): the workers keep glibc's defaults, as a serial run does (the thread limits are kept)
+# the eval library the workers' system time was 5 times the serial run's, and the median input took
+# 1.27 times its serial time, 1.09 without): the workers keep glibc's defaults, as a serial run does
+# (None unsets it; Dask's thread limits stay)
 LOCAL_CONFIG = {"distributed.worker.daemon": False, "distributed.worker.profile.enabled": False,
-                "distributed.nanny.pre-spawn-environ": {"OMP_NUM_THREADS": 1, "MKL_NUM_THREADS": 1,
-                                                        "OPENBLAS_NUM_THREADS": 1},
+                "distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_": None,
                 "distributed.admin.system-monitor.gil.enabled": False,
                 "distributed.admin.system-monitor.disk": False, "distributed.admin.tick.interval": "1s",
                 "distributed.admin.system-monitor.interval": "5s",

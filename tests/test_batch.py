@@ -245,3 +245,43 @@ def test_local_workers_compute_on_one_core_with_the_default_allocator():
     assert len(envs) == os.cpu_count()
     for env in envs:
         assert env == {"MALLOC_TRIM_THRESHOLD_": None, "NUMBA_NUM_THREADS": "1", "OMP_NUM_THREADS": "1"}
+
+
+DOCS_WORKER = """
+import json
+from distributed import Client, LocalCluster
+
+def environment():
+    import os
+    return os.environ.get("MALLOC_TRIM_THRESHOLD_")
+
+if __name__ == "__main__":
+    with LocalCluster(n_workers=1, threads_per_worker=1, processes=True, dashboard_address=":0") as cluster:
+        with Client(cluster) as client:
+            print(json.dumps(list(client.run(environment).values())))
+"""
+
+
+@pytest.mark.long
+def test_the_guides_worker_configuration_keeps_the_default_allocator(tmp_path):
+    """The batch guide's Dask configuration file for other clusters' workers, as written, unsets
+    MALLOC_TRIM_THRESHOLD_ in a plain Dask worker (Dask's own cluster, not omaps's settings)."""
+    import re
+    from pathlib import Path
+
+    guide = (Path(__file__).resolve().parents[1] / "docs" / "guide" / "batch.md").read_text()
+    (block,) = re.findall(r"^```yaml\n(.*?)^```", guide, re.M | re.S)
+    (tmp_path / "config").mkdir()
+    (tmp_path / "config" / "omaps.yaml").write_text(block)
+    (tmp_path / "probe.py").write_text(DOCS_WORKER)
+    runs = {}
+    for name, config in (("default", tmp_path / "empty"), ("guide", tmp_path / "config")):
+        config.mkdir(exist_ok=True)
+        env = dict(os.environ, DASK_CONFIG=str(config))
+        env.pop("MALLOC_TRIM_THRESHOLD_", None)
+        r = subprocess.run([sys.executable, str(tmp_path / "probe.py")], capture_output=True, text=True, timeout=120,
+                           env=env, cwd=tmp_path)
+        assert r.returncode == 0, r.stderr
+        runs[name] = json.loads(r.stdout.strip().splitlines()[-1])
+    assert runs["default"] != [None]  # Dask's default sets it (else this test checks nothing)
+    assert runs["guide"] == [None]
