@@ -193,7 +193,8 @@ def main() -> None:
     tmp = Path(a.keep) if a.keep else Path(tempfile.mkdtemp(prefix="omaps-bench-batch-"))
     try:
         if a.job == "eval":
-            command, paths, opts = "eval", texture_library(tmp / "lib", a.variants, [int(x) for x in a.max_side.split(",")]), ["--schemes", a.schemes]
+            sides = [int(x) for x in a.max_side.split(",")]
+            command, paths, opts = "eval", texture_library(tmp / "lib", a.variants, sides), ["--schemes", a.schemes]
         elif a.job == "omm":
             command, paths, opts = "omm", scene_library(tmp / "lib", a.scenes), ["--level", str(a.level or 5)]
         else:
