@@ -13,7 +13,7 @@ The library is built at run time in a temporary folder from the shared data (nev
   rescaled so that its longer side is at most ``--max-side`` px, at each size given (by default 384
   and 192 px, as two mips; one of the 46 textures is too small for the second: 91 x 8 = 728 inputs),
   evaluated with ``SCHEMES`` (square maps, micromaps, their lossless trees, the texel map, every
-  codec with its default encoder and the deck's: 27 schemes);
+  codec with its default and its -paper encoder: 27 schemes);
 * ``omm``: ``--scenes`` copies of ``palm.glb`` whose UVs are mirrored, rotated by quarter turns
   and shrunk into one of the texture's quadrants (``omm --level 5``);
 * ``split``: ``forest.glb`` alone (``omm --level 4``): serial, the local cluster with the scene as
@@ -48,7 +48,7 @@ import time
 from pathlib import Path
 
 SHARED = Path(os.environ.get("OMAPS_SHARED", Path(__file__).resolve().parents[2] / "shared")) / "data"
-# every scheme family; each vector-quantisation codec with its default encoder and the deck's (-paper)
+# every scheme family; each vector-quantisation codec with its default and its -paper encoder
 SCHEMES = ("sq1,sq2,sq4,sq8,sq16,sq32,sq64,sq128,tri0,tri1,tri2,tri3,tri4,tri5,tri6,succinct4,csm4,texel,"
            "vq2,vq2-paper,vq4,vq4-paper,vq4x64,vq4x64-paper,vq4-synth,vq4-synth-paper,wavelet3")
 
