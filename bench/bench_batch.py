@@ -73,15 +73,15 @@ def texture_library(folder: Path, variants: int, max_sides: list[int]) -> list[s
     folder.mkdir(parents=True)
     for p in src:
         full = np.asarray(Image.open(p).convert("L"))
-        done = None
+        shape = None  # the texture's at the previous (larger) size
         for side in sorted(set(max_sides), reverse=True):
             a, s = full, max(full.shape)
             if s > side:
                 h, w = (max(1, round(x * side / s)) for x in a.shape)
                 a = np.asarray(Image.fromarray(a).resize((w, h), Image.BILINEAR))
-            if done is not None and a.shape == done.shape:
+            if a.shape == shape:
                 continue  # not smaller than at the larger size: the same texture
-            done = a
+            shape = a.shape
             for k in range(variants):  # the dihedral group: k % 4 quarter turns, then a mirror for k >= 4
                 v = np.rot90(a, k % 4)
                 v = v[:, ::-1] if k >= 4 else v

@@ -222,44 +222,52 @@ def test_local_cluster_eval_equals_single_eval_on_the_folder(tmp_path):
 
 
 WORKER_ENVIRONMENT = """
-import json
-from omaps.batch import dask_client
+import json, sys
 
 def environment():
     import os
     return {k: os.environ.get(k) for k in ("MALLOC_TRIM_THRESHOLD_", "NUMBA_NUM_THREADS", "OMP_NUM_THREADS")}
 
-with dask_client("local") as client:
-    print(json.dumps(list(client.run(environment).values())))
+if __name__ == "__main__":
+    if sys.argv[1] == "omaps":  # omaps's local cluster
+        from omaps.batch import dask_client
+        cluster = dask_client("local")
+    else:  # Dask's own, with whatever configuration Dask reads
+        import contextlib
+        from distributed import Client, LocalCluster
+
+        @contextlib.contextmanager
+        def plain():
+            with LocalCluster(n_workers=1, threads_per_worker=1, processes=True, dashboard_address=":0") as c:
+                with Client(c) as client:
+                    yield client
+        cluster = plain()
+    with cluster as client:
+        print(json.dumps(list(client.run(environment).values())))
 """
+
+
+def _worker_environments(tmp_path, which, **env):
+    """Each worker's MALLOC_TRIM_THRESHOLD_, NUMBA_NUM_THREADS and OMP_NUM_THREADS, on omaps's
+    local cluster (``which`` "omaps") or on a plain Dask LocalCluster of one worker ("dask")."""
+    probe = tmp_path / "probe.py"
+    probe.write_text(WORKER_ENVIRONMENT)
+    env = {k: v for k, v in dict(os.environ, **env).items() if k != "MALLOC_TRIM_THRESHOLD_"}
+    r = subprocess.run([sys.executable, str(probe), which], capture_output=True, text=True, timeout=120, env=env,
+                       cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    return json.loads(r.stdout.strip().splitlines()[-1])
 
 
 @pytest.mark.long
-def test_local_workers_compute_on_one_core_with_the_default_allocator():
+def test_local_workers_compute_on_one_core_with_the_default_allocator(tmp_path):
     """Each local worker runs numba and OpenMP on one thread, and glibc's allocator keeps its
     defaults: Dask's default worker environment sets MALLOC_TRIM_THRESHOLD_, which turns off
     the adaptive mmap threshold, so every large array would be mapped and faulted in afresh."""
-    r = subprocess.run([sys.executable, "-c", WORKER_ENVIRONMENT], capture_output=True, text=True, timeout=120)
-    assert r.returncode == 0, r.stderr
-    envs = json.loads(r.stdout.strip().splitlines()[-1])
+    envs = _worker_environments(tmp_path, "omaps")
     assert len(envs) == os.cpu_count()
     for env in envs:
         assert env == {"MALLOC_TRIM_THRESHOLD_": None, "NUMBA_NUM_THREADS": "1", "OMP_NUM_THREADS": "1"}
-
-
-DOCS_WORKER = """
-import json
-from distributed import Client, LocalCluster
-
-def environment():
-    import os
-    return os.environ.get("MALLOC_TRIM_THRESHOLD_")
-
-if __name__ == "__main__":
-    with LocalCluster(n_workers=1, threads_per_worker=1, processes=True, dashboard_address=":0") as cluster:
-        with Client(cluster) as client:
-            print(json.dumps(list(client.run(environment).values())))
-"""
 
 
 @pytest.mark.long
@@ -273,15 +281,8 @@ def test_the_guides_worker_configuration_keeps_the_default_allocator(tmp_path):
     (block,) = re.findall(r"^```yaml\n(.*?)^```", guide, re.M | re.S)
     (tmp_path / "config").mkdir()
     (tmp_path / "config" / "omaps.yaml").write_text(block)
-    (tmp_path / "probe.py").write_text(DOCS_WORKER)
-    runs = {}
-    for name, config in (("default", tmp_path / "empty"), ("guide", tmp_path / "config")):
-        config.mkdir(exist_ok=True)
-        env = dict(os.environ, DASK_CONFIG=str(config))
-        env.pop("MALLOC_TRIM_THRESHOLD_", None)
-        r = subprocess.run([sys.executable, str(tmp_path / "probe.py")], capture_output=True, text=True, timeout=120,
-                           env=env, cwd=tmp_path)
-        assert r.returncode == 0, r.stderr
-        runs[name] = json.loads(r.stdout.strip().splitlines()[-1])
-    assert runs["default"] != [None]  # Dask's default sets it (else this test checks nothing)
-    assert runs["guide"] == [None]
+    (tmp_path / "empty").mkdir()
+    default = _worker_environments(tmp_path, "dask", DASK_CONFIG=str(tmp_path / "empty"))
+    guided = _worker_environments(tmp_path, "dask", DASK_CONFIG=str(tmp_path / "config"))
+    assert default[0]["MALLOC_TRIM_THRESHOLD_"] is not None  # Dask's default sets it (else this checks nothing)
+    assert guided[0]["MALLOC_TRIM_THRESHOLD_"] is None
