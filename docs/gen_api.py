@@ -1,7 +1,9 @@
 """Generate the Python API reference pages (``reference/api/*.md``) for mkdocstrings: one page per
 public namespace, one ``:::`` entry per name of its ``__all__``, pointing at the module that
-defines it (the packages export their names lazily, which a static reader cannot follow). Run by
-the mkdocs-gen-files plugin during ``mkdocs build``."""
+defines it (the packages export their names lazily, which a static reader cannot follow). A
+function made at import (a numba kernel assembled from a registry) gets a heading and its signature
+from ``inspect``; constants are listed with their values. Run by the mkdocs-gen-files plugin during
+``mkdocs build``."""
 
 from __future__ import annotations
 
@@ -36,15 +38,58 @@ def _target(pkg, name: str) -> str | None:
     return None  # a constant: listed by name only
 
 
+def _built(pkg, name: str):
+    """The Python function of ``pkg.name`` if it is made by a call at import (a numba kernel
+    assembled from a registry), which a static reader cannot document; else None."""
+    obj = getattr(pkg, name)
+    obj = getattr(obj, "py_func", obj)
+    if inspect.isfunction(obj) and "<locals>" in obj.__qualname__ and obj.__module__.startswith("omaps"):
+        return obj
+    return None
+
+
+def _built_entry(package: str, name: str, func, kernel: bool, modules: set[str]) -> list[str]:
+    """A heading and the signature of a function made at import; its module's docstring (shown
+    once per page, above the first) describes it."""
+    lines = []
+    if func.__module__ not in modules:
+        modules.add(func.__module__)
+        lines += [f"::: {func.__module__}", "    options:", "      members: false",
+                  f"      heading: \"{func.__module__}\"", ""]
+    lines += [f"## {package}.{name} {{#{package}.{name}}}", "", "```python", f"{name}{inspect.signature(func)}",
+              "```", "", f"{'A numba kernel' if kernel else 'A function'} made when the package is imported: "
+              f"see [`{func.__module__}`][{func.__module__}] above.", ""]
+    return lines
+
+
+def _value(value) -> str:
+    """A constant as the page shows it: its value when short, else what it holds (a long value or
+    one holding functions is no reading, and its addresses change from build to build)."""
+    text = repr(value)
+    if len(text) <= 100 and " at 0x" not in text:
+        return f" = `{text}`"
+    kind = type(value).__name__
+    if isinstance(value, (tuple, list, set, frozenset, dict)):
+        items = list(value.values() if isinstance(value, dict) else value)
+        kinds = {type(v).__name__ for v in items}
+        what = f" `{kinds.pop()}`" if len(kinds) == 1 else ""
+        return f": a `{kind}` of {len(items)}{what} {'entries' if isinstance(value, dict) else 'items'}"
+    return f": a `{kind}`"
+
+
 def render(page: str, package: str, intro: str, done: dict[str, str]) -> str:
     """The page of ``package``; ``done`` maps the targets documented on earlier pages to their
     public names there (an object is documented once, and linked from the other pages)."""
     pkg = importlib.import_module(package)
     lines = [f"# `{package}`", "", intro, "",
              "Generated from the docstrings (`docs/gen_api.py`, mkdocstrings).", ""]
-    consts, elsewhere = [], []
+    consts, elsewhere, modules = [], [], set()
     for name in pkg.__all__:
         target = _target(pkg, name)
+        built = _built(pkg, name) if target is None else None
+        if built is not None:
+            lines += _built_entry(package, name, built, hasattr(getattr(pkg, name), "py_func"), modules)
+            continue
         if target is None:
             consts.append(name)
             continue
@@ -58,7 +103,7 @@ def render(page: str, package: str, intro: str, done: dict[str, str]) -> str:
     if consts:
         lines += ["## Constants", ""]
         for name in consts:
-            lines.append(f"- `{package}.{name}` = `{getattr(pkg, name)!r}`"[:300])
+            lines.append(f"- `{package}.{name}`{_value(getattr(pkg, name))}")
         lines.append("")
     return "\n".join(lines)
 
