@@ -247,6 +247,28 @@ def finished(command: str, out: str, marker: str, fp: dict) -> dict | None:
 # ---------------------------------------------------------------------------------------------
 # one input
 
+# Test-only: when this environment variable names a folder, each input's task (``run_one``, not
+# split) and each piece's task (``bake_piece_task``) stops at ``_test_gate`` until the test lets it
+# go, so that a test interrupts or kills a batch at a moment it chooses, whatever the machine's
+# speed. Never set outside the tests; unset, the gate is one dictionary lookup.
+TEST_GATE = "OMAPS_TEST_GATE"
+
+
+def _test_gate(what: str) -> None:
+    """Test-only (``TEST_GATE``): with the variable unset, nothing. Set to a folder: write
+    ``started-WHAT`` there, then wait until a file ``release`` or ``release-WHAT`` appears there,
+    or the folder is removed (or the process is interrupted or killed)."""
+    folder = os.environ.get(TEST_GATE)
+    if not folder:
+        return
+    what = "".join(c if c.isalnum() or c in "-_." else "_" for c in what)
+    with open(os.path.join(folder, f"started-{what}"), "w"):
+        pass
+    go = (os.path.join(folder, "release"), os.path.join(folder, f"release-{what}"))
+    while os.path.isdir(folder) and not any(os.path.exists(g) for g in go):
+        time.sleep(0.01)
+
+
 SETTINGS = ("level", "dynamic", "max_level", "budget", "format", "promote", "seed", "special", "dedup", "source",
             "encoder", "effort", "jobs")  # bake_omms' options that make its OmmSettings (omm_settings)
 
@@ -300,6 +322,8 @@ def run_one(command: str, options: dict, path: str, name: str, outdir: str, fp: 
     out = output_path(command, outdir, name, {"glb": options.get("glb")})
     options = {k: v for k, v in options.items() if k != "glb"}
     rec = {"input": path, "output": os.path.relpath(out, outdir), "status": None}
+    if split is None:
+        _test_gate(f"input-{name}")
     t0 = time.perf_counter()
     messages: list[str] = []
     try:
@@ -552,6 +576,7 @@ def bake_piece_task(test, piece, *rest):
     """``omaps.omm.split.bake_piece`` as a Dask task."""
     from .omm.split import bake_piece
 
+    _test_gate(f"piece-{piece.geometry}-{piece.a}")
     return bake_piece(test, piece, *rest)
 
 

@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import os
 import re
-import signal
+import select
 import socket
 import subprocess
 import sys
@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 
 from gltf_files import write_quad_gltf
-from interrupts import check_interrupted, children
+from interrupts import LIMIT, check_interrupted, children, gate_env, wait_for
 from omaps import batch as engine
 from omaps.cli.main import main
 from omaps.errors import InputError
@@ -187,6 +187,24 @@ class _Server:
         self.sock.close()
 
 
+class _Unanswered:
+    """A loopback port whose queue of connections is full (a backlog of 0, taken by one
+    connection never accepted): the kernel drops a new connection's first packet, so the connection
+    is never answered, as at an address no route leads to, without leaving this machine."""
+
+    def __init__(self):
+        self.sock = socket.socket()
+        self.sock.bind(("127.0.0.1", 0))
+        self.sock.listen(0)
+        self.address = f"tcp://127.0.0.1:{self.sock.getsockname()[1]}"
+        self.filler = socket.create_connection(self.sock.getsockname(), timeout=LIMIT)
+        assert select.select([self.sock], [], [], LIMIT)[0], "the filler connection was not queued"
+
+    def close(self):
+        self.filler.close()
+        self.sock.close()
+
+
 def test_a_dask_scheduler_passes_the_check():
     """The check reads a real scheduler's handshake (``dask scheduler``, as on a cluster)."""
     port = _free_port()
@@ -206,58 +224,57 @@ def test_a_dask_scheduler_passes_the_check():
         p.wait(30)
 
 
-@pytest.mark.parametrize("kind", ["silent", "http", "unroutable"])
+@pytest.mark.parametrize("kind", ["silent", "http", "unanswered"])
 def test_a_scheduler_address_that_is_not_a_dask_scheduler_fails_quickly_naming_it(tmp_path, capsys, kind):
     """A server that takes the connection but is silent or speaks another protocol (Dask's own
-    client failed there with a traceback, or waited its whole timeout), and an address no route
-    leads to (on some networks a proxy takes the connection): exit 2 within the connection check's
-    time (``CONNECT_SECONDS``; the bound here is generous: a slow machine must not fail it), one
-    line naming the address, nothing written."""
+    client failed there with a traceback, or waited its whole timeout), and an address whose
+    connection is never answered (``_Unanswered``, on loopback): exit 2 within the connection
+    check's time (``CONNECT_SECONDS``; the bound here is generous: a slow machine must not fail
+    it), one line naming the address and what happened, nothing written."""
     src = tmp_path / "tex"
     _textures(src, n=1)
-    server = None if kind == "unroutable" else _Server(b"HTTP/1.1 400 Bad Request\r\n\r\n" if kind == "http" else None)
-    address = "tcp://10.255.255.1:8786" if server is None else server.address
+    if kind == "unanswered":
+        server = _Unanswered()
+    else:
+        server = _Server(b"HTTP/1.1 400 Bad Request\r\n\r\n" if kind == "http" else None)
+    address = server.address
     try:
         t0 = time.monotonic()
         rc = main(["batch", "eval", str(src), "-o", str(tmp_path / "out"), "--scheduler", address, "--quiet"])
         dt = time.monotonic() - t0
     finally:
-        if server is not None:
-            server.close()
+        server.close()
     err = capsys.readouterr().err
     assert rc == 2, err
     assert address in err and "scheduler" in err and len(err.strip().splitlines()) == 1, err
     assert "Traceback" not in err
+    said = {"silent": "sent no Dask handshake", "http": "not a Dask scheduler", "unanswered": "no answer"}[kind]
+    assert said in err, err
     assert dt < engine.CONNECT_SECONDS + 10, dt
     assert not (tmp_path / "out").exists()
 
 
 # --- Ctrl-C during the Dask start-up -----------------------------------------------------------
 
-@pytest.mark.parametrize("group, after", [(True, 0.0), (True, 1.0), (False, 0.5)])
-def test_ctrl_c_during_cluster_start_up(tmp_path, group, after):
-    """SIGINT once the LocalCluster's first process exists (``after`` s later): to the whole
-    process group as a terminal's Ctrl-C, or to omaps alone. One line, exit 130, no output."""
+@pytest.mark.parametrize("group, kids", [(True, 1), (True, 2), (False, 2)])
+def test_ctrl_c_during_cluster_start_up(tmp_path, group, kids):
+    """SIGINT once the batch has ``kids`` child processes (its resource tracker first, then the
+    LocalCluster's first worker or a compile started before it): to the whole process group as a
+    terminal's Ctrl-C, or to omaps alone. One line, exit 130, no output. The batch's inputs are
+    held at the test-only gate (``omaps.batch.TEST_GATE``): however fast the machine, the batch
+    cannot finish before the signal."""
     src = tmp_path / "tex"
     _textures(src, n=4)
-    out = tmp_path / "out"
-    env = dict(os.environ, PYTHONUNBUFFERED="1", OMAPS_PROGRESS="0")
+    out, gate = tmp_path / "out", tmp_path / "gate"
+    env = gate_env(dict(os.environ, PYTHONUNBUFFERED="1", OMAPS_PROGRESS="0"), gate)
     p = subprocess.Popen([sys.executable, "-m", "omaps", "batch", "eval", str(src), "-o", str(out),
                           "--scheduler", "local", "--schemes", "sq16"], env=env, stdout=subprocess.DEVNULL,
                          stderr=subprocess.PIPE, start_new_session=group)
 
-    def interrupt():
-        deadline = time.monotonic() + 120
-        while not children(p.pid) and p.poll() is None and time.monotonic() < deadline:
-            time.sleep(0.01)
-        assert p.poll() is None, "the batch ended before its cluster started"
-        time.sleep(after)
-        if group:
-            os.killpg(p.pid, signal.SIGINT)
-        else:
-            p.send_signal(signal.SIGINT)
+    def moment():
+        wait_for(lambda: len(children(p.pid)) >= kids, f"{kids} child processes", p)
 
-    check_interrupted(p, out, interrupt)
+    check_interrupted(p, out, moment, group=group, gate=gate)
 
 
 def test_a_busy_dashboard_port_is_not_a_warning(tmp_path):
@@ -267,7 +284,7 @@ def test_a_busy_dashboard_port_is_not_a_warning(tmp_path):
     _textures(src, n=1)
     held = socket.socket()
     try:
-        held.bind(("", 8787))  # (if the port is busy already, the case is there anyway)
+        held.bind(("127.0.0.1", 8787))  # (if the port is busy already, the case is there anyway)
         held.listen(1)
     except OSError:
         pass

@@ -146,16 +146,6 @@ def test_a_cluster_interrupted_in_its_constructor_is_dropped_quietly():
 
 # --- Ctrl-C while a local-cluster batch runs ---------------------------------------------------
 
-def _wait(cond, what, p, limit=300):
-    import time
-
-    deadline = time.monotonic() + limit
-    while not cond():
-        assert p.poll() is None, f"the batch ended before {what}"
-        assert time.monotonic() < deadline, f"no {what} in {limit} s"
-        time.sleep(0.05)
-
-
 def _grid_scene(path, k=24):
     from gltf_files import grid_scene
 
@@ -168,45 +158,42 @@ def _grid_scene(path, k=24):
 @pytest.mark.parametrize("phase", ["inputs", "pieces"])
 def test_ctrl_c_while_a_local_cluster_batch_runs(tmp_path, phase):
     """Ctrl-C (SIGINT to the process group, as a terminal sends it) once the batch is under way:
-    ``inputs``, after the first input of many finished on the workers; ``pieces``, while a split
-    scene's pieces run on the workers and this process waits for them (``omaps batch omm
-    --split``). One line, exit 130, no summary, no process left."""
-    import signal
+    ``inputs``, after one input of many finished on the workers while others run there;
+    ``pieces``, while a split scene's pieces run on the workers and this process waits for them
+    (``omaps batch omm --split``). One line, exit 130, no summary, no process left.
 
-    from interrupts import check_interrupted, children
+    The moment is an event, not a time: the batch's test-only gate (``omaps.batch.TEST_GATE``)
+    holds every task at its start until the test releases it, so the batch cannot finish (or
+    not yet start its work) before the signal, however fast the machine."""
+    from interrupts import check_interrupted, gate_env, release, started, wait_for
 
-    out = tmp_path / "out"
+    out, gate = tmp_path / "out", tmp_path / "gate"
     if phase == "inputs":
         src = tmp_path / "tex"
         src.mkdir()
         rng = np.random.default_rng(0)
-        for i in range(40):
+        for i in range(12):  # (the gate, not the work's length, keeps the batch from finishing first)
             a = np.kron((rng.random((32, 32)) > 0.5).astype(np.uint8) * 255, np.ones((8, 8), np.uint8))
             Image.fromarray(a).save(src / f"t{i:02d}.png")
-        cmd = ["eval", str(src), "--schemes", "sq16,tri4,vq2,wavelet3"]
+        cmd = ["eval", str(src), "--schemes", "sq16"]
     else:
-        cmd = ["omm", _grid_scene(tmp_path / "grid.gltf", k=40), "--level", "8", "--split"]
-    env = dict(ENV, OMAPS_PROGRESS="0")
+        cmd = ["omm", _grid_scene(tmp_path / "grid.gltf", k=24), "--level", "6", "--split"]
+    env = gate_env(dict(ENV, OMAPS_PROGRESS="0"), gate)
     p = subprocess.Popen([sys.executable, "-m", "omaps", "batch", *cmd, "-o", str(out), "--scheduler", "local"],
                          env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, start_new_session=True)
 
-    def interrupt():
-        if phase == "inputs":
-            _wait(lambda: (out / ".batch").is_dir() and any((out / ".batch").iterdir()), "a finished input", p)
-        else:  # the workers are up and busy with pieces: their CPU time grows past their start-up's
-            def busy():
-                import psutil
+    def moment():
+        if phase == "inputs":  # one input let through and finished (its marker written); the rest held
+            wait_for(lambda: started(gate, "input-"), "an input started on a worker", p)
+            first = started(gate, "input-")[0]
+            release(gate, first)
+            marker = out / ".batch" / (first[len("input-"):] + ".json")
+            wait_for(marker.is_file, f"the marker of {first}", p)
+            assert [f.name for f in (out / ".batch").iterdir() if not f.name.startswith(".")] == [marker.name]
+        else:  # a piece has started on a worker: this process waits for the pieces
+            wait_for(lambda: started(gate, "piece-"), "a piece started on a worker", p)
 
-                kids = children(p.pid)
-                try:
-                    return len(kids) >= 2 and sum(c.cpu_times().user for c in kids) > 5
-                except psutil.Error:
-                    return False
-
-            _wait(busy, "busy workers", p)
-        os.killpg(p.pid, signal.SIGINT)
-
-    check_interrupted(p, out, interrupt)
+    check_interrupted(p, out, moment, gate=gate)
 
 
 GC_SCRIPT = """
