@@ -92,18 +92,28 @@ def test_pages_are_files(site):
 
 
 def test_every_link_is_a_file_of_the_site(site):
-    """Each relative ``href`` / ``src`` of every page names a file of the site (the 404 page is the
-    exception: a web server serves it at any depth, so its links start at the site's root)."""
+    """Each relative ``href`` / ``src`` of every page names a file of the site, and an anchor an
+    element of that page (the 404 page is the exception: a web server serves it at any depth, so
+    its links start at the site's root)."""
+    ids = {}
+
+    def has_id(page: Path, anchor: str) -> bool:
+        if page not in ids:
+            ids[page] = {html.unescape(i) for i in re.findall(r'\bid="([^"]*)"', page.read_text(encoding="utf-8"))}
+        return anchor in ids[page]
+
     broken = []
     for page in sorted(site.rglob("*.html")):
         if page == site / "404.html":
             continue
         for ref in re.findall(r'(?:href|src)="([^"]*)"', page.read_text(encoding="utf-8")):
             parts = urllib.parse.urlsplit(html.unescape(ref))
-            if parts.scheme or parts.netloc or not parts.path:
-                continue  # another site, or an anchor of this page
-            target = (page.parent / urllib.parse.unquote(parts.path)).resolve()
+            if parts.scheme or parts.netloc:
+                continue  # another site
+            target = (page.parent / urllib.parse.unquote(parts.path)).resolve() if parts.path else page
             if not target.is_file():
+                broken.append((str(page.relative_to(site)), ref))
+            elif target.suffix == ".html" and parts.fragment and not has_id(target, urllib.parse.unquote(parts.fragment)):
                 broken.append((str(page.relative_to(site)), ref))
     assert broken == []
 
