@@ -10,7 +10,6 @@ import os
 import signal
 import subprocess
 import sys
-import time
 
 import numpy as np
 import pytest
@@ -20,6 +19,7 @@ from omaps.cli.main import main
 from conftest import SCENES, TEXTURES, needs_scenes, needs_shared
 
 SCHEMES = "sq16,tri3,vq2"
+OLD_NS = 946684800 * 10**9  # 2000-01-01: a time stamp a test gives outputs, which only a rewrite changes
 
 
 def _textures(folder, n=4, size=64, seed=0):
@@ -85,15 +85,15 @@ def test_resume_skips_finished_inputs_and_redoes_changed_ones(tmp_path):
     out = tmp_path / "out"
     args = ["batch", "eval", str(src), "-o", str(out), "--scheduler", "none", "--schemes", "sq16", "--quiet"]
     assert main(args) == 0
-    before = {f: os.stat(out / f).st_mtime_ns for f in ("t00.json", "t01.json", "t02.json")}
-    time.sleep(0.02)
+    for f in ("t00.json", "t02.json"):  # an old time stamp, which only a rewrite changes (whatever the clock)
+        os.utime(out / f, ns=(OLD_NS, OLD_NS))
     (out / "t01.json").unlink()  # an output gone: that input is done again, the others are skipped
     assert main(args) == 0
     s, _ = _summary(out)
     resumed = {os.path.basename(r["input"]): bool(r.get("resumed")) for r in s["inputs"]}
     assert resumed == {"t00.png": True, "t01.png": False, "t02.png": True}
-    assert os.stat(out / "t00.json").st_mtime_ns == before["t00.json"]
-    assert os.stat(out / "t01.json").st_mtime_ns != before["t01.json"]
+    assert os.stat(out / "t00.json").st_mtime_ns == os.stat(out / "t02.json").st_mtime_ns == OLD_NS
+    assert (out / "t01.json").is_file()
     assert s["totals"]["ok"] == 3 and s["totals"]["resumed"] == 2
     # other options: nothing is skipped (the markers record the options)
     assert main(args[:-3] + ["--schemes", "sq32", "--quiet"]) == 0
@@ -102,37 +102,48 @@ def test_resume_skips_finished_inputs_and_redoes_changed_ones(tmp_path):
 
 
 def test_killed_batch_resumes_without_redoing_finished_inputs(tmp_path):
+    """Killed (SIGKILL) while its third input runs, two finished: the re-run skips those two. The
+    moment is an event: the batch's test-only gate (``omaps.batch.TEST_GATE``) holds each input
+    at its start until the test releases it, so the kill never depends on the machine's speed."""
+    from interrupts import gate_env, release, started, wait_for
+
     src = tmp_path / "tex"
-    _textures(src, n=40, size=256, seed=3)
-    out = tmp_path / "out"
+    _textures(src, n=8, seed=3)
+    out, gate = tmp_path / "out", tmp_path / "gate"
     cmd = [sys.executable, "-m", "omaps", "batch", "eval", str(src), "-o", str(out), "--scheduler", "none",
-           "--schemes", "sq64,tri6,vq4x64,texel", "--quiet"]
-    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+           "--schemes", "sq16", "--quiet"]
+    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+                            env=gate_env(os.environ, gate))
     markers = out / ".batch"
 
     def finished():  # markers in place (one being written is still under its hidden temporary name)
         names = os.listdir(markers) if markers.is_dir() else []
         return sorted(f for f in names if f.endswith(".json") and not f.startswith(".omaps-"))
 
-    # killed once two inputs are marked finished: the same count as the assertion below (finished
-    # markers are never removed while the batch runs, so it holds whenever the kill comes after)
-    deadline = time.monotonic() + 300
-    while proc.poll() is None and len(finished()) < 2 and time.monotonic() < deadline:
-        time.sleep(0.005)
-    proc.send_signal(signal.SIGKILL)
-    proc.wait()
-    assert proc.returncode == -signal.SIGKILL, "the batch finished before it could be killed"
+    try:
+        for name in ("t00", "t01"):  # (serial: in order, each one's marker written before the next starts)
+            wait_for(lambda: f"input-{name}" in started(gate), f"input {name} started", proc)
+            release(gate, f"input-{name}")
+        wait_for(lambda: "input-t02" in started(gate), "input t02 started", proc)
+        proc.send_signal(signal.SIGKILL)
+        proc.wait()
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    assert proc.returncode == -signal.SIGKILL
     done = finished()
-    assert 2 <= len(done) < 40 and not (out / "summary.json").exists()
+    assert done == ["t00.json", "t01.json"] and not (out / "summary.json").exists()
     for f in done:  # every marked input has its whole output
         json.loads((out / f).read_text())
-    stamps = {f: os.stat(out / f).st_mtime_ns for f in done}
+    for f in done:  # an old time stamp, which only a rewrite changes (whatever the clock)
+        os.utime(out / f, ns=(OLD_NS, OLD_NS))
     (out / ".omaps-0123456789ab.json").write_text("{")  # what a kill while writing leaves
     r = subprocess.run(cmd, capture_output=True, text=True)
     assert r.returncode == 0, r.stderr
     s, _ = _summary(out)
-    assert s["totals"]["ok"] == 40 and s["totals"]["resumed"] == len(done)
-    assert {f: os.stat(out / f).st_mtime_ns for f in done} == stamps  # not redone
+    assert s["totals"]["ok"] == 8 and s["totals"]["resumed"] == len(done)
+    assert {f: os.stat(out / f).st_mtime_ns for f in done} == {f: OLD_NS for f in done}  # not redone
     assert not [f for f in os.listdir(out) if f.startswith(".omaps-")]  # the killed input left nothing
 
 

@@ -59,21 +59,25 @@ def test_run_under_a_profiler_exits_as_usual(tmp_path):
 
 def test_run_waits_for_a_running_thread(tmp_path):
     """A non-daemon thread still running when ``main`` returns (an interrupted worker pool's
-    manager, unlinking its semaphores) finishes before the process ends."""
+    manager, unlinking its semaphores) finishes before the process ends. The thread writes its
+    mark only once the interpreter's exit has begun (the main thread is over), so a process that
+    ends without waiting for it never writes it, however fast or slow the machine."""
     script = """
 import sys, threading, time
 import importlib
 m = importlib.import_module("omaps.cli.main")
 def main(argv):
     def late():
-        time.sleep(0.3)
+        while threading.main_thread().is_alive():  # until the interpreter's exit has begun
+            time.sleep(0.01)
         open(sys.argv[1], "w").write("done")
     threading.Thread(target=late).start()
     return 3
 m.main = main
 m.run([])
 """
-    r = subprocess.run([sys.executable, "-c", script, str(tmp_path / "mark")], capture_output=True, text=True, env=ENV)
+    r = subprocess.run([sys.executable, "-c", script, str(tmp_path / "mark")], capture_output=True, text=True, env=ENV,
+                       timeout=300)
     assert r.returncode == 3, r.stderr
     assert (tmp_path / "mark").read_text() == "done"
 
