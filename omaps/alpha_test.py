@@ -35,10 +35,12 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
-from . import states
-from .errors import InputError
+import os
+
+from . import checks, states
+from .errors import InputError, InputTypeError
 from .sampling import FootprintGrid, filter_code, footprint_grid, sample_texture, wrap_code
-from .texture import as_texture
+from .texture import AlphaTexture, as_texture
 
 __all__ = ["AlphaTest", "StateRule", "MaterialRules", "material_test", "passes", "below", "sample_passes", "MODES",
            "BLEND_RULES", "RULES", "CUTOFF_TOLERANCE"]
@@ -68,13 +70,19 @@ class AlphaTest:
     high: float = 1.0
     tolerance: float = 0.0
 
-    def __post_init__(self):
-        filter_code(self.filter, self.name)
-        wrap_code(self.wrap_u)
-        wrap_code(self.wrap_v)
-        if self.rule not in RULES:
-            raise InputError(f"unknown state rule {self.rule!r} (choose from {', '.join(RULES)})", self.name)
-        v = np.asarray(self.value)
+    def __post_init__(self) -> None:
+        from .names import FILTERS, WRAP_MODES
+
+        checks.text(self.name, "name")
+        checks.choice(self.filter, "filter", FILTERS)
+        checks.choice(self.wrap_u, "wrap_u", WRAP_MODES)
+        checks.choice(self.wrap_v, "wrap_v", WRAP_MODES)
+        checks.choice(self.rule, "rule", RULES)
+        checks.boolean(self.inclusive, "inclusive")
+        for name in ("threshold", "low", "high", "tolerance"):
+            if isinstance(getattr(self, name), bool) or not isinstance(getattr(self, name), (int, float, np.number)):
+                raise InputTypeError(f"{name} must be a number, got {type(getattr(self, name)).__name__}", param=name)
+        v = checks.array(self.value, "value", kinds="biuf")
         if v.ndim != 2 or v.size == 0:
             raise InputError(f"alpha must be a non-empty 2-D array, got shape {v.shape}", self.name)
 
@@ -174,19 +182,20 @@ class StateRule:
     o_min: float = 225.0
     cutoff: float = 0.5
 
-    def __post_init__(self):
-        if self.mode not in MODES:
-            raise InputError(f"unknown state mode {self.mode!r} (choose from {', '.join(MODES)})")
+    def __post_init__(self) -> None:
+        if isinstance(self.mode, str) and self.mode not in MODES:
+            raise InputError(f"unknown state mode {self.mode!r} (choose from {', '.join(MODES)})", param="mode")
+        checks.choice(self.mode, "mode", MODES)
         for name in ("t_max", "o_min", "cutoff"):
-            if not np.isfinite(getattr(self, name)):
-                raise InputError(f"{name} must be finite")
+            checks.number(getattr(self, name), name)
         if self.mode == "levels" and not (0 <= self.t_max < self.o_min <= 255):
-            raise InputError(f"levels need 0 <= t_max < o_min <= 255, got {self.t_max}, {self.o_min}")
+            raise InputError(f"levels need 0 <= t_max < o_min <= 255, got {self.t_max}, {self.o_min}",
+                             param=("t_max", "o_min"))
         if self.mode == "cutoff" and not (0 <= self.cutoff <= 1):
-            raise InputError(f"cutoff must be in [0, 1], got {self.cutoff}")
+            raise InputError(f"cutoff must be in [0, 1], got {self.cutoff}", param="cutoff")
 
-    def alpha_test(self, texture, filter: str = "nearest", wrap: str = "clamp",
-                   wrap_v: str | None = None) -> AlphaTest:
+    def alpha_test(self, texture: AlphaTexture | np.ndarray | str | os.PathLike[str], filter: str = "nearest",
+                   wrap: str = "clamp", wrap_v: str | None = None) -> AlphaTest:
         """The test of a texture under this rule.
 
         Parameters
@@ -212,6 +221,11 @@ class StateRule:
         >>> StateRule("cutoff", cutoff=0.5).alpha_test(np.array([[0.5, 0.75]])).texel_states().tolist()
         [[0, 1]]
         """
+        from .names import FILTERS, WRAP_MODES
+
+        checks.choice(filter, "filter", FILTERS)
+        checks.choice(wrap, "wrap", WRAP_MODES)
+        checks.choice(wrap_v, "wrap_v", WRAP_MODES, optional=True)
         texture = as_texture(texture)
         a8 = texture.alpha8
         wv = wrap if wrap_v is None else wrap_v
@@ -221,7 +235,7 @@ class StateRule:
             return AlphaTest(texture.name, texture.values, float(self.cutoff), False, filter, wrap, wv, "test")
         return AlphaTest(texture.name, a8, self.cutoff * 255.0, False, filter, wrap, wv, "test")
 
-    def classify(self, texture) -> np.ndarray:
+    def classify(self, texture: AlphaTexture | np.ndarray | str | os.PathLike[str]) -> np.ndarray:
         """Texel states (uint8 codes of ``omaps.states``), shape (H, W), of a texture, an array
         or an image path."""
         return self.alpha_test(texture).texel_states()
@@ -250,17 +264,19 @@ class MaterialRules:
     blend: str = "levels"
     blend_cutoff: float = 0.5
 
-    def __post_init__(self):
-        if self.blend not in BLEND_RULES:
-            raise InputError(f"unknown blend rule {self.blend!r} (choose from {', '.join(BLEND_RULES)})")
+    def __post_init__(self) -> None:
+        from .names import FILTERS, WRAP_MODES
+
+        if isinstance(self.blend, str) and self.blend not in BLEND_RULES:
+            raise InputError(f"unknown blend rule {self.blend!r} (choose from {', '.join(BLEND_RULES)})",
+                             param="blend")
+        checks.choice(self.blend, "blend", BLEND_RULES)
         for name in ("cutoff", "blend_cutoff"):
             v = getattr(self, name)
-            if v is not None and not (np.isfinite(v) and 0.0 <= v <= 1.0):
-                raise InputError(f"{name.replace('_', '-')} must be in [0, 1], got {v}")
-        if self.filter is not None:
-            filter_code(self.filter)
-        if self.wrap is not None:
-            wrap_code(self.wrap)
+            if v is not None:
+                checks.number(v, name, 0.0, 1.0)
+        checks.choice(self.filter, "filter", FILTERS, optional=True)
+        checks.choice(self.wrap, "wrap", WRAP_MODES, optional=True)
 
     def alpha_tested(self, alpha_mode: str) -> bool:
         return alpha_mode == "MASK" or (alpha_mode == "BLEND" and self.blend != "skip")

@@ -28,7 +28,11 @@ import os
 import time
 from dataclasses import dataclass, field
 
-from .errors import InputError, check_count
+from collections.abc import Callable, Sequence
+from typing import Any
+
+from . import checks
+from .errors import InputError, InputTypeError, check_count
 from .text import plural
 
 __all__ = ["bake_omms", "OmmBake", "omm_settings", "omm_input_spec", "verify_omms", "OmmCheck", "expand_omms",
@@ -131,7 +135,7 @@ def _numba_threads(threads: int | None):
         return
     import numba
 
-    check_count(threads, "--threads")
+    check_count(threads, "threads")
     before = numba.get_num_threads()
     numba.set_num_threads(min(threads, numba.config.NUMBA_NUM_THREADS))
     try:
@@ -140,58 +144,90 @@ def _numba_threads(threads: int | None):
         numba.set_num_threads(before)
 
 
-def omm_settings(*, level=None, dynamic=None, max_level: int = 8, budget=None, format: str = "4state",
-                 promote: str = "nearest", seed: int = 0, special: bool = True, dedup: bool = True,
-                 source: str = "texture", encoder=None, effort=None, jobs: int = 1):
-    """The ``OmmSettings`` of ``bake_omms``' options, checked (an ``InputError`` names the
-    conflict)."""
+def omm_settings(*, level: int | None = None, dynamic: float | None = None, max_level: int = 8,
+                 budget: int | str | None = None, format: str = "4state", promote: str = "nearest", seed: int = 0,
+                 special: bool = True, dedup: bool = True, source: str = "texture", encoder: str | None = None,
+                 effort: str | None = None, jobs: int = 1) -> Any:
+    """The ``OmmSettings`` of ``bake_omms``' options, checked (an ``InputError`` naming the
+    parameter, or the conflict)."""
+    from . import omm_format
+    from .names import EFFORTS, PROMOTIONS
     from .omm.pipeline import OmmSettings
+    from .omm_format import MAX_LEVEL
 
+    if level is not None:
+        level = checks.integer(level, "level", 0, MAX_LEVEL)
+    if dynamic is not None:
+        dynamic = checks.number(dynamic, "dynamic", 0, open_lo=True)
+    max_level = checks.integer(max_level, "max_level", 0, MAX_LEVEL)
+    checks.choice(format, "format", tuple(omm_format.FORMAT_NAMES))
+    checks.choice(promote, "promote", PROMOTIONS)
+    seed = checks.integer(seed, "seed", 0, 2 ** 63 - 1)
+    special, dedup = checks.boolean(special, "special"), checks.boolean(dedup, "dedup")
+    source = checks.text(source, "source")
+    checks.choice(encoder, "encoder", ("paper", "best"), optional=True)
+    checks.choice(effort, "effort", tuple(EFFORTS), optional=True)
+    jobs = checks.integer(jobs, "jobs", 1)
     if sum(x is not None for x in (level, dynamic, budget)) > 1:
-        raise InputError("--level, --dynamic and --budget exclude each other")
-    if budget is not None and not isinstance(budget, int):
-        from .budget import parse_bytes
+        raise InputError("level, dynamic and budget exclude each other", param=("level", "dynamic", "budget"))
+    if budget is not None:
+        if isinstance(budget, str):
+            from .budget import parse_bytes
 
-        budget = parse_bytes(budget)
-    check_count(jobs)
+            budget = parse_bytes(budget)
+        elif isinstance(budget, bool) or not isinstance(budget, int):
+            raise InputTypeError(f"budget must be bytes as an int or text such as '1.2MiB', got {budget!r}",
+                                 param="budget")
+        budget = checks.integer(budget, "budget", 1)
     if level is not None and source != "texture":
-        raise InputError("--from fixes the level to log2 N of the square map; drop --level")
+        raise InputError("source fixes the level to log2 N of the square map; drop level", param=("source", "level"))
     return OmmSettings(format=format, level=4 if level is None else level, dynamic_scale=dynamic,
                        max_level=max_level, promotion=promote, special=special, dedup=dedup, source=source,
                        encoder=encoder, effort=effort, seed=seed, jobs=jobs, budget=budget)
 
 
-def omm_input_spec(inputs, rules=None, channel=None) -> dict:
+def omm_input_spec(inputs: str | os.PathLike[str] | Sequence[str | os.PathLike[str]], rules: Any = None,
+                   channel: str | int | None = None) -> dict:
     """The input of ``bake_omms`` as omm.json records it (a scene, or a texture and UVs), checked."""
     from .alpha_test import MaterialRules
     from .omm import inputs as omm_inputs
     from .scene.files import SCENE_RULE, is_scene_file  # the scene loader's rule (omaps trace's too)
 
+    inputs = checks.paths(inputs, "inputs")
+    if rules is not None and not isinstance(rules, MaterialRules):
+        raise InputTypeError(f"rules must be an omaps.MaterialRules, got {type(rules).__name__}", param="rules")
+    if channel is not None and (isinstance(channel, bool) or not isinstance(channel, (str, int))):
+        raise InputTypeError(f"channel must be a band name or index, got {type(channel).__name__}", param="channel")
     rules = MaterialRules() if rules is None else rules
     if len(inputs) == 1 and is_scene_file(inputs[0]):
-        if channel:
-            raise InputError("--channel applies to a texture input, not to glTF")
+        if channel is not None:
+            raise InputError("channel applies to a texture input, not to glTF", param="channel")
         return omm_inputs.gltf_spec(inputs[0], rules)
     if len(inputs) == 2:
         return omm_inputs.texture_spec(inputs[0], inputs[1], rules.cutoff, rules.filter, rules.wrap, channel)
     if len(inputs) == 1:
         raise InputError(f"a texture needs a .npy array of UV triangles (T, 3, 2) after it; {SCENE_RULE}", inputs[0])
-    raise InputError("give SCENE.gltf|.glb, or TEXTURE UVS.npy (and -o DIR), or --verify DIR")
+    raise InputError(f"inputs must be [scene.gltf|.glb] or [texture, uvs.npy], got {len(inputs)} paths",
+                     param="inputs")
 
 
-def bake_omms(inputs, output=None, *, level: int | None = None, dynamic: float | None = None, max_level: int = 8,
-              budget=None, weights: str = "area", size=(512, 512), format: str = "4state", promote: str = "nearest",
-              seed: int = 0, special: bool = True, dedup: bool = True, source: str = "texture", encoder=None,
-              effort=None, jobs: int = 1, threads: int | None = None, rules=None, channel=None,
-              progress=None, root=None, allow_outside: bool = False, build_stage=None) -> OmmBake:
+def bake_omms(inputs: str | os.PathLike[str] | Sequence[str | os.PathLike[str]],
+              output: str | os.PathLike[str] | None = None, *, level: int | None = None,
+              dynamic: float | None = None, max_level: int = 8, budget: int | str | None = None,
+              weights: str = "area", size: int | tuple[int, int] | str = (512, 512), format: str = "4state",
+              promote: str = "nearest", seed: int = 0, special: bool = True, dedup: bool = True,
+              source: str = "texture", encoder: str | None = None, effort: str | None = None, jobs: int = 1,
+              threads: int | None = None, rules: Any = None, channel: str | int | None = None,
+              progress: Any = None, root: str | os.PathLike[str] | None = None, allow_outside: bool = False,
+              build_stage: Callable[..., Any] | None = None) -> OmmBake:
     """Bake standard opacity micromaps (VK_EXT_opacity_micromap / DXR 1.2) and write them.
 
     Parameters
     ----------
-    inputs : list of str
-        ``[SCENE.gltf|.glb]`` (every alpha-tested primitive), or ``[TEXTURE, UVS.npy]`` (UV
+    inputs : str or os.PathLike, or a list of them
+        ``SCENE.gltf|.glb`` (every alpha-tested primitive), or ``[TEXTURE, UVS.npy]`` (UV
         triangles, shape (T, 3, 2)).
-    output : str, optional
+    output : str or os.PathLike, optional
         A folder (omm_data.bin, omm_triangles.bin, omm_index.bin, omm_usage.json, omm.json;
         replaced whole if empty or an earlier omm folder), or for a scene a .glb / .gltf file with
         the EXT_mesh_opacity_micromap extension. Checked before any work, written all or nothing.
@@ -206,6 +242,8 @@ def bake_omms(inputs, output=None, *, level: int | None = None, dynamic: float |
     weights : {"area", "view"}
         The budget's weights: world area times instances, or where the candidate hits of a trace
         of the scene's default camera (for an image of ``size``) fall.
+    size : int, (int, int) or str
+        ``weights="view"``: the image size W, (W, H) or "WxH", sides 1..8192.
     format : {"4state", "2state"}
     promote : {"nearest", "opaque", "transparent", "hashed"}
         What unknown regions become (in 4state: unknown-opaque or unknown-transparent).
@@ -245,8 +283,10 @@ def bake_omms(inputs, output=None, *, level: int | None = None, dynamic: float |
 
     Raises
     ------
+    InputTypeError
+        An argument of the wrong type (its message names the parameter).
     InputError
-        For bad inputs or options; nothing is written then.
+        For bad inputs or values (naming the file or the parameter); nothing is written then.
     """
     from .atomic import Outputs
     from .omm import files, gltf_io
@@ -254,7 +294,23 @@ def bake_omms(inputs, output=None, *, level: int | None = None, dynamic: float |
     from .omm import inputs as omm_inputs
     from .omm.pipeline import build
 
-    inputs = [os.fspath(p) for p in inputs]
+    inputs = checks.paths(inputs, "inputs")
+    if output is not None:
+        output = checks.path(output, "output")
+    checks.choice(weights, "weights", ("area", "view"))
+    w, h = checks.size(size, "size")
+    check_count(threads, "threads")
+    if root is not None:
+        root = checks.path(root, "root")
+    allow_outside = checks.boolean(allow_outside, "allow_outside")
+    if not (progress is None or isinstance(progress, bool) or hasattr(progress, "stage")):
+        raise InputTypeError(f"progress must be True, False or an object with stage and advance, got "
+                             f"{type(progress).__name__}", param="progress")
+    if build_stage is not None and not callable(build_stage):
+        raise InputTypeError(f"build_stage must be callable, got {type(build_stage).__name__}", param="build_stage")
+    settings = omm_settings(level=level, dynamic=dynamic, max_level=max_level, budget=budget, format=format,
+                            promote=promote, seed=seed, special=special, dedup=dedup, source=source,
+                            encoder=encoder, effort=effort, jobs=jobs)
     spec = omm_input_spec(inputs, rules, channel)
     outputs = Outputs(inputs=inputs)
     to_gltf = output is not None and gltf_io.is_gltf(output)
@@ -264,23 +320,17 @@ def bake_omms(inputs, output=None, *, level: int | None = None, dynamic: float |
         outputs.file(output, "-o")
     else:
         outputs.folder(output, "-o", omm_format.SUMMARY_FILE, (".glb", ".gltf"))  # before the work, not after
-    settings = omm_settings(level=level, dynamic=dynamic, max_level=max_level, budget=budget, format=format,
-                            promote=promote, seed=seed, special=special, dedup=dedup, source=source,
-                            encoder=encoder, effort=effort, jobs=jobs)
     t0 = time.perf_counter()
     view, view_info = None, None
     if weights == "view":  # where the view's hits fall: the same counting trace as trace's budget
         if settings.budget is None or spec["kind"] != "gltf":
-            raise InputError("--weights view needs --budget and a glTF scene")
+            raise InputError("weights 'view' needs a budget and a glTF scene", param=("weights", "budget"))
         from .alpha_test import MaterialRules
         from .scene import load_scene
         from .trace.view import scene_view_samples
 
-        w, h = (size, size) if isinstance(size, int) else size
         vw, hits, cam = scene_view_samples(load_scene(spec["path"], root=root, allow_outside=allow_outside), rules or MaterialRules(), w, h)
         view, view_info = (vw, hits), {"weights": "view", "size": [w, h], "camera": cam, "hits": int(len(hits))}
-    elif weights != "area":
-        raise InputError(f"unknown weights {weights!r} (choose from area, view)")
     geoms, skipped, warned = omm_inputs.load_geometries(spec, view, root=root, allow_outside=allow_outside)
     bar = TqdmProgress() if progress is True else (progress or None)
     with _numba_threads(threads):
@@ -319,25 +369,47 @@ class OmmCheck:
         return not self.problems
 
 
-def verify_omms(path, *, root=None, allow_outside: bool = False) -> OmmCheck:
+def verify_omms(path: str | os.PathLike[str], *, root: str | os.PathLike[str] | None = None,
+                allow_outside: bool = False) -> OmmCheck:
     """Check an OMM folder or a baked glTF file: layout (the extension's rules), usage counts,
     pair blocks, and a re-bake from its recorded inputs (a glTF file: its own textures).
-    ``root``, ``allow_outside``: the URI policy of the scenes read (``omaps.load_scene``)."""
+    ``root``, ``allow_outside``: the URI policy of the scenes read (``omaps.load_scene``).
+
+    Raises
+    ------
+    InputTypeError, InputError
+        A wrong argument (naming the parameter), or a file that cannot be read (naming it).
+    """
     from .omm.verify import verify
+
+    path = checks.path(path, "path")
+    root = None if root is None else checks.path(root, "root")
+    allow_outside = checks.boolean(allow_outside, "allow_outside")
 
     return OmmCheck(*verify(path, root=root, allow_outside=allow_outside))
 
 
-def expand_omms(baked, output, *, root=None, allow_outside: bool = False) -> OmmBake:
+def expand_omms(baked: str | os.PathLike[str], output: str | os.PathLike[str], *,
+                root: str | os.PathLike[str] | None = None, allow_outside: bool = False) -> OmmBake:
     """A baked .glb / .gltf holding the deck's pair blocks (OMAPS_pair_opacity_maps), decoded
     and expanded into standard micromaps (EXT_mesh_opacity_micromap only), written to
-    ``output`` (.glb / .gltf). ``root``, ``allow_outside``: the URI policy (``omaps.load_scene``)."""
+    ``output`` (.glb / .gltf). ``root``, ``allow_outside``: the URI policy (``omaps.load_scene``).
+
+    Raises
+    ------
+    InputTypeError, InputError
+        A wrong argument (naming the parameter), or a file that cannot be read (naming it).
+    """
     from .atomic import Outputs
     from .omm import gltf_io
     from .omm.expand import expand_result
 
-    if not gltf_io.is_gltf(baked) or not gltf_io.is_gltf(output):
-        raise InputError("--expand takes one baked .glb/.gltf and -o OUT.glb|OUT.gltf")
+    baked, output = checks.path(baked, "baked"), checks.path(output, "output")
+    root = None if root is None else checks.path(root, "root")
+    allow_outside = checks.boolean(allow_outside, "allow_outside")
+    for name, value in (("baked", baked), ("output", output)):
+        if not gltf_io.is_gltf(value):
+            raise InputError(f"{name} must be a .glb or .gltf file, got {value!r}", param=name)
     outputs = Outputs(inputs=[baked])
     outputs.file(output, "-o")
     t0 = time.perf_counter()

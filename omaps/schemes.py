@@ -34,10 +34,12 @@ Example::
 from __future__ import annotations
 
 import re
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 from .codecs.registry import EFFORTS, Codec, budget_options, check_choice, codec_names, get_codec
-from .errors import InputError
+from . import checks
+from .errors import InputError, InputTypeError
 
 __all__ = ["Scheme", "get_scheme", "parse_schemes", "square_scheme_choices", "DEFAULT_SCHEMES", "KINDS", "EVAL_KINDS",
            "TRACE_KINDS", "VARIANTS"]
@@ -150,10 +152,13 @@ def _budget_options(name: str, text: str) -> tuple[str, ...]:
 
 
 def get_scheme(name: str, encoder: str | None = None, effort: str | None = None) -> Scheme:
-    """A scheme by name; ``encoder`` / ``effort`` apply to a codec named without a variant."""
+    """A scheme by name; ``encoder`` / ``effort`` apply to a codec named without a variant.
+
+    Raises an ``InputTypeError`` for a name that is no string, an ``InputError`` for an unknown
+    scheme (its message lists the known ones)."""
     check_choice("encoder", encoder, ("paper", "best"))
     check_choice("effort", effort, tuple(EFFORTS))
-    key = str(name).strip().lower()
+    key = checks.text(name, "name").strip().lower()
     if key in ("none", "texel"):
         return Scheme(key, key)
     if key == "omm":
@@ -196,17 +201,35 @@ def get_scheme(name: str, encoder: str | None = None, effort: str | None = None)
                      f"{square_scheme_choices()})")
 
 
-def parse_schemes(text, kinds=KINDS, encoder: str | None = None, effort: str | None = None,
-                  command: str = "this command") -> list[Scheme]:
-    """Schemes from a comma-separated string or a list of names, in order, without repeats;
-    InputError for a scheme whose kind the command cannot use."""
-    names = text.split(",") if isinstance(text, str) else list(text)
-    names = [n.strip() for n in names if n.strip()]
-    if not names:
-        raise InputError("no schemes given")
+def parse_schemes(text: str | Scheme | Sequence[str | Scheme], kinds: Sequence[str] = KINDS,
+                  encoder: str | None = None, effort: str | None = None, command: str = "this command", *,
+                  param: str = "schemes") -> list[Scheme]:
+    """Schemes from a comma-separated string, or a list / tuple of names (each may hold commas)
+    and ``Scheme`` objects, in order, without repeats.
+
+    Raises an ``InputTypeError`` naming ``param`` for anything else, an ``InputError`` for an
+    unknown scheme, for none at all, or for a scheme whose kind (``kinds``) ``command`` cannot use.
+    """
+    if isinstance(text, (str, Scheme)):
+        items: list[object] = [text]
+    elif isinstance(text, (list, tuple)):
+        items = list(text)
+    else:
+        raise InputTypeError(f"{param} must be comma-separated scheme names or a list of names or Schemes, got "
+                             f"{type(text).__name__}", param=param)
+    given: list[str | Scheme] = []
+    for item in items:
+        if isinstance(item, Scheme):
+            given.append(item)
+        elif isinstance(item, str):
+            given.extend(n.strip() for n in item.split(",") if n.strip())
+        else:
+            raise InputTypeError(f"{param} must hold scheme names or Schemes, got {type(item).__name__}", param=param)
+    if not given:
+        raise InputError(f"no schemes given in {param}", param=param)
     out, seen = [], set()
-    for n in names:
-        s = get_scheme(n, encoder, effort)
+    for n in given:
+        s = n if isinstance(n, Scheme) else get_scheme(n, encoder, effort)
         if s.kind not in kinds:
             raise InputError(f"scheme {s.name!r} ({s.kind}) is not available in {command}")
         if s.name not in seen:

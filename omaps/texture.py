@@ -12,7 +12,8 @@ from dataclasses import dataclass
 import numpy as np
 from PIL import Image, UnidentifiedImageError
 
-from .errors import InputError
+from . import checks
+from .errors import InputError, InputTypeError
 
 # Extensions we look for when a folder is given (Pillow decides what it can actually read).
 IMAGE_EXTENSIONS = (".png", ".tga", ".jpg", ".jpeg", ".bmp", ".dds", ".tif", ".tiff", ".webp", ".gif")
@@ -26,7 +27,12 @@ class AlphaTexture:
     values: np.ndarray  # uint8 / uint16 raw values, or float64 in [0, 1] (maxval 1); shape (H, W)
     maxval: int
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
+        checks.text(self.name, "name")
+        if not isinstance(self.values, np.ndarray) or self.values.dtype.kind not in "uif":
+            raise InputTypeError(f"values must be a numpy array of integers or floats, got "
+                                 f"{checks._show(self.values)}", self.name, param="values")
+        checks.number(self.maxval, "maxval", 0, open_lo=True)
         v = self.values
         if v.ndim != 2:
             raise InputError(f"alpha must be a 2-D array, got shape {v.shape}", self.name)
@@ -50,7 +56,7 @@ class AlphaTexture:
         return self.values.astype(np.float64) * 255.0 / self.maxval
 
     @classmethod
-    def from_array(cls, name: str, alpha, channel=None) -> "AlphaTexture":
+    def from_array(cls, name: str, alpha: object, channel: str | int | None = None) -> "AlphaTexture":
         """Wrap an array as a numpy user holds a texture.
 
         Parameters
@@ -69,6 +75,11 @@ class AlphaTexture:
         -------
         AlphaTexture
 
+        Raises
+        ------
+        InputTypeError, InputError
+            ``alpha`` not a numeric array, a bad shape or range, or no such ``channel``.
+
         Examples
         --------
         >>> import numpy as np
@@ -78,14 +89,16 @@ class AlphaTexture:
         >>> AlphaTexture.from_array("half", np.full((1, 1), 0.5)).alpha8.tolist()
         [[127.5]]
         """
-        a = np.asarray(alpha)
+        checks.text(name, "name")
+        _check_channel(channel)
+        a = checks.array(alpha, "alpha", kinds="biuf")
         if a.ndim == 3:
             bands = ARRAY_BANDS.get(a.shape[2])
             bands = None if bands is None else tuple(bands)
             if bands is None:
                 raise InputError(f"an (H, W, C) texture needs 1 to 4 channels, got shape {a.shape}", name)
             what = f"an {''.join(bands)} array"
-            a = a[:, :, _coverage_band(bands, channel, what, f"{what} has no alpha channel; pick one with channel=", name)]
+            a = a[:, :, _coverage_band(bands, channel, what, f"{what} has no alpha channel; give {{channel}} to pick one", name)]
         elif channel is not None and a.ndim == 2:
             try:
                 _channel_index(channel, ("L",))
@@ -118,7 +131,7 @@ class AlphaTexture:
 ARRAY_BANDS = {1: "L", 2: "LA", 3: "RGB", 4: "RGBA"}
 
 
-def as_texture(texture, name: str = "array", channel=None) -> AlphaTexture:
+def as_texture(texture: object, name: str = "array", channel: str | int | None = None) -> AlphaTexture:
     """What every function taking a texture accepts: an ``AlphaTexture`` (returned as it is), a
     numpy array (``AlphaTexture.from_array``) or an image file's path (``load_alpha``).
 
@@ -128,20 +141,30 @@ def as_texture(texture, name: str = "array", channel=None) -> AlphaTexture:
     >>> as_texture(np.array([[0, 65535]], np.uint16)).maxval
     65535
     """
+    checks.text(name, "name")
+    _check_channel(channel)
     if isinstance(texture, AlphaTexture):
         if channel is not None:
-            raise InputError("channel= applies to arrays and files, not to an AlphaTexture", texture.name)
+            raise InputError("channel applies to arrays and files, not to an AlphaTexture", texture.name,
+                             param="channel")
         return texture
     if isinstance(texture, (str, os.PathLike)):
         return load_alpha(texture, channel)
     if isinstance(texture, (np.ndarray, list, tuple)):
         return AlphaTexture.from_array(name, texture, channel)
-    raise InputError(f"a texture is an AlphaTexture, a numpy array or an image path, not {type(texture).__name__}",
-                     name)
+    raise InputTypeError(f"texture must be an AlphaTexture, a numpy array or an image path, got "
+                         f"{checks._show(texture)}", param="texture")
+
+
+def _check_channel(channel: object) -> None:
+    """A ``channel`` argument: None, a band name or an index."""
+    if channel is not None and (isinstance(channel, bool) or not isinstance(channel, (str, int, np.integer))):
+        raise InputTypeError(f"channel must be a band name (R, G, B, A, L) or an index, got {checks._show(channel)}",
+                             param="channel")
 
 
 def _channel_index(channel, bands) -> int:
-    if isinstance(channel, int) or (isinstance(channel, str) and channel.isdigit()):
+    if isinstance(channel, (int, np.integer)) or (isinstance(channel, str) and channel.isdigit()):
         idx = int(channel)
     else:
         key = str(channel).upper()
@@ -166,7 +189,7 @@ def _coverage_band(bands, channel, what: str, no_alpha: str, name: str) -> int:
         return bands.index("A")
     if len(bands) == 1:
         return 0  # a single-channel mask
-    raise InputError(no_alpha, name)
+    raise InputError(no_alpha, name, param="channel")
 
 
 def _mode_maxval(im: Image.Image) -> int:
@@ -175,13 +198,18 @@ def _mode_maxval(im: Image.Image) -> int:
     return 255
 
 
-def load_alpha(path, channel=None, name: str = "array") -> AlphaTexture:
+def load_alpha(path: str | os.PathLike[str] | np.ndarray, channel: str | int | None = None,
+               name: str = "array") -> AlphaTexture:
     """Load the coverage of an image file, or wrap an array (``AlphaTexture.from_array``: (H, W)
     or (H, W, C) greyscale, LA, RGB or RGBA; uint8, uint16, bool or float in [0, 1]).
 
     ``channel=None``: the alpha of RGBA / LA / PA, of P with a tRNS transparency, or the single
     channel of a greyscale mask (L, I;16). An image with colour but no alpha is an error.
     ``channel``: a band name (R, G, B, A, L) or index, to read coverage from another channel.
+    ``name``: an array's name in messages and results (a file's is its base name).
+
+    Raises an ``InputTypeError`` for an argument of the wrong type, an ``InputError`` naming the
+    file for one that does not exist or cannot be read, or has no such channel.
 
     Example::
 
@@ -190,9 +218,10 @@ def load_alpha(path, channel=None, name: str = "array") -> AlphaTexture:
         >>> load_alpha(np.array([[0, 255]], np.uint8)).alpha8.tolist()
         [[0.0, 255.0]]
     """
+    _check_channel(channel)
     if isinstance(path, np.ndarray):
         return AlphaTexture.from_array(name, path, channel)
-    path = os.fspath(path)
+    path = checks.path(path, "path")
     name = os.path.basename(path)
     if not os.path.exists(path):
         raise InputError("no such file", path)
@@ -213,7 +242,7 @@ def open_image(source, path) -> Image.Image:
     except UnidentifiedImageError:
         raise InputError("not an image Pillow can read", path) from None
     except Exception as exc:  # the third-party decode boundary, message kept
-        raise InputError(f"cannot decode image ({type(exc).__name__}: {exc})", path) from None
+        raise InputError(f"cannot decode image ({exc or type(exc).__name__})", path) from None
     try:
         im.load()
         if im.width <= 0 or im.height <= 0:
@@ -224,7 +253,7 @@ def open_image(source, path) -> Image.Image:
         raise
     except Exception as exc:  # as above: truncated data, bad chunks, unsupported variants
         im.close()
-        raise InputError(f"cannot decode image ({type(exc).__name__}: {exc})", path) from None
+        raise InputError(f"cannot decode image ({exc or type(exc).__name__})", path) from None
 
 
 def _alpha_from_image(im: Image.Image, name: str, path: str, channel) -> AlphaTexture:
@@ -235,7 +264,8 @@ def _alpha_from_image(im: Image.Image, name: str, path: str, channel) -> AlphaTe
         im = im.convert("RGBA")  # applies tRNS / palette alpha
         mode = "RGBA"
         if channel is None and np.all(np.asarray(im.getchannel("A")) == 255):
-            raise InputError("palette image without transparency (tRNS); use --channel", path)
+            raise InputError("palette image without transparency (tRNS); give {channel} to pick a band", path,
+                             param="channel")
     elif mode == "1":
         im = im.convert("L")
         mode = "L"
@@ -248,7 +278,7 @@ def _alpha_from_image(im: Image.Image, name: str, path: str, channel) -> AlphaTe
     maxval = _mode_maxval(im)
     bands = im.getbands()
     idx = _coverage_band(bands, channel, f"a {im.mode} image (bands {''.join(bands)})",
-                         f"image has no alpha channel (mode {im.mode}); pick one with --channel", path)
+                         f"image has no alpha channel (mode {im.mode}); give {{channel}} to pick one", path)
     if len(bands) == 1:
         arr = np.asarray(im)
     else:

@@ -73,7 +73,7 @@ def test_blend_is_alpha_tested_at_the_given_cutoff(tmp_path):
     assert (t.rule, t.threshold, t.inclusive) == ("test", pytest.approx(0.1 * 255), True)
     assert s.alpha_test(0, MaterialRules(blend_cutoff=0.1)).threshold == pytest.approx(0.1 * 255)
     assert not s.alpha_tested(MaterialRules(blend="skip"))[0]
-    with pytest.raises(InputError, match="blend-cutoff must be in"):
+    with pytest.raises(InputError, match="blend_cutoff must be in"):
         MaterialRules(blend_cutoff=2)
 
 

@@ -51,6 +51,7 @@ import math
 import numba
 import numpy as np
 from numba import njit, prange
+from numpy.typing import ArrayLike
 
 from ..bilinear import POLY_MAX, point_flag
 from ..birdcurve import CHILD_VERTS, MAX_LEVEL, bary_point, child
@@ -70,21 +71,24 @@ __all__ = ["bake_micromaps", "bake_micromap_rows", "dynamic_levels", "micro_star
 GROW_TEXEL = 2.0 ** -20
 
 
-def check_level(level, name="level") -> int:
-    """A subdivision level of the APIs (0 .. 12)."""
-    if not isinstance(level, (int, np.integer)) or not 0 <= level <= MAX_LEVEL:
-        raise InputError(f"{name} must be an integer from 0 to {MAX_LEVEL}, got {level!r}")
-    return int(level)
+def check_level(level: object, name: str = "level") -> int:
+    """A subdivision level of the APIs (0 .. 12); an ``InputError`` naming ``name`` otherwise."""
+    from ..checks import integer
+
+    return integer(level, name, 0, MAX_LEVEL)
 
 
-def check_uv_triangles(tris_uv) -> np.ndarray:
+def check_uv_triangles(tris_uv: object, param: str = "tris_uv") -> np.ndarray:
     """UV triangles as float64 (T, 3, 2); NaN or infinite coordinates are an error."""
-    t = np.asarray(tris_uv, dtype=np.float64)
+    from ..checks import array
+
+    t = array(tris_uv, param, kinds="iuf", dtype=np.float64)
     if t.ndim != 3 or t.shape[1:] != (3, 2):
-        raise InputError(f"UV triangles must have shape (T, 3, 2), got {t.shape}")
+        raise InputError(f"UV triangles must have shape (T, 3, 2), got {t.shape}", param=param)
     if not np.isfinite(t).all():  # (one reduction; the per-triangle one only to name the first: 30 ms a million)
         finite = np.isfinite(t).all(axis=(1, 2))
-        raise InputError(f"UV triangle {int(np.flatnonzero(~finite)[0])} has NaN or infinite coordinates")
+        raise InputError(f"UV triangle {int(np.flatnonzero(~finite)[0])} has NaN or infinite coordinates",
+                         param=param)
     return t
 
 
@@ -383,13 +387,19 @@ def _bake_all(sat, grid, tris, order, levels, starts, w, h, offset, grow, out, n
     return empty
 
 
-def micro_starts(levels: np.ndarray) -> np.ndarray:
-    """Start of each triangle's micro-triangles in a flat array, plus the total at the end."""
-    sizes = np.left_shift(np.int64(1), 2 * np.asarray(levels, dtype=np.int64))
+def micro_starts(levels: ArrayLike) -> np.ndarray:
+    """Start of each triangle's micro-triangles in a flat array, plus the total at the end
+    (``levels``: one level 0..12 per triangle)."""
+    from ..checks import array
+
+    lv = array(levels, "levels", ndim=(0, 1), kinds="iu", dtype=np.int64).reshape(-1)
+    if lv.size and (lv.min() < 0 or lv.max() > MAX_LEVEL):
+        raise InputError(f"levels must be integers from 0 to {MAX_LEVEL}", param="levels")
+    sizes = np.left_shift(np.int64(1), 2 * lv)
     return np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64)
 
 
-def bake_micromaps(grid: FootprintGrid, tris_uv, levels, grow: float = 0.0,
+def bake_micromaps(grid: FootprintGrid, tris_uv: ArrayLike, levels: int | ArrayLike, grow: float = 0.0,
                    sat: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Micromaps of UV triangles (T, 3, 2), triangle t at ``levels[t]`` (or one level for all).
 
@@ -399,11 +409,21 @@ def bake_micromaps(grid: FootprintGrid, tris_uv, levels, grow: float = 0.0,
 
     Returns (states, starts): states uint8 (0 T, 1 O, 2 C), triangle t's micro-triangles in
     bird-curve order at ``states[starts[t]:starts[t+1]]``. With no growth, a micro-triangle of
-    no area is an error (it reads nothing); with growth it reads the texels it touches."""
+    no area is an error (it reads nothing); with growth it reads the texels it touches.
+    ``grid`` may be an ``AlphaTest`` (its ``grid()``). A wrong argument raises an
+    ``InputTypeError`` / ``InputError`` naming it."""
+    from .. import checks
+
+    grid = checks.grid(grid)
+    grow = checks.number(grow, "grow", 0)
     t = np.ascontiguousarray(check_uv_triangles(tris_uv))
-    lv = np.broadcast_to(np.asarray(levels), (len(t),))
+    lv_in = checks.array(levels, "levels", ndim=(0, 1), kinds="iu")
+    if lv_in.ndim == 1 and len(lv_in) != len(t):
+        raise InputError(f"levels must be one level or one per triangle ({len(t)}), got {len(lv_in)}",
+                         param="levels")
+    lv = np.broadcast_to(lv_in, (len(t),))
     for x in np.unique(lv):
-        check_level(int(x))
+        check_level(x, "levels")
     lv = np.array(lv, dtype=np.int64)  # writable (a broadcast view is not): one compiled specialisation
     starts = micro_starts(lv)
     out = np.empty(int(starts[-1]), dtype=np.uint8)
@@ -418,7 +438,7 @@ def bake_micromaps(grid: FootprintGrid, tris_uv, levels, grow: float = 0.0,
     return out, starts
 
 
-def bake_micromap_rows(grid: FootprintGrid, tris_uv, level: int, grow: float = 0.0) -> np.ndarray:
+def bake_micromap_rows(grid: FootprintGrid, tris_uv: ArrayLike, level: int, grow: float = 0.0) -> np.ndarray:
     """``bake_micromaps`` at one level: states (T, 4**level)."""
     level = check_level(level)
     s, _ = bake_micromaps(grid, tris_uv, level, grow)
@@ -442,14 +462,16 @@ def texel_areas(tris_uv, width: int, height: int) -> np.ndarray:
     return out
 
 
-def dynamic_levels(tris_uv, width: int, height: int, scale: float, max_level: int) -> np.ndarray:
+def dynamic_levels(tris_uv: ArrayLike, width: int, height: int, scale: float, max_level: int) -> np.ndarray:
     """Per-triangle level from its texel area: the smallest level whose micro-triangles cover at
     most ``scale``² texels each (as the OMM SDKs' dynamic subdivision scale), capped at
     ``max_level``."""
-    if not (np.isfinite(scale) and scale > 0):
-        raise InputError(f"dynamic scale must be a positive number of texels, got {scale!r}")
-    max_level = check_level(max_level, "max level")
-    area = texel_areas(tris_uv, width, height)
+    from .. import checks
+
+    scale = checks.number(scale, "scale", 0, open_lo=True)
+    max_level = check_level(max_level, "max_level")
+    width, height = checks.integer(width, "width", 1), checks.integer(height, "height", 1)
+    area = texel_areas(check_uv_triangles(tris_uv), width, height)
     ratio = np.maximum(area / (scale * scale), 1.0)
     lv = np.ceil(np.log(ratio) / np.log(4.0) - 1e-12)
     return np.clip(lv, 0, max_level).astype(np.int64)

@@ -19,35 +19,52 @@ Example::
 
 from __future__ import annotations
 
-import numpy as np
+from typing import TYPE_CHECKING
 
-from .. import pair, states
+import numpy as np
+from numpy.typing import ArrayLike
+
+from .. import checks, pair, states
+from ..errors import InputError
 from ..sampling import FootprintGrid
 from .micromap import bake_micromap_rows
 from .square import bake_pair_squares
 
+if TYPE_CHECKING:
+    from ..alpha_test import AlphaTest
+
 __all__ = ["bake_square", "bake_pair_triangles", "known_fraction", "texel_limit"]
 
 
-def bake_square(grid: FootprintGrid, n: int) -> np.ndarray:
-    """The N x N square map of the corpus pair: states (N, N), ``map[j, i]``."""
-    return bake_pair_squares(grid, pair.PAIR_CORNER_UV, np.ones(1, bool), n)[0]
+def bake_square(grid: FootprintGrid | AlphaTest, n: int) -> np.ndarray:
+    """The N x N square map of the corpus pair: states (N, N), ``map[j, i]``.
+
+    ``grid``: a footprint grid (``AlphaTest.grid()``) or the ``AlphaTest`` itself; ``n`` a power
+    of two from 1 to 128. A wrong argument raises an ``InputTypeError`` / ``InputError`` naming it."""
+    return bake_pair_squares(checks.grid(grid), pair.PAIR_CORNER_UV, np.ones(1, bool), n)[0]
 
 
-def bake_pair_triangles(grid: FootprintGrid, level: int) -> np.ndarray:
-    """The per-triangle micromaps of the corpus pair: states (2, 4**level), A then B."""
-    return bake_micromap_rows(grid, pair.PAIR, level)
+def bake_pair_triangles(grid: FootprintGrid | AlphaTest, level: int) -> np.ndarray:
+    """The per-triangle micromaps of the corpus pair: states (2, 4**level), A then B.
+
+    ``grid``: a footprint grid or an ``AlphaTest``; ``level`` 0..12."""
+    return bake_micromap_rows(checks.grid(grid), pair.PAIR, level)
 
 
-def known_fraction(map_states: np.ndarray) -> float:
-    """Fraction of equal-area regions that skip the any-hit shader."""
-    m = np.asarray(map_states)
+def known_fraction(map_states: ArrayLike) -> float:
+    """Fraction of equal-area regions that skip the any-hit shader (``map_states``: any
+    non-empty array of states 0 T, 1 O, 2 C)."""
+    m = checks.array(map_states, "map_states", kinds="iu")
+    if m.size == 0:
+        raise InputError("map_states must not be empty", param="map_states")
     return float(np.count_nonzero(m != states.C)) / m.size
 
 
-def texel_limit(grid: FootprintGrid) -> float:
+def texel_limit(grid: FootprintGrid | AlphaTest) -> float:
     """Area fraction of the texture whose footprint cell is known: the savings of a map whose
     regions are the cells (under ``nearest`` the most any map can save; under exact bilinear a
-    finer map can save more, knowing the parts of a mixed cell on either side of the cut-off)."""
+    finer map can save more, knowing the parts of a mixed cell on either side of the cut-off).
+    ``grid``: a footprint grid or an ``AlphaTest``."""
+    grid = checks.grid(grid)
     f, w = grid.cells_within_texture()
     return float((w * (f != states.FLAG_C)).sum() / w.sum())

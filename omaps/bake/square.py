@@ -30,6 +30,7 @@ from __future__ import annotations
 import numba
 import numpy as np
 from numba import njit, prange
+from numpy.typing import ArrayLike
 
 from .. import raster, states
 from ..bilinear import POLY_MAX, point_flag
@@ -45,11 +46,15 @@ __all__ = ["bake_pair_squares", "bake_pair_flags", "or_downsample", "flags_to_st
 MAX_SQUARE = 128
 
 
-def check_square_size(n) -> int:
-    """A square map size: a power of two from 1 to MAX_SQUARE."""
-    if not isinstance(n, (int, np.integer)) or n < 1 or n > MAX_SQUARE or (n & (n - 1)):
-        raise InputError(f"square map size must be a power of two from 1 to {MAX_SQUARE}, got {n!r}")
-    return int(n)
+def check_square_size(n: object, param: str = "n") -> int:
+    """A square map size: a power of two from 1 to MAX_SQUARE (an ``InputError`` naming ``param``)."""
+    from ..checks import integer
+
+    v = integer(n, param)
+    if v < 1 or v > MAX_SQUARE or (v & (v - 1)):
+        raise InputError(f"{param} must be a square map size, a power of two from 1 to {MAX_SQUARE}, got {v}",
+                         param=param)
+    return v
 
 
 @njit(cache=True)
@@ -270,11 +275,25 @@ def _bake_pairs(sat, grid, off, w, h, uv, has_b, n, grow, out, n_workers):
                             buf_b, st_i, st_j, st_n)
 
 
-def bake_pair_flags(grid: FootprintGrid, corner_uv, has_b, n: int, grow: float = 0.0) -> np.ndarray:
-    """Footprint flags (P, n, n) uint8 of the pairs' square maps (0: a cell no hit reaches)."""
+def bake_pair_flags(grid: FootprintGrid, corner_uv: ArrayLike, has_b: ArrayLike, n: int,
+                    grow: float = 0.0) -> np.ndarray:
+    """Footprint flags (P, n, n) uint8 of the pairs' square maps (0: a cell no hit reaches).
+    ``grid`` may be an ``AlphaTest`` (its ``grid()``); an argument of the wrong type or shape
+    raises an ``InputTypeError`` / ``InputError`` naming it."""
+    from .. import checks
+
+    grid = checks.grid(grid)
     n = check_square_size(n)
-    uv = np.ascontiguousarray(corner_uv, dtype=np.float64).reshape(-1, 6, 2)
-    hb = np.array(np.broadcast_to(np.asarray(has_b, dtype=np.bool_), (len(uv),)))  # writable: one specialisation
+    grow = checks.number(grow, "grow", 0)
+    uv = checks.array(corner_uv, "corner_uv", kinds="iuf", dtype=np.float64)
+    if uv.size % 12 or (uv.ndim == 3 and uv.shape[1:] != (6, 2)):
+        raise InputError(f"corner_uv must have shape (P, 6, 2), got {uv.shape}", param="corner_uv")
+    uv = np.ascontiguousarray(uv).reshape(-1, 6, 2)
+    hb_in = checks.array(has_b, "has_b", kinds="biu")
+    if hb_in.ndim > 1 or (hb_in.ndim == 1 and len(hb_in) != len(uv)):
+        raise InputError(f"has_b must be one bool or one per pair ({len(uv)}), got shape {hb_in.shape}",
+                         param="has_b")
+    hb = np.array(np.broadcast_to(hb_in.astype(np.bool_), (len(uv),)))  # writable: one specialisation
     if not np.isfinite(uv).all():
         raise InputError("pair corner UVs must be finite")
     out = np.zeros((len(uv), n, n), np.uint8)
@@ -284,7 +303,8 @@ def bake_pair_flags(grid: FootprintGrid, corner_uv, has_b, n: int, grow: float =
     return out
 
 
-def bake_pair_squares(grid: FootprintGrid, corner_uv, has_b, n: int, grow: float = 0.0) -> np.ndarray:
+def bake_pair_squares(grid: FootprintGrid, corner_uv: ArrayLike, has_b: ArrayLike, n: int,
+                      grow: float = 0.0) -> np.ndarray:
     """States (P, n, n) of the pairs' N x N square maps, ``map[j, i]`` (0 T, 1 O, 2 C).
 
     Parameters: ``corner_uv`` (P, 6, 2) as in the module docstring; ``has_b`` (P,) bool;
@@ -292,10 +312,23 @@ def bake_pair_squares(grid: FootprintGrid, corner_uv, has_b, n: int, grow: float
     return flags_to_states(bake_pair_flags(grid, corner_uv, has_b, n, grow))
 
 
+def or_downsample(flags: np.ndarray, factor: int) -> np.ndarray:
+    """Flags (P, n/factor, n/factor) of square maps from flags (P, n, n) uint8: a coarse cell
+    reads what its fine cells read (exact: a coarse cell's parts are the union of its fine cells'
+    parts). ``factor`` divides n."""
+    from .. import checks
+
+    f = checks.array(flags, "flags", ndim=3, kinds="u")
+    if f.shape[1] != f.shape[2]:
+        raise InputError(f"flags must have shape (P, n, n), got {f.shape}", param="flags")
+    factor = checks.integer(factor, "factor", 1, max(1, f.shape[1]))
+    if f.shape[1] % factor:
+        raise InputError(f"factor must divide the map size {f.shape[1]}, got {factor}", param="factor")
+    return _or_downsample(np.ascontiguousarray(f, dtype=np.uint8), factor)
+
+
 @njit(cache=True)
-def or_downsample(flags, factor):
-    """Flags of an n/factor square map from an n one: a coarse cell reads what its fine cells read
-    (exact: a coarse cell's parts are the union of its fine cells' parts)."""
+def _or_downsample(flags, factor):
     p, n, _ = flags.shape
     m = n // factor
     out = np.zeros((p, m, m), np.uint8)

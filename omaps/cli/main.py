@@ -7,6 +7,7 @@ import atexit
 import difflib
 import gc
 import os
+import re
 import sys
 import threading
 import warnings
@@ -76,13 +77,17 @@ def main(argv=None) -> int:
 
     argv = list(sys.argv[1:] if argv is None else argv)
     ahead = None
+    options: dict[str, str] = {}
     try:
         if argv[:1] == ["omm"]:
-            args = parser("omm").parse_args(argv)
+            p = parser("omm")
+            args = p.parse_args(argv)
         else:
             from .trace import bind_camera_value
 
-            args = parser().parse_args(bind_camera_value(argv))
+            p = parser()
+            args = p.parse_args(bind_camera_value(argv))
+        options = option_names(p, args)
         from ..workers import start_resource_tracker
 
         start_resource_tracker()  # before a progress bar's lock or a worker pool starts one that prints
@@ -95,7 +100,7 @@ def main(argv=None) -> int:
             warnings.simplefilter("always", UserWarning)
             return args.func(args)
     except InputError as exc:
-        print(f"omaps: error: {exc}", file=sys.stderr)
+        print(f"omaps: error: {error_text(exc, options)}", file=sys.stderr)
         return 2
     except OSError as exc:
         print(f"omaps: error: {exc.filename or ''}: {exc.strerror or exc}", file=sys.stderr)
@@ -105,6 +110,37 @@ def main(argv=None) -> int:
         return 130
     finally:
         precompile.stop_ahead(ahead)
+
+
+def option_names(p: argparse.ArgumentParser, args: argparse.Namespace) -> dict[str, str]:
+    """The options of the command line's (sub)command, by their destination (the library's
+    parameter name, as in ``--from`` for ``source``): ``{"level": "--level", ...}``."""
+    out: dict[str, str] = {}
+    current: argparse.ArgumentParser | None = p
+    while current is not None:
+        following = None
+        for action in current._actions:  # noqa: SLF001 - argparse keeps no public list
+            if isinstance(action, argparse._SubParsersAction):  # noqa: SLF001
+                following = action.choices.get(getattr(args, action.dest, None))
+            elif action.option_strings and action.dest not in ("help", "version"):
+                names = [o for o in action.option_strings if o.startswith("--")] or action.option_strings
+                out[action.dest] = max(names, key=len)
+        current = following
+    return out
+
+
+_CLASS_NAME = re.compile(r"\b[A-Z][A-Za-z0-9_]*(?:Error|Exception|Warning): ")
+
+
+def error_text(exc: InputError, options: dict[str, str]) -> str:
+    """An ``InputError`` as the command line prints it: ``path: problem``, the parameters it
+    names replaced by the command's options (``level must ...`` -> ``--level must ...``),
+    without exception class names or the path repeated inside the problem."""
+    names = {p: options[p.replace("-", "_")] for p in exc.params if p.replace("-", "_") in options}
+    problem = _CLASS_NAME.sub("", exc.named(names))
+    if exc.path:
+        problem = problem.replace(f"{exc.path}: ", "")
+    return f"{exc.path}: {problem}" if exc.path else problem
 
 
 _gc_paused = False  # ``run`` paused the cyclic garbage collector for the start-up

@@ -76,13 +76,15 @@ def cmd_omm(a) -> int:
     # the library is imported here, not at the top: parsing (and --help) loads no numba kernel
     from ..jobs import bake_omms
 
-    check_count(a.threads, "--threads")
+    check_count(a.threads, "threads")
     if a.verify:
         if a.inputs or a.output:
             raise InputError("--verify DIR takes no inputs and no -o")
         return _cmd_verify(a.verify, a)
     if a.expand:
         return _cmd_expand(a)
+    if len(a.inputs) > 2:
+        raise InputError(f"give SCENE.gltf|.glb, or TEXTURE UVS.npy, not {len(a.inputs)} inputs")
     if a.inputs and not a.output:
         from ..jobs import omm_input_spec
 

@@ -34,6 +34,7 @@ from dataclasses import dataclass, replace
 from typing import Callable
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from .. import states
 from ..birdcurve import MAX_LEVEL
@@ -46,8 +47,9 @@ __all__ = ["Codec", "CodecEntry", "PairMicromaps", "ENTRIES", "get_codec", "code
 
 def check_choice(kind: str, value, allowed) -> None:
     """InputError unless ``value`` (an encoder or effort name; None means the default) is known."""
-    if value is not None and value not in allowed:
-        raise InputError(f"unknown {kind} {value!r} (choose from {', '.join(allowed)})")
+    from ..checks import choice
+
+    choice(value, kind, allowed, optional=True)
 
 
 @dataclass(frozen=True)
@@ -85,19 +87,34 @@ class Codec:
             raise InputError(f"{self.name} has no encoder {encoder!r} (choose from {', '.join(self.encoders)})")
         return encoder or self.default_encoder, effort or self.default_effort
 
-    def encode(self, m, encoder: str | None = None, effort: str | None = None) -> bytes:
-        """One N x N map of states -> its block (``block_bytes`` bytes)."""
-        blocks, _ = self.encode_many(np.asarray(m)[None], encoder, effort)
+    def _maps(self, maps: object, param: str, one: bool) -> np.ndarray:
+        """``maps`` (N, N) when ``one``, else (P, N, N): states 0..2 as uint8 (integers, bools, or
+        floats of those values), checked; an InputError naming ``param`` and the shape given."""
+        from ..checks import array
+
+        n = self.map_size
+        a = array(maps, param, kinds="biuf")
+        want = (n, n) if one else (None, n, n)
+        bad_shape = a.ndim != len(want) or any(w is not None and w != s for w, s in zip(want, a.shape))
+        if bad_shape or (a.size and (a.min() < 0 or a.max() > states.C)) or (
+                a.dtype.kind == "f" and not np.array_equal(a, np.floor(a))):
+            what = f"a {n}x{n} map" if one else f"{n}x{n} maps (P, {n}, {n})"
+            raise InputError(f"{param}: {self.name} stores {what} of states 0..2, got shape {a.shape}"
+                             + ("" if bad_shape else " with other values"), param=param)
+        return np.ascontiguousarray(a, dtype=np.uint8)
+
+    def encode(self, m: ArrayLike, encoder: str | None = None, effort: str | None = None) -> bytes:
+        """One N x N map of states -> its block (``block_bytes`` bytes). A map of another shape or
+        other values raises an ``InputError`` naming ``m`` and the shape given."""
+        blocks, _ = self.encode_many(self._maps(m, "m", True)[None], encoder, effort)
         return blocks[0].tobytes()
 
-    def encode_many(self, maps, encoder: str | None = None, effort: str | None = None) -> tuple[np.ndarray, np.ndarray]:
+    def encode_many(self, maps: ArrayLike, encoder: str | None = None,
+                    effort: str | None = None) -> tuple[np.ndarray, np.ndarray]:
         """Maps (P, N, N) -> (blocks (P, block_bytes) uint8, decoded maps (P, N, N)). Every block is
         decoded again and must be conservative (only O->C or T->C): a RuntimeError otherwise."""
         enc, eff = self.options(encoder, effort)
-        m = np.ascontiguousarray(maps, dtype=np.uint8)
-        n = self.map_size
-        if m.ndim != 3 or m.shape[1:] != (n, n) or m.max(initial=0) > states.C:
-            raise InputError(f"{self.name} stores {n}x{n} maps of states 0..2, got shape {m.shape}")
+        m = self._maps(maps, "maps", False)
         if len(m) == 0:
             return np.zeros((0, self.block_bytes), np.uint8), m.copy()
         blocks = np.ascontiguousarray(self._encode_many(m, enc, eff), dtype=np.uint8)
@@ -106,22 +123,39 @@ class Codec:
             raise RuntimeError(f"internal error: the {self.name} encoder changed a known state")
         return blocks, decoded
 
-    def decode(self, data) -> np.ndarray:
+    def decode(self, data: bytes | bytearray | memoryview | np.ndarray) -> np.ndarray:
         """A block (bytes or uint8 array) -> its N x N map."""
-        b = bytes(data) if not isinstance(data, bytes) else data
+        b = _block_bytes(data, "data").tobytes()
         if len(b) != self.block_bytes:
-            raise InputError(f"a {self.name} block is {self.block_bytes} bytes, got {len(b)}")
+            raise InputError(f"a {self.name} block is {self.block_bytes} bytes, got {len(b)}", param="data")
         return self._decode(b)
 
-    def decode_many(self, blocks) -> np.ndarray:
+    def decode_many(self, blocks: bytes | bytearray | memoryview | np.ndarray) -> np.ndarray:
         """Blocks (P, block_bytes) (or their bytes, concatenated) -> their maps (P, N, N)."""
-        b = np.ascontiguousarray(blocks, dtype=np.uint8).reshape(-1, self.block_bytes)
+        raw = _block_bytes(blocks, "blocks")
+        if self.block_bytes == 0 or raw.size % self.block_bytes:
+            raise InputError(f"blocks: {self.name} blocks are {self.block_bytes} bytes each, got {raw.size} bytes",
+                             param="blocks")
+        b = raw.reshape(-1, self.block_bytes)
         if self._decode_many is not None:
             return self._decode_many(b)
         out = np.empty((len(b), self.map_size, self.map_size), np.uint8)
         for i, row in enumerate(b):
             out[i] = self._decode(row.tobytes())
         return out
+
+
+def _block_bytes(data: object, param: str) -> np.ndarray:
+    """Blocks given as bytes, bytearray, memoryview or a uint8 array, as a contiguous uint8 array."""
+    if isinstance(data, np.ndarray) and data.dtype == np.uint8:
+        return np.ascontiguousarray(data)
+    if isinstance(data, (bytes, bytearray, memoryview)):
+        return np.frombuffer(bytes(data), np.uint8).copy()  # (writable: the kernels' one array type)
+    from ..errors import InputTypeError
+
+    raise InputTypeError(f"{param} must be bytes or a uint8 array, got "
+                         f"{type(data).__name__}{'' if not hasattr(data, 'dtype') else ' of ' + str(data.dtype)}",
+                         param=param)
 
 
 def _raw(n: int) -> Codec:
@@ -299,9 +333,11 @@ COMPILE_FAMILIES = {
 
 def entry(name: str) -> CodecEntry:
     """A codec's declaration by name (``sqN`` or a compressed codec); InputError if unknown."""
-    key = str(name).strip().lower()
+    from ..checks import text
+
+    key = text(name, "name").strip().lower()
     if key not in _BY_NAME:
-        raise InputError(f"unknown codec {name!r} (choose from sqN, {', '.join(_COMPRESSED)})")
+        raise InputError(f"unknown codec {name!r} (choose from sqN, {', '.join(_COMPRESSED)})", param="name")
     return _BY_NAME[key]
 
 
@@ -331,13 +367,15 @@ def codec_names() -> list[str]:
 def get_codec(name: str) -> Codec:
     """A codec by name: ``sqN`` (raw 2-bit map), ``vq2``, ``vq4``, ``vq4x64``, ``vq4-synth`` or
     ``wavelet3``."""
-    key = str(name).strip().lower()
+    from ..checks import text
+
+    key = text(name, "name").strip().lower()
     if key not in _CACHE:
         m = re.fullmatch(r"sq(\d+)", key)
         if m and key not in _BY_NAME:
             from ..bake.square import check_square_size
 
-            key = f"sq{check_square_size(int(m.group(1)))}"  # its own message for a size that is no codec
+            key = f"sq{check_square_size(int(m.group(1)), 'N of sqN')}"  # its own message for a size that is no codec
         e = entry(key)
         if e.variable:
             raise InputError(f"{e.name} stores a pair's micromaps as trees of variable bytes (a byte budget's "

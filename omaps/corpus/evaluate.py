@@ -24,7 +24,10 @@ from tqdm import tqdm
 from .. import states
 from ..alpha_test import StateRule
 from ..bake import bake_pair_triangles, bake_square, known_fraction, texel_limit
-from ..errors import InputError
+from .. import checks
+from ..codecs.registry import check_choice
+from ..errors import InputError, InputTypeError
+from ..names import EFFORTS, ENCODERS
 from ..schemes import EVAL_KINDS, Scheme, parse_schemes
 from ..texture import AlphaTexture, as_texture, load_alpha
 from ..workers import process_pool
@@ -41,6 +44,19 @@ class EvalConfig:
     channel: str | None = None
     encoder: str | None = None  # for codec schemes named without a variant
     effort: str | None = None
+
+    def __post_init__(self) -> None:
+        from ..names import FILTERS, WRAP_MODES
+
+        if not isinstance(self.rule, StateRule):
+            raise InputTypeError(f"rule must be an omaps.StateRule, got {type(self.rule).__name__}", param="rule")
+        checks.choice(self.filter, "filter", FILTERS)
+        checks.choice(self.wrap, "wrap", WRAP_MODES)
+        if self.channel is not None and (isinstance(self.channel, bool) or not isinstance(self.channel, (str, int))):
+            raise InputTypeError(f"channel must be a band name or an index, got {type(self.channel).__name__}",
+                                 param="channel")
+        check_choice("encoder", self.encoder, ENCODERS)
+        check_choice("effort", self.effort, tuple(EFFORTS))
 
     def test(self, texture: AlphaTexture):
         """The alpha test of a texture under these rules, filter and addressing."""
@@ -154,11 +170,12 @@ def evaluate_texture(texture, schemes, config: EvalConfig = EvalConfig(),
     >>> r.savings["succinct5"] == r.savings["csm5"] == r.savings["tri5"], r.bits
     (True, {'tri5': 4096, 'succinct5': 996, 'csm5': 2230})
     """
+    if not isinstance(config, EvalConfig):
+        raise InputTypeError(f"config must be an omaps.EvalConfig, got {type(config).__name__}", param="config")
+    keep_maps = checks.boolean(keep_maps, "keep_maps")
+    schemes = parse_schemes(schemes, EVAL_KINDS, config.encoder, config.effort, "evaluate_texture")
     if not isinstance(texture, AlphaTexture):  # (an AlphaTexture was read with its channel already)
         texture = as_texture(texture, channel=config.channel)
-    if isinstance(schemes, str) or any(isinstance(s, str) for s in schemes):
-        names = schemes if isinstance(schemes, str) else [s if isinstance(s, str) else s.name for s in schemes]
-        schemes = parse_schemes(names, EVAL_KINDS, config.encoder, config.effort, "evaluate_texture")
     grid = config.grid(texture)
     savings, bits, kept = {}, {}, {}
     for s in schemes:
@@ -178,6 +195,8 @@ def _work(item, scheme_names, config, keep_maps, min_size):
     path = None
     if isinstance(item, AlphaTexture):
         tex = item
+    elif isinstance(item, tuple):  # (name, array): read through the channel here
+        tex = AlphaTexture.from_array(item[0], item[1], config.channel)
     else:
         path = item
         tex = load_alpha(item, config.channel)
@@ -197,7 +216,8 @@ def warm_up(schemes: list[Scheme], config: EvalConfig) -> None:
 
 def evaluate_many(items, schemes: list[Scheme], config: EvalConfig = EvalConfig(), jobs: int | None = None,
                   keep_maps: bool = False, min_size: int = 0, progress: bool = True, unreadable: list | None = None):
-    """Evaluate textures (AlphaTexture objects or paths). Returns (results, skipped_small):
+    """Evaluate textures (AlphaTexture objects, paths, or (name, array) pairs). Returns
+    (results, skipped_small):
     results in input order; paths of textures below ``min_size`` in ``skipped_small``.
 
     A texture that cannot be read raises its ``InputError``, unless ``unreadable`` is a list:
@@ -238,6 +258,8 @@ def evaluate_many(items, schemes: list[Scheme], config: EvalConfig = EvalConfig(
 
 
 def _label(item) -> str:
+    if isinstance(item, tuple):
+        return str(item[0])
     return item.name if isinstance(item, AlphaTexture) else str(item)
 
 

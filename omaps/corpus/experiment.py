@@ -6,16 +6,51 @@ from __future__ import annotations
 
 import os
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any, Union
 
-from ..errors import InputError, check_count
+from .. import checks
+from ..errors import InputError, InputTypeError, check_count
 from ..schemes import DEFAULT_SCHEMES, EVAL_KINDS, parse_schemes
 from ..text import format_table, plural
 from .evaluate import EvalConfig, evaluate_many, mean_results
 
+if TYPE_CHECKING:
+    import numpy as np
+
+    from ..schemes import Scheme
+    from ..texture import AlphaTexture
+
+    PathOrArray = Union[str, os.PathLike[str], np.ndarray, AlphaTexture]
+    PathsOrArrays = Union[PathOrArray, Sequence[PathOrArray]]
+
 __all__ = ["evaluate_corpus", "CorpusResult", "PER_TEXTURE_ROWS"]
 
 PER_TEXTURE_ROWS = 20  # per-texture rows printed by default when there are at most this many textures
+
+
+def _inputs(paths: object) -> list[Any]:
+    """``evaluate_corpus``' inputs as a list: paths (str), and arrays as ``AlphaTexture`` objects
+    named ``array N`` by their place in the list (the texture's channel is read later)."""
+    import numpy as np
+
+    from ..texture import AlphaTexture
+
+    single = isinstance(paths, (str, os.PathLike, np.ndarray, AlphaTexture))
+    if not single and not isinstance(paths, (list, tuple)):
+        raise InputTypeError(f"paths must be a path, an array or an AlphaTexture, or a list of them, got "
+                             f"{type(paths).__name__}", param="paths")
+    out: list[Any] = []
+    for i, p in enumerate([paths] if single else list(paths)):  # type: ignore[call-overload]
+        name = "paths" if single else f"paths[{i}]"
+        if isinstance(p, AlphaTexture):
+            out.append(p)
+        elif isinstance(p, np.ndarray):
+            out.append(("array" if single else f"array {i}", p))
+        else:
+            out.append(checks.path(p, name))
+    return out
 
 
 @dataclass
@@ -97,17 +132,19 @@ class CorpusResult:
         write_show(folder, self.results, self.settings, progress)
 
 
-def evaluate_corpus(paths=None, schemes=None, *, config: EvalConfig | None = None, jobs: int | None = None,
-                    min_size: int = 0, keep_maps: bool = False, progress: bool = False) -> CorpusResult:
+def evaluate_corpus(paths: PathsOrArrays | None = None, schemes: str | Sequence[str | Scheme] | None = None, *,
+                    config: EvalConfig | None = None, jobs: int | None = None, min_size: int = 0,
+                    keep_maps: bool = False, progress: bool = False) -> CorpusResult:
     """Savings (the fraction of hits needing no any-hit shader) of each scheme on each texture
     mapped to the corpus pair.
 
     Parameters
     ----------
-    paths : list of str, optional
-        Image files and folders (searched recursively); None or empty: the embedded procedural
-        corpus.
-    schemes : str or list of Scheme, optional
+    paths : str, os.PathLike, numpy array or AlphaTexture, or a list of them, optional
+        Image files and folders (searched recursively), and textures as arrays (named ``array 0``,
+        ``array 1``, ... by their place in the list) or ``AlphaTexture`` objects; None or empty:
+        the embedded procedural corpus.
+    schemes : str, or list of str or Scheme, optional
         Comma-separated names (``sqN``, ``triL``, ``texel``, a codec); default
         ``omaps.schemes.DEFAULT_SCHEMES``.
     config : EvalConfig, optional
@@ -127,9 +164,11 @@ def evaluate_corpus(paths=None, schemes=None, *, config: EvalConfig | None = Non
 
     Raises
     ------
+    InputTypeError
+        An argument of the wrong type (its message names the parameter).
     InputError
-        For bad options, a file named in ``paths`` that cannot be read, or no texture at all (its
-        ``unreadable`` attribute then lists the files that could not be read).
+        For bad values (naming the parameter), a file named in ``paths`` that cannot be read, or no
+        texture at all (its ``unreadable`` attribute then lists the files that could not be read).
 
     Examples
     --------
@@ -141,23 +180,32 @@ def evaluate_corpus(paths=None, schemes=None, *, config: EvalConfig | None = Non
     from ..texture import find_images
     from .procedural import default_corpus
 
+    if config is not None and not isinstance(config, EvalConfig):
+        raise InputTypeError(f"config must be an omaps.EvalConfig, got {type(config).__name__}", param="config")
     config = EvalConfig() if config is None else config
-    if schemes is None or isinstance(schemes, str):
-        schemes = parse_schemes(schemes or ",".join(DEFAULT_SCHEMES), EVAL_KINDS, config.encoder, config.effort,
-                                "omaps eval")
+    schemes = parse_schemes(",".join(DEFAULT_SCHEMES) if schemes is None else schemes, EVAL_KINDS,
+                            config.encoder, config.effort, "evaluate_corpus", param="schemes")
     names = [s.name for s in schemes]
-    if min_size < 0:
-        raise InputError(f"--min-size must be >= 0, got {min_size}")
-    check_count(jobs)
-    paths = [os.fspath(p) for p in paths or []]
+    min_size = checks.integer(min_size, "min_size", 0)
+    jobs = check_count(jobs, "jobs")
+    keep_maps, progress = checks.boolean(keep_maps, "keep_maps"), checks.boolean(progress, "progress")
+    given = [] if paths is None else _inputs(paths)
+    paths = [p for p in given if isinstance(p, str)]
     skipped_other: list = []
     named: set = set()
-    if paths:
-        items, skipped_other = find_images(paths)
+    if given:
+        items: list = []
+        for p in given:
+            if isinstance(p, str):
+                found, other = find_images([p])
+                items += found
+                skipped_other += other
+            else:
+                items.append(p)
         if not items:
             raise InputError("no image files found", ", ".join(paths))
-        named = {p for p in paths if not os.path.isdir(p)}
-        source = plural(len(items), "file")
+        named = {p for p in paths if not os.path.isdir(p)} | {p[0] for p in given if isinstance(p, tuple)}
+        source = plural(len(items), "file" if all(isinstance(it, str) for it in items) else "texture")
     else:
         items = default_corpus()
         source = "the embedded procedural corpus"

@@ -106,24 +106,29 @@ class OmmSettings:
 
     def __post_init__(self):
         if self.format not in omm_format.FORMAT_NAMES:
-            raise InputError(f"unknown OMM format {self.format!r} (choose from {', '.join(omm_format.FORMAT_NAMES)})")
+            raise InputError(f"unknown OMM format {self.format!r} (choose from {', '.join(omm_format.FORMAT_NAMES)})",
+                             param="format")
         if self.promotion not in PROMOTIONS:
-            raise InputError(f"unknown promotion {self.promotion!r} (choose from {', '.join(PROMOTIONS)})")
+            raise InputError(f"unknown promotion {self.promotion!r} (choose from {', '.join(PROMOTIONS)})",
+                             param="promote")
         check_level(self.level)
-        check_level(self.max_level, "max level")
+        check_level(self.max_level, "max_level")
         if self.budget is not None and (self.dynamic_scale is not None or self.source != "texture"):
-            raise InputError("--budget chooses each triangle's level from the texture: drop --dynamic and --from")
+            raise InputError("budget chooses each triangle's level from the texture: drop dynamic and source",
+                             param=("budget", "dynamic", "source"))
         if self.budget is not None and self.format != "4state":
-            raise InputError("--budget chooses each micromap's format (2-state where it has no unknown region)")
+            raise InputError("budget chooses each micromap's format (2-state where it has no unknown region): "
+                             "drop format", param=("budget", "format"))
         if self.dynamic_scale is not None and self.source != "texture":
-            raise InputError("--dynamic needs the texture source: square pair maps fix the level to log2 N")
+            raise InputError("dynamic needs the texture source: square pair maps fix the level to log2 N",
+                             param="dynamic")
         if self.source != "texture":
             s = self.scheme
             if s.kind != "square":
                 from ..schemes import square_scheme_choices
 
-                raise InputError(f"--from takes texture or a square scheme ({square_scheme_choices()}), "
-                                 f"not {self.source!r}")
+                raise InputError(f"source takes texture or a square scheme ({square_scheme_choices()}), "
+                                 f"not {self.source!r}", param="source")
 
     @property
     def scheme(self):

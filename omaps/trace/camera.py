@@ -16,12 +16,16 @@ DEFAULT_LIGHT = (0.45, 0.8, 0.4)  # towards the sun: high enough to light the gr
 SHADOW_TNEAR = 1e-5  # shadow ray start, as a fraction of the scene's diagonal
 
 
-def light_direction(v=None) -> np.ndarray:
-    """A unit direction towards the light (default DEFAULT_LIGHT)."""
-    d = np.asarray(DEFAULT_LIGHT if v is None else v, np.float64)
+def light_direction(v: object = None) -> np.ndarray:
+    """A unit direction towards the light (default DEFAULT_LIGHT); an ``InputError`` (a
+    ``ValueError``) naming ``light`` for anything but three finite numbers, not all zero."""
+    from ..checks import array
+    from ..errors import InputError
+
+    d = array(DEFAULT_LIGHT if v is None else v, "light", shape=(3,), kinds="iuf", dtype=np.float64)
     n = np.linalg.norm(d)
-    if not n > 0:
-        raise ValueError("the light direction must not be the zero vector")
+    if not np.isfinite(d).all() or not n > 0:
+        raise InputError(f"light must be a finite direction, not the zero vector, got {d.tolist()}", param="light")
     return d / n
 
 
@@ -71,10 +75,10 @@ def gltf_camera(scene, index: int) -> Camera:
     cams = scene.cameras
     if not 0 <= index < len(cams):
         have = "no cameras" if not cams else f"{len(cams)} camera{'s' if len(cams) > 1 else ''} (0-{len(cams) - 1})"
-        raise InputError(f"--camera gltf:{index}: the file has {have}", scene.path)
+        raise InputError(f"camera gltf:{index}: the file has {have}", scene.path, param="camera")
     c = cams[index]
     if c.problem is not None:
-        raise InputError(f"--camera gltf:{index}: {c.problem}", scene.path)
+        raise InputError(f"camera gltf:{index}: {c.problem}", scene.path, param="camera")
     return Camera(np.array(c.eye, float), np.array(c.eye, float) + c.forward, math.degrees(c.yfov),
                   np.array(c.up, float))
 
@@ -198,9 +202,9 @@ def _floats(text: str, n: int, what: str) -> np.ndarray:
     try:
         v = np.array([float(x) for x in text.split(",")], dtype=np.float64)
     except ValueError:
-        raise InputError(f"{what}: expected {_numbers(n)}, got {text!r}") from None
+        raise InputError(f"{what}: expected {_numbers(n)}, got {text!r}", param=what.split()[0]) from None
     if v.shape != (n,) or not np.all(np.isfinite(v)):
-        raise InputError(f"{what}: expected {_numbers(n, 'finite ')}, got {text!r}")
+        raise InputError(f"{what}: expected {_numbers(n, 'finite ')}, got {text!r}", param=what.split()[0])
     return v
 
 
@@ -216,34 +220,39 @@ def parse_camera(text: str) -> Camera | int:
         >>> parse_camera("0,1,5:0,1,0:60").fov, parse_camera("gltf:2")
         (60.0, 2)
     """
+    if not isinstance(text, str):
+        from ..errors import InputTypeError
+
+        raise InputTypeError(f"camera must be text such as 'X,Y,Z:TX,TY,TZ:FOV' or 'gltf:N', got "
+                             f"{type(text).__name__}", param="camera")
     parts = text.split(":")
     if parts[0].strip().lower() == "gltf":
         if len(parts) == 1:
             return 0
         if len(parts) == 2 and parts[1].strip().isdigit():
             return int(parts[1])
-        raise InputError(f"--camera gltf[:N] takes a camera index N >= 0, got {text!r}")
+        raise InputError(f"camera gltf[:N] takes a camera index N >= 0, got {text!r}", param="camera")
     if len(parts) not in (3, 4):
-        raise InputError(f"--camera must be X,Y,Z:TX,TY,TZ:FOV[:UX,UY,UZ] or gltf[:N], got {text!r}")
-    eye = _floats(parts[0], 3, "--camera eye")
-    target = _floats(parts[1], 3, "--camera target")
-    fov = _floats(parts[2], 1, "--camera fov")[0]
-    up = _floats(parts[3], 3, "--camera up") if len(parts) == 4 else None
+        raise InputError(f"camera must be X,Y,Z:TX,TY,TZ:FOV[:UX,UY,UZ] or gltf[:N], got {text!r}", param="camera")
+    eye = _floats(parts[0], 3, "camera eye")
+    target = _floats(parts[1], 3, "camera target")
+    fov = _floats(parts[2], 1, "camera fov")[0]
+    up = _floats(parts[3], 3, "camera up") if len(parts) == 4 else None
     if not 0 < fov < 180:
-        raise InputError(f"--camera field of view must be in (0, 180) degrees, got {fov}")
+        raise InputError(f"camera field of view must be in (0, 180) degrees, got {fov}", param="camera")
     if np.allclose(eye, target):
-        raise InputError("--camera eye and target must differ")
+        raise InputError("camera eye and target must differ", param="camera")
     cam = Camera(eye, target, float(fov), up)
     try:
         cam.basis(1, 1)
     except ValueError:
-        raise InputError("--camera up must not be zero or parallel to the view direction") from None
+        raise InputError("camera up must not be zero or parallel to the view direction", param="camera") from None
     return cam
 
 
 def parse_light(text: str | None) -> np.ndarray:
     """The unit direction towards the light from ``X,Y,Z`` text (None: ``DEFAULT_LIGHT``)."""
     try:
-        return light_direction(None if text is None else _floats(text, 3, "--light"))
+        return light_direction(None if text is None else _floats(text, 3, "light"))
     except ValueError:
-        raise InputError("--light must not be the zero vector") from None
+        raise InputError("light must not be the zero vector", param="light") from None

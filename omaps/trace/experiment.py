@@ -11,30 +11,34 @@ traversal traced again for ``TIMING_ROUNDS`` rounds, each the best of its rounds
 from __future__ import annotations
 
 import json
+import os
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from ..alpha_test import MaterialRules
-from ..errors import InputError, check_count
+from .. import checks
+from ..errors import InputError, InputTypeError, check_count
 from ..names import BUDGET_WEIGHTS
-from ..schemes import TRACE_KINDS, parse_schemes
+from ..schemes import TRACE_KINDS, Scheme, parse_schemes
 from ..text import count, format_table, plural
 from .camera import Camera, choose_default_camera, gltf_camera, light_direction, parse_camera, parse_light
 from .timing import TIMING_ROUNDS, time_side_by_side
 from .two_state import parse_modes
+
+if TYPE_CHECKING:
+    from ..scene import Scene
 
 __all__ = ["DEFAULT_SCHEMES", "trace_scene", "TraceResult", "format_report", "format_memory"]
 
 DEFAULT_SCHEMES = "none,tri3,sq16,vq2,vq4,vq4x64"
 
 
-def _size(size) -> tuple[int, int]:
-    w, h = (size, size) if np.isscalar(size) else tuple(size)
-    if not (1 <= int(w) <= 8192 and 1 <= int(h) <= 8192) or int(w) != w or int(h) != h:
-        raise InputError(f"the image size must be whole numbers 1..8192, got {size!r}")
-    return int(w), int(h)
+def _size(size: object) -> tuple[int, int]:
+    return checks.size(size, "size")
 
 
 @dataclass
@@ -115,9 +119,12 @@ class TraceResult:
         frontier_plot(path, self.report)
 
 
-def trace_scene(scene, schemes=DEFAULT_SCHEMES, *, size=512, camera=None, shadows: bool = False, light=None,
-                weights: str = "area", two_state=None, rules: MaterialRules | None = None, jobs: int | None = None,
-                encoder: str | None = None, effort: str | None = None, progress: bool = False, root=None,
+def trace_scene(scene: str | os.PathLike[str] | Scene, schemes: str | Sequence[str | Scheme] = DEFAULT_SCHEMES, *,
+                size: int | tuple[int, int] | str = 512, camera: Camera | str | int | None = None,
+                shadows: bool = False, light: str | Sequence[float] | np.ndarray | None = None,
+                weights: str = "area", two_state: str | Sequence[str] | None = None,
+                rules: MaterialRules | None = None, jobs: int | None = None, encoder: str | None = None,
+                effort: str | None = None, progress: bool = False, root: str | os.PathLike[str] | None = None,
                 allow_outside: bool = False, memory: bool = False, cache_kib: float | None = None) -> TraceResult:
     """Trace primary (and shadow) rays through a scene with each scheme's maps read in the
     any-hit filter, and compare every scheme's visible result with ``none``'s.
@@ -126,11 +133,11 @@ def trace_scene(scene, schemes=DEFAULT_SCHEMES, *, size=512, camera=None, shadow
     ----------
     scene : str, path or Scene
         A .gltf / .glb file, or a scene from ``omaps.load_scene``.
-    schemes : str or list of Scheme
+    schemes : str, or list of str or Scheme
         Comma-separated scheme names (``none``, ``triL``, ``sqN``, a codec, ``omm``, ``file:CODEC``,
-        ``budget:BYTES``) or parsed schemes.
-    size : int or (int, int)
-        Image width and height (an int: a square image).
+        ``budget:BYTES``), or a list of names or parsed schemes.
+    size : int, (int, int) or str
+        Image width and height, 1..8192 (an int: a square image; or text "W" / "WxH").
     camera : Camera, str, int or None
         A ``Camera``, ``"X,Y,Z:TX,TY,TZ:FOV[:UX,UY,UZ]"``, ``"gltf[:N]"`` or N (the file's
         camera N); None: a view that frames the alpha-tested geometry.
@@ -169,8 +176,10 @@ def trace_scene(scene, schemes=DEFAULT_SCHEMES, *, size=512, camera=None, shadow
 
     Raises
     ------
+    InputTypeError
+        An argument of the wrong type (its message names the parameter).
     InputError
-        For a bad scene, scheme, camera, light or option.
+        For a bad scene (naming the file), scheme, camera, light or value (naming the parameter).
 
     Examples
     --------
@@ -186,26 +195,37 @@ def trace_scene(scene, schemes=DEFAULT_SCHEMES, *, size=512, camera=None, shadow
     from .metrics import summary
     from .prepare import prepare, trace_scheme
 
-    if isinstance(schemes, str):
-        schemes = parse_schemes(schemes, TRACE_KINDS, encoder, effort, "omaps trace")
+    from ..scene import Scene, load_scene
+
+    if not isinstance(scene, Scene):
+        scene = checks.path(scene, "scene")
+    schemes = parse_schemes(schemes, TRACE_KINDS, encoder, effort, "trace_scene", param="schemes")
     names = [s.name for s in schemes]
     modes = parse_modes(two_state)
     w, h = _size(size)
-    check_count(jobs)
+    jobs = check_count(jobs, "jobs")
+    shadows, memory = checks.boolean(shadows, "shadows"), checks.boolean(memory, "memory")
+    progress = checks.boolean(progress, "progress")
+    allow_outside = checks.boolean(allow_outside, "allow_outside")
+    root = None if root is None else checks.path(root, "root")
     if cache_kib is not None:
+        cache_kib = checks.number(cache_kib, "cache_kib", 1 / 16, 1 << 20)
         if not memory:
-            raise InputError("a cache size measures what a ray reads: it needs --memory")
-        if not (isinstance(cache_kib, (int, float, np.integer, np.floating)) and 1 / 16 <= cache_kib <= 1 << 20):
-            raise InputError(f"the cache size is a number of KiB from 1/16 to 1048576, got {cache_kib!r}")
-    if weights not in BUDGET_WEIGHTS:
-        raise InputError(f"unknown weights {weights!r} (choose from {', '.join(BUDGET_WEIGHTS)})")
+            raise InputError("a cache size (cache_kib) measures what a ray reads: it needs memory",
+                             param=("cache_kib", "memory"))
+    checks.choice(weights, "weights", BUDGET_WEIGHTS)
+    if rules is not None and not isinstance(rules, MaterialRules):
+        raise InputTypeError(f"rules must be an omaps.MaterialRules, got {type(rules).__name__}", param="rules")
     rules = MaterialRules() if rules is None else rules
     light = _light(light) if shadows else None
+    if camera is not None and not isinstance(camera, (Camera, str, int, np.integer)) or isinstance(camera, bool):
+        raise InputTypeError(f"camera must be a Camera, text or a glTF camera index, got {type(camera).__name__}",
+                             param="camera")
+    if isinstance(camera, (int, np.integer)) and camera < 0:
+        raise InputError(f"camera index must be >= 0, got {camera}", param="camera")
     cam_given = parse_camera(camera) if isinstance(camera, str) else camera
     t_start = time.perf_counter()
-    if not hasattr(scene, "meshes"):
-        from ..scene import load_scene
-
+    if not isinstance(scene, Scene):
         scene = load_scene(scene, root=root, allow_outside=allow_outside)
     if not any(len(scene.meshes[mi].merged["triangles"]) for mi, _ in scene.instances):
         raise InputError("the scene has no triangles", scene.path)
@@ -293,7 +313,7 @@ def _light(light) -> np.ndarray:
     try:
         return light_direction(light)
     except ValueError:
-        raise InputError("--light must not be the zero vector") from None
+        raise InputError("light must not be the zero vector", param="light") from None
 
 
 def _budget_maps(prep, budgets, weights: str, cam, w: int, h: int, jobs: int, progress: bool) -> None:

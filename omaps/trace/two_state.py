@@ -35,12 +35,17 @@ def parse_modes(text) -> list[str]:
     if isinstance(text, str):
         modes = (list(MODES) if text.strip().lower() == "all"
                  else [m.strip().lower() for m in text.split(",") if m.strip()])
+    elif isinstance(text, (list, tuple)) and all(isinstance(m, str) for m in text):
+        modes = [m.strip().lower() for m in text]
     else:
-        modes = [str(m).strip().lower() for m in text]
+        from ..errors import InputTypeError
+
+        raise InputTypeError(f"two_state must be comma-separated rules or a list of them, got {type(text).__name__}",
+                             param="two_state")
     bad = [m for m in modes if m not in MODES]
     if bad or not modes:
-        raise InputError(f"--two-state: unknown rule {bad[0] if bad else text!r} (choose from {', '.join(MODES)} "
-                         "or all)")
+        raise InputError(f"two_state: unknown rule {bad[0] if bad else text!r} (choose from {', '.join(MODES)} "
+                         "or all)", param="two_state")
     return list(dict.fromkeys(modes))
 
 
