@@ -4,7 +4,21 @@ Reading (``read_container``) gives the JSON document and the GLB binary chunk; e
 resource of the document (buffers, images) is then found and read through the returned
 ``Container`` under one policy (``AssetPolicy``), for the scene reader (``scene.gltf``) and the
 writer of baked scenes (``scene.micromaps``) alike. Writing (``write_glb``, ``write_json``) packs
-a document back into a file.
+a document back into a file; ``self_contained`` first makes the document name nothing outside
+the output (the one rule of every glTF file omaps writes; docs/guide/io.md "glTF outputs"):
+
+* a **.glb** output holds every buffer and image in its binary chunk: the buffers one after the
+  other (each at a multiple of 8 bytes, their buffer views re-based), image files and data URIs
+  as buffer views with a ``mimeType``; no buffer or image keeps a ``uri``;
+* a **.gltf** output keeps data URIs and buffer views as they are; every file it names (buffers,
+  images) is copied, byte for byte, into the folder ``OUT_files`` beside it (names made safe and
+  unique, a file named twice copied once) and named by ``OUT_files/NAME``; that folder is
+  replaced whole on a later write, only when it is empty or holds ``omaps-files.json`` (omaps
+  wrote it);
+* an image omaps cannot read (missing, unreadable, a URI omaps never fetches) is left out: the
+  images after it move up one, the textures that used it keep their place but name no image,
+  and a warning names it (reading treats such an image as absent: the maps of a material using
+  it are unknown, its texel white); a buffer omaps cannot read is an error, as on reading.
 
 The policy, for assets that may come from strangers (docs/guide/untrusted.md states the same):
 
@@ -32,17 +46,20 @@ from __future__ import annotations
 import base64
 import binascii
 import json
+import mimetypes
 import os
 import re
+import shutil
 import stat
 import struct
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from urllib.parse import quote, unquote
 
 from ..errors import InputError
 
 __all__ = ["DEFAULT_MAX_BYTES", "MAX_BYTES_ENV", "AssetPolicy", "Container", "Location", "read_container",
-           "max_asset_bytes", "write_glb", "write_json", "relocated_uri"]
+           "max_asset_bytes", "write_glb", "write_json", "SelfContained", "self_contained", "files_folder",
+           "FILES_MANIFEST"]
 
 DEFAULT_MAX_BYTES = 2 << 30  # 2 GiB: any one asset file, buffer, image file or data URI
 MAX_BYTES_ENV = "OMAPS_MAX_ASSET_BYTES"
@@ -284,15 +301,6 @@ def _glb_chunks(raw: bytes, path: str) -> tuple[bytes, bytes | None]:
     return js, bin_chunk
 
 
-def relocated_uri(uri, src_dir: str, out_dir: str):
-    """A file URI of an asset in ``src_dir`` as seen from ``out_dir``: relative, percent-encoded.
-    Data URIs and URIs omaps never reads (schemes, Windows paths) are kept as they are."""
-    if (not isinstance(uri, str) or uri.startswith("data:") or "://" in uri or _SCHEME.match(uri)
-            or _DRIVE.match(uri) or "\\" in uri or src_dir == out_dir):
-        return uri
-    return quote(os.path.relpath(os.path.join(src_dir, unquote(uri)), out_dir).replace(os.sep, "/"))
-
-
 def write_glb(f, doc: dict, body: bytes) -> None:
     """Write a GLB container to the binary file ``f``: the header, ``doc`` as the JSON chunk
     (compact, padded with spaces) and ``body`` as the BIN chunk (padded with zeros)."""
@@ -309,3 +317,270 @@ def write_json(f, doc: dict) -> None:
     """Write ``doc`` as .gltf JSON to the text file ``f`` (indented by one, UTF-8 kept)."""
     json.dump(doc, f, indent=1, ensure_ascii=False)
     f.write("\n")
+
+
+# ---- self-contained outputs ---------------------------------------------------------------------
+FILES_SUFFIX = "_files"
+FILES_MANIFEST = "omaps-files.json"
+ALIGN = 8  # every buffer and image placed in a GLB's binary chunk starts at a multiple of 8 bytes
+_UNSAFE = re.compile(r"[^A-Za-z0-9._-]+")
+_MAGIC = ((b"\x89PNG\r\n\x1a\n", "image/png"), (b"\xff\xd8\xff", "image/jpeg"),
+          (b"\xabKTX 20\xbb\r\n\x1a\n", "image/ktx2"), (b"GIF8", "image/gif"), (b"BM", "image/bmp"))
+
+
+def files_folder(out_path) -> str:
+    """The folder a .gltf output's files are copied into: ``OUT_files`` beside ``OUT.gltf``."""
+    out = os.path.abspath(os.fspath(out_path))
+    return os.path.join(os.path.dirname(out), os.path.splitext(os.path.basename(out))[0] + FILES_SUFFIX)
+
+
+def _mime(raw: bytes, declared, name: str) -> str:
+    """An embedded image's media type: the one the document (or its data URI) declares, else the
+    file's signature, else its name's suffix."""
+    if isinstance(declared, str) and declared:
+        return declared
+    for magic, kind in _MAGIC:
+        if raw.startswith(magic):
+            return kind
+    if raw[:4] == b"RIFF" and raw[8:12] == b"WEBP":
+        return "image/webp"
+    return mimetypes.guess_type(name)[0] or "application/octet-stream"
+
+
+def _safe_name(decoded: str) -> str:
+    """A file name made of letters, digits, '.', '_' and '-', never hidden nor empty."""
+    name = _UNSAFE.sub("_", os.path.basename(decoded)).lstrip(".")
+    return name or "file"
+
+
+@dataclass
+class SelfContained:
+    """What ``self_contained`` made of a document: for a .glb, ``body``, the binary chunk (buffer 0,
+    the only buffer); for a .gltf, ``copies`` (name in the files folder -> (source file, its URI
+    in the source)) and ``folder`` (where they go); ``warnings`` (the images left out)."""
+
+    body: bytes | None = None
+    copies: dict = field(default_factory=dict)
+    folder: str | None = None
+    warnings: list = field(default_factory=list)
+
+    def write_files(self, out_path) -> None:
+        """Copy the files beside the .gltf output ``out_path`` (called when it is written): into
+        a temporary folder, renamed over ``folder``; with nothing to copy, an earlier files folder
+        omaps wrote there is removed."""
+        from .. import atomic
+
+        if not self.copies:
+            if self.folder and os.path.isfile(os.path.join(self.folder, FILES_MANIFEST)):
+                shutil.rmtree(self.folder, ignore_errors=True)
+            return
+        tmp = atomic.make_temp_folder(os.path.dirname(self.folder))
+        try:
+            for name, (src, _) in self.copies.items():
+                shutil.copyfile(src, os.path.join(tmp, name))
+            manifest = {"gltf": os.path.basename(os.fspath(out_path)),
+                        "files": {name: uri for name, (_, uri) in self.copies.items()}}
+            with open(os.path.join(tmp, FILES_MANIFEST), "w", encoding="utf-8") as f:
+                json.dump(manifest, f, indent=1, ensure_ascii=False)
+                f.write("\n")
+            atomic.replace_folder(tmp, self.folder)
+        except BaseException:
+            atomic._remove(tmp)
+            raise
+
+
+def _items(doc: dict, key: str) -> list:
+    items = doc.get(key)
+    if items is None:
+        return []
+    if not isinstance(items, list):
+        raise InputError(f"{key} is {type(items).__name__}, not an array")
+    return items
+
+
+def self_contained(c: Container, out_path) -> SelfContained:
+    """Make ``c.doc`` (changed in place) name nothing outside the output ``out_path`` (.glb or
+    .gltf by its suffix), under ``c``'s policy (the module docstring states the rule). Nothing is
+    written here: a .gltf's files are copied by ``SelfContained.write_files``. An ``InputError``
+    naming the asset for a buffer that is refused, missing or shorter than its byteLength, an
+    image URI the policy refuses, or a files folder omaps may not replace."""
+    try:
+        return _self_contained(c, out_path)
+    except InputError as exc:
+        if exc.path is None:
+            raise InputError(exc.problem, c.path) from None
+        raise
+
+
+def _buffer_bytes(c: Container, i: int, b) -> bytes:
+    if not isinstance(b, dict):
+        raise InputError(f"buffer {i} is not an object")
+    length = b.get("byteLength")
+    if isinstance(length, bool) or not isinstance(length, int) or length < 0:
+        raise InputError(f"buffer {i}: byteLength is {length!r}, not a number of bytes")
+    uri = b.get("uri")
+    if uri is None:
+        if c.bin is None:
+            raise InputError(f"buffer {i} has no URI and the file has no binary chunk")
+        raw = c.bin
+    elif not isinstance(uri, str):
+        raise InputError(f"buffer {i}: uri is {uri!r}, not a string")
+    else:
+        raw = c.read(uri, f"buffer {i}", None if uri.startswith("data:") else length)
+        if raw is None:
+            raise InputError(f"buffer {i}: file {_show(uri)} is missing or unreadable")
+    if len(raw) < length:
+        raise InputError(f"buffer {i} holds {len(raw)} bytes, byteLength says {length}")
+    return bytes(raw[:length])
+
+
+def _image_bytes(c: Container, i: int, uri: str):
+    """An image's bytes, or (None, why) when omaps cannot read it (left out)."""
+    what = f"image {i}"
+    if uri.startswith("data:"):
+        try:
+            return c.data_uri(uri, what), None
+        except InputError as exc:
+            if "size cap" in exc.problem:
+                raise
+            return None, f"its data URI cannot be read ({exc.problem})"
+    raw = c.read(uri, what, unread_ok=True)
+    if isinstance(raw, Location):
+        return None, raw.problem.split(": ", 1)[-1]
+    if raw is None:
+        return None, f"file {_show(uri)} is missing or unreadable"
+    return raw, None
+
+
+def _leave_out_images(doc: dict, gone: dict, out: SelfContained, path: str) -> None:
+    """Remove the images ``gone`` (index -> why) from the document: later images move up, every
+    texture naming one of them (``source`` or an extension's ``source``) names none."""
+    images = doc["images"]
+    new = {}
+    for i in range(len(images)):
+        if i not in gone:
+            new[i] = len(new)
+    users: dict = {i: [] for i in gone}
+    for ti, t in enumerate(_items(doc, "textures")):
+        if not isinstance(t, dict):
+            continue
+        holders = [t]
+        if isinstance(t.get("extensions"), dict):  # EXT_texture_webp, KHR_texture_basisu, ...: their source
+            holders += [e for e in t["extensions"].values() if isinstance(e, dict)]
+        for h in holders:
+            s = h.get("source")
+            if isinstance(s, int) and not isinstance(s, bool):
+                if s in gone:
+                    del h["source"]
+                    users[s].append(ti)
+                elif s in new:
+                    h["source"] = new[s]
+    for i, why in sorted(gone.items()):
+        used = users[i]
+        named = (f"; texture{'s' if len(used) > 1 else ''} {', '.join(map(str, used))} now name"
+                 f"{'' if len(used) > 1 else 's'} no image" if used else "")
+        out.warnings.append(f"{path}: image {i}: {why}: it is left out of the output{named}")
+    images[:] = [im for i, im in enumerate(images) if i not in gone]
+    if not images:
+        del doc["images"]
+
+
+def _self_contained(c: Container, out_path) -> SelfContained:
+    doc = c.doc
+    glb = os.fspath(out_path).lower().endswith(".glb")
+    buffers, images = _items(doc, "buffers"), _items(doc, "images")
+    views = doc.setdefault("bufferViews", []) if glb else _items(doc, "bufferViews")
+    out = SelfContained()
+    # every image URI checked under the policy first: a refused one is an error, nothing written
+    for i, im in enumerate(images):
+        if not isinstance(im, dict):
+            raise InputError(f"image {i} is not an object")
+        uri = im.get("uri")
+        if uri is not None and not isinstance(uri, str):
+            raise InputError(f"image {i}: uri is {uri!r}, not a string")
+    gone: dict = {}
+    if glb:
+        body = bytearray()
+        shift = {}
+        for i, b in enumerate(buffers):
+            raw = _buffer_bytes(c, i, b)
+            body += b"\0" * ((-len(body)) % ALIGN)
+            shift[i] = len(body)
+            body += raw
+        for v in views:
+            if isinstance(v, dict) and isinstance(v.get("buffer"), int) and v["buffer"] in shift:
+                k = v["buffer"]
+                v["buffer"] = 0
+                if shift[k]:
+                    v["byteOffset"] = v.get("byteOffset", 0) + shift[k]
+        for i, im in enumerate(images):
+            uri = im.get("uri")
+            if uri is None:
+                continue  # a buffer view: re-based above
+            raw, why = _image_bytes(c, i, uri)
+            if raw is None:
+                gone[i] = why
+                continue
+            declared = uri[5:].split(",", 1)[0].split(";")[0] if uri.startswith("data:") else None
+            body += b"\0" * ((-len(body)) % ALIGN)
+            views.append({"buffer": 0, "byteOffset": len(body), "byteLength": len(raw)})
+            body += raw
+            im["bufferView"] = len(views) - 1
+            im["mimeType"] = _mime(raw, im.get("mimeType") or declared, unquote(uri))
+            del im["uri"]
+        buffers[:] = [{"byteLength": len(body)}]
+        doc["buffers"] = buffers
+        out.body = bytes(body)
+    else:
+        from .. import atomic
+
+        out.folder = files_folder(out_path)
+        rel = os.path.basename(out.folder)
+        by_source: dict = {}  # real path -> name
+
+        def copy(uri: str, real: str) -> str:
+            if real not in by_source:
+                name = _safe_name(unquote(uri))
+                stem, ext = os.path.splitext(name)
+                k = 1
+                while name in out.copies or name == FILES_MANIFEST:
+                    k += 1
+                    name = f"{stem}-{k}{ext}"
+                by_source[real] = name
+                out.copies[name] = (real, uri)
+            return quote(f"{rel}/{by_source[real]}")
+
+        for i, b in enumerate(buffers):
+            uri = b.get("uri") if isinstance(b, dict) else None
+            if uri is None or (isinstance(uri, str) and uri.startswith("data:")):
+                if isinstance(b, dict) and uri is None and c.bin is not None and i == 0:
+                    b["uri"] = "data:application/octet-stream;base64," + base64.b64encode(c.bin).decode()
+                continue
+            _buffer_bytes(c, i, b)  # refused, missing or short: an error, as on reading
+            b["uri"] = copy(uri, c.locate(uri, f"buffer {i}").path)
+        for i, im in enumerate(images):
+            uri = im.get("uri")
+            if uri is None:
+                continue
+            if uri.startswith("data:"):
+                raw, why = _image_bytes(c, i, uri)
+                if raw is None:
+                    gone[i] = why
+                continue
+            loc = c.locate(uri, f"image {i}", unread_ok=True)
+            if loc.kind == "unread":
+                gone[i] = loc.problem.split(": ", 1)[-1]
+            elif not os.path.isfile(loc.path) or not os.access(loc.path, os.R_OK):
+                gone[i] = f"file {_show(uri)} is missing or unreadable"
+            else:
+                size = os.path.getsize(loc.path)
+                if size > c.max_bytes:
+                    raise InputError(f"image {i}: file {_show(uri)} holds {size} bytes, over the size cap of "
+                                     f"{c.max_bytes} ({MAX_BYTES_ENV})")
+                im["uri"] = copy(uri, loc.path)
+        if out.copies:
+            atomic.check_folder(out.folder, FILES_MANIFEST, "the files folder of the output",
+                                inputs=[c.path] + [src for src, _ in out.copies.values()])
+    if gone:
+        _leave_out_images(doc, gone, out, c.path)
+    return out

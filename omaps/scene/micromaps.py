@@ -8,8 +8,10 @@ what the file stores; every rule of the extension is checked there and a broken 
 InputError naming the file. Writing (``write_gltf``) works on the file's JSON and binary chunk
 (``scene.container``, the one reader and writer of the glTF container, under the same URI policy
 as the scene reader) directly (no glTF library round trip), so every mesh, material, image,
-node, animation, camera and unknown extension or extra of the input is kept as it was: the new
-data is appended as buffer views (and accessors for the per-primitive indices). The OMM format's
+node, animation, camera and unknown extension or extra of the input is kept as it was, its
+buffers and images made part of the output (``container.self_contained``: in a .glb's binary
+chunk, or copied beside a .gltf): the new data is appended as buffer views (and accessors for the
+per-primitive indices). The OMM format's
 facts (record layout, level limit, sizes, record checks) are ``omm_format``'s.
 """
 
@@ -23,7 +25,7 @@ import numpy as np
 
 from ..errors import InputError
 from ..omm_format import MAX_LEVEL, PAIR_RECORD, TRIANGLE_RECORD, record_problem
-from .container import AssetPolicy, read_container, relocated_uri, write_glb, write_json
+from .container import AssetPolicy, read_container, self_contained, write_glb, write_json
 
 __all__ = ["EXT_OMM", "EXT_PAIRS", "MicromapArray", "PrimitiveMicromap", "PairMaps", "PrimitivePairs",
            "StoredMicromaps", "read_extensions", "write_gltf", "index_component_type", "encode_indices"]
@@ -300,56 +302,32 @@ def write_gltf(src, out_tmp, out_final, micromaps: list[dict], prim_omm: dict, p
                prim_pairs: dict, warn=None, *, root=None, allow_outside: bool = False,
                max_bytes: int | None = None) -> None:
     """Write ``src`` with the extensions to ``out_tmp`` (.glb or .gltf by ``out_final``'s suffix;
-    ``out_final`` is where it will be renamed to, for relative URIs). Earlier micromaps of either
-    extension in ``src`` are replaced.
+    ``out_final`` is where it will be renamed to). Earlier micromaps of either extension in
+    ``src`` are replaced. The output is self-contained (``container.self_contained``): a .glb
+    holds every buffer and image, a .gltf names only data URIs and its copies in
+    ``OUT_files/`` (copied last, beside ``out_final``).
 
     ``micromaps``: [{data: bytes, triangles: RECORD array, usage: [(count, level, format)], extras}];
     ``prim_omm``: (mesh, primitive) -> (micromap, signed int64 lookup values);
     ``pair_maps``: [{codec, blockBytes, mapSize, blocks: bytes, extras}];
     ``prim_pairs``: (mesh, primitive) -> (maps, PAIR_RECORD array). ``root``, ``allow_outside``,
     ``max_bytes``: the URI policy (``scene.container``) of ``src``, as the scene reader's: every
-    file URI the output keeps is checked under it, so the output names no file outside the root."""
+    file it names is read or copied under it."""
     c = read_container(src, AssetPolicy.of(root, allow_outside, max_bytes))
-    doc, bin_chunk = c.doc, c.bin
+    doc = c.doc
     glb_out = str(out_final).lower().endswith(".glb")
-    src_dir = os.path.dirname(os.path.abspath(src))
-    out_dir = os.path.dirname(os.path.abspath(out_final))
+    packed = self_contained(c, out_final)  # every buffer and image in the output or beside it
+    for w in packed.warnings:
+        if warn:
+            warn(w)
     buffers = doc.setdefault("buffers", [])
     views = doc.setdefault("bufferViews", [])
     accessors = doc.setdefault("accessors", [])
-    for key, items in (("buffer", buffers), ("image", doc.get("images") or [])):
-        for i, item in enumerate(items):
-            if isinstance(item, dict) and isinstance(item.get("uri"), str):
-                c.locate(item["uri"], f"{key} {i}", unread_ok=True)  # refused: an InputError, nothing written
-                item["uri"] = relocated_uri(item["uri"], src_dir, out_dir)
-    # where the new bytes go: a GLB's binary chunk (buffer 0, which also takes the binary chunk
-    # and every data-URI buffer of the input, so a GLB holds no data URI), or a new buffer
-    uses_bin = bin_chunk is not None and buffers and isinstance(buffers[0], dict) and "uri" not in buffers[0]
-    if glb_out:
-        body, new_index, shift, kept = bytearray(), {}, {}, [{"byteLength": 0}]
-        for i, b in enumerate(buffers):
-            uri = b.get("uri") if isinstance(b, dict) else None
-            if (i == 0 and uses_bin) or (isinstance(uri, str) and uri.startswith("data:")):
-                raw = bin_chunk if uri is None else c.data_uri(uri, f"buffer {i}")
-                body += b"\0" * ((-len(body)) % 8)
-                new_index[i], shift[i] = 0, len(body)
-                body += raw[:b.get("byteLength", len(raw))] if isinstance(b.get("byteLength"), int) else raw
-            else:
-                new_index[i], shift[i] = len(kept), 0
-                kept.append(b)
-        for v in views:
-            if isinstance(v, dict) and isinstance(v.get("buffer"), int) and v["buffer"] in new_index:
-                k = v["buffer"]
-                v["buffer"] = new_index[k]
-                if shift[k]:
-                    v["byteOffset"] = v.get("byteOffset", 0) + shift[k]
-        buffers[:] = kept
-        bin_chunk = bytes(body)
+    if glb_out:  # the new bytes go after the others in the binary chunk (buffer 0, the only one)
+        bin_chunk = packed.body
         app = _Appender(len(bin_chunk) + (-len(bin_chunk)) % 8)
         new_buffer = 0
-    else:
-        if uses_bin:  # .glb to .gltf: the binary chunk becomes a data URI
-            buffers[0]["uri"] = "data:application/octet-stream;base64," + base64.b64encode(bin_chunk).decode()
+    else:  # a new buffer (a data URI)
         app = _Appender(0)
         new_buffer = len(buffers)
         buffers.append({"byteLength": 0})
@@ -366,14 +344,6 @@ def write_gltf(src, out_tmp, out_final, micromaps: list[dict], prim_omm: dict, p
                     del p["extensions"]
     used = [e for e in doc.get("extensionsUsed") or [] if e not in (EXT_OMM, EXT_PAIRS)]
     first_view = len(views)
-    if glb_out:  # images stored as data URIs move into the binary chunk (a GLB holds no data URI)
-        for im in doc.get("images") or []:
-            uri = im.get("uri") if isinstance(im, dict) else None
-            if isinstance(uri, str) and uri.startswith("data:"):
-                head = uri[5:].split(",", 1)[0].split(";")[0]
-                im["bufferView"] = first_view + app.add(c.data_uri(uri, "image"))
-                im["mimeType"] = head or im.get("mimeType") or "image/png"
-                del im["uri"]
     if micromaps:
         items = []
         for mm in micromaps:
@@ -437,3 +407,4 @@ def write_gltf(src, out_tmp, out_final, micromaps: list[dict], prim_omm: dict, p
                                           + base64.b64encode(bytes(app.blob)).decode())
         with open(out_tmp, "w", encoding="utf-8") as f:
             write_json(f, doc)
+        packed.write_files(out_final)  # last: the files folder beside it, whole
