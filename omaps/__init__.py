@@ -41,6 +41,7 @@ _LAZY = {
     "get_codec": (".codecs", "get_codec"), "EvalConfig": (".corpus", "EvalConfig"),
     "default_corpus": (".corpus", "default_corpus"), "evaluate_many": (".corpus", "evaluate_many"),
     "evaluate_texture": (".corpus", "evaluate_texture"), "InputError": (".errors", "InputError"),
+    "InputTypeError": (".errors", "InputTypeError"),
     "footprint_grid": (".sampling", "footprint_grid"), "get_scheme": (".schemes", "get_scheme"),
     "parse_schemes": (".schemes", "parse_schemes"), "AlphaTexture": (".texture", "AlphaTexture"),
     "load_alpha": (".texture", "load_alpha"), "as_texture": (".texture", "as_texture"),
@@ -78,6 +79,6 @@ def load_scene(path, root=None, allow_outside=False, max_bytes=None):
 __all__ = [
     "evaluate_corpus", "trace_scene", "bake_omms", "verify_omms", "expand_omms", "run_batch", "states", "AlphaTest", "MaterialRules", "StateRule", "bake_micromaps", "bake_pair_squares", "bake_pair_triangles",
     "bake_square", "known_fraction", "texel_limit", "get_codec", "EvalConfig", "default_corpus", "evaluate_many",
-    "evaluate_texture", "InputError", "footprint_grid", "get_scheme", "parse_schemes", "AlphaTexture", "load_alpha",
+    "evaluate_texture", "InputError", "InputTypeError", "footprint_grid", "get_scheme", "parse_schemes", "AlphaTexture", "load_alpha",
     "as_texture", "load_scene",
 ]

@@ -85,8 +85,8 @@ class OmmBake:
         Time of the bake (inputs read, weights, bake, pack), not of the writing.
     """
 
-    result: object
-    settings: object
+    result: Any
+    settings: Any
     spec: dict
     output: str | None = None
     skipped: list = field(default_factory=list)
@@ -137,7 +137,7 @@ def _numba_threads(threads: int | None):
 
     check_count(threads, "threads")
     before = numba.get_num_threads()
-    numba.set_num_threads(min(threads, numba.config.NUMBA_NUM_THREADS))
+    numba.set_num_threads(min(threads, numba.config.NUMBA_NUM_THREADS))  # type: ignore[attr-defined]
     try:
         yield
     finally:

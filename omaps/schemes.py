@@ -72,9 +72,9 @@ class Scheme:
         one) with its variant."""
         if self.kind == "micromap":
             return "tri" if self.representation == "raw" else self.representation
-        if self.kind == "square" and not self.codec.compressed:
+        if self.kind == "square" and self.codec is not None and not self.codec.compressed:
             return "sq"
-        if self.kind == "square":
+        if self.kind == "square" and self.codec is not None:
             base = "vq4" if self.codec.name == "vq4x64" else self.codec.name
             return base + self.name[len(self.codec.name):]
         return self.name
@@ -87,17 +87,17 @@ class Scheme:
         """Storage bits per pair for a width x height texture; None for a hierarchical micromap,
         whose size depends on its states (``omaps.corpus.evaluate.scheme_bits``)."""
         if self.kind == "micromap":
-            if self.representation != "raw":
+            if self.representation != "raw" or self.level is None:
                 return None
             return 2 * 4 ** self.level * 2  # two triangles, 2 bits per micro-triangle
-        if self.kind == "square":
+        if self.kind == "square" and self.codec is not None:
             return self.codec.bits
         if self.kind == "texel":
             return 2 * width * height
         return 0
 
     def settings(self) -> dict:
-        out = {"kind": self.kind}
+        out: dict[str, object] = {"kind": self.kind}
         if self.level is not None:
             out["level"] = self.level
         if self.kind == "micromap" and self.representation != "raw":

@@ -93,10 +93,10 @@ class AlphaTexture:
         _check_channel(channel)
         a = checks.array(alpha, "alpha", kinds="biuf")
         if a.ndim == 3:
-            bands = ARRAY_BANDS.get(a.shape[2])
-            bands = None if bands is None else tuple(bands)
-            if bands is None:
+            band_text = ARRAY_BANDS.get(a.shape[2])
+            if band_text is None:
                 raise InputError(f"an (H, W, C) texture needs 1 to 4 channels, got shape {a.shape}", name)
+            bands = tuple(band_text)
             what = f"an {''.join(bands)} array"
             a = a[:, :, _coverage_band(bands, channel, what, f"{what} has no alpha channel; give {{channel}} to pick one", name)]
         elif channel is not None and a.ndim == 2:
@@ -300,7 +300,8 @@ def find_images(paths) -> tuple[list[str], list[str]]:
     Returns (images, skipped): files named explicitly are always returned (so a bad one is
     reported); files in folders without an image extension are listed in ``skipped``.
     """
-    images, skipped = [], []
+    images: list[str] = []
+    skipped: list[str] = []
     for p in paths:
         p = os.fspath(p)
         if os.path.isdir(p):

@@ -65,6 +65,5 @@ def texel_limit(grid: FootprintGrid | AlphaTest) -> float:
     regions are the cells (under ``nearest`` the most any map can save; under exact bilinear a
     finer map can save more, knowing the parts of a mixed cell on either side of the cut-off).
     ``grid``: a footprint grid or an ``AlphaTest``."""
-    grid = checks.grid(grid)
-    f, w = grid.cells_within_texture()
+    f, w = checks.grid(grid).cells_within_texture()
     return float((w * (f != states.FLAG_C)).sum() / w.sum())

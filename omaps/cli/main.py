@@ -121,7 +121,7 @@ def option_names(p: argparse.ArgumentParser, args: argparse.Namespace) -> dict[s
         following = None
         for action in current._actions:  # noqa: SLF001 - argparse keeps no public list
             if isinstance(action, argparse._SubParsersAction):  # noqa: SLF001
-                following = action.choices.get(getattr(args, action.dest, None))
+                following = action.choices.get(str(getattr(args, action.dest, "")))
             elif action.option_strings and action.dest not in ("help", "version"):
                 names = [o for o in action.option_strings if o.startswith("--")] or action.option_strings
                 out[action.dest] = max(names, key=len)

@@ -81,10 +81,12 @@ def scheme_map(scheme: Scheme, grid) -> np.ndarray:
         if scheme.representation == "raw":
             return m
         return _hierarchical(scheme, m)[0]  # lossless: the decoded maps equal the baked ones
-    m = bake_square(grid, scheme.codec.map_size)
-    if not scheme.codec.compressed:
+    codec = scheme.codec
+    assert codec is not None, scheme  # a square scheme has its codec
+    m = bake_square(grid, codec.map_size)
+    if not codec.compressed:
         return m
-    return scheme.codec.encode_many(m[None], scheme.encoder, scheme.effort)[1][0]
+    return codec.encode_many(m[None], scheme.encoder, scheme.effort)[1][0]
 
 
 def _hierarchical(scheme: Scheme, m: np.ndarray) -> tuple[np.ndarray, int]:

@@ -190,7 +190,7 @@ def evaluate_corpus(paths: PathsOrArrays | None = None, schemes: str | Sequence[
     jobs = check_count(jobs, "jobs")
     keep_maps, progress = checks.boolean(keep_maps, "keep_maps"), checks.boolean(progress, "progress")
     given = [] if paths is None else _inputs(paths)
-    paths = [p for p in given if isinstance(p, str)]
+    files: list[str] = [p for p in given if isinstance(p, str)]
     skipped_other: list = []
     named: set = set()
     if given:
@@ -203,8 +203,8 @@ def evaluate_corpus(paths: PathsOrArrays | None = None, schemes: str | Sequence[
             else:
                 items.append(p)
         if not items:
-            raise InputError("no image files found", ", ".join(paths))
-        named = {p for p in paths if not os.path.isdir(p)} | {p[0] for p in given if isinstance(p, tuple)}
+            raise InputError("no image files found", ", ".join(files))
+        named = {p for p in files if not os.path.isdir(p)} | {p[0] for p in given if isinstance(p, tuple)}
         source = plural(len(items), "file" if all(isinstance(it, str) for it in items) else "texture")
     else:
         items = default_corpus()
@@ -218,9 +218,9 @@ def evaluate_corpus(paths: PathsOrArrays | None = None, schemes: str | Sequence[
         if path in named:  # a file named on the command line is bad input
             raise InputError(problem, path)
     if not results:
-        exc = (InputError("no texture could be read", ", ".join(paths)) if unreadable
+        exc = (InputError("no texture could be read", ", ".join(files)) if unreadable
                else InputError(f"no texture is at least {min_size} px"))
-        exc.unreadable = unreadable
+        exc.unreadable = unreadable  # type: ignore[attr-defined]
         raise exc
     settings = {"source": source, **config.settings(), "min_size": min_size,
                 "schemes": {s.name: s.settings() for s in schemes}}

@@ -15,7 +15,7 @@ import os
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -65,9 +65,9 @@ class TraceResult:
     report: dict
     names: list
     runs: dict
-    prep: object
+    prep: Any
     camera: Camera
-    basis: np.ndarray = field(repr=False, default=None)
+    basis: np.ndarray = field(repr=False, default=None)  # type: ignore[arg-type]
     light: np.ndarray | None = None
     shadows: bool = False
 
@@ -223,13 +223,14 @@ def trace_scene(scene: str | os.PathLike[str] | Scene, schemes: str | Sequence[s
                              param="camera")
     if isinstance(camera, (int, np.integer)) and camera < 0:
         raise InputError(f"camera index must be >= 0, got {camera}", param="camera")
-    cam_given = parse_camera(camera) if isinstance(camera, str) else camera
+    cam_given: Camera | int | np.integer | None = parse_camera(camera) if isinstance(camera, str) else camera
     t_start = time.perf_counter()
     if not isinstance(scene, Scene):
         scene = load_scene(scene, root=root, allow_outside=allow_outside)
     if not any(len(scene.meshes[mi].merged["triangles"]) for mi, _ in scene.instances):
         raise InputError("the scene has no triangles", scene.path)
-    if isinstance(cam_given, (int, np.integer)) and not isinstance(cam_given, bool):
+    cam_info: dict[str, Any] | None
+    if isinstance(cam_given, (int, np.integer)):
         cam_info = {"chosen": f"gltf:{cam_given}"}
         cam_given = gltf_camera(scene, int(cam_given))  # before any work: a bad index is an input error
     else:
@@ -238,12 +239,12 @@ def trace_scene(scene: str | os.PathLike[str] | Scene, schemes: str | Sequence[s
     if "none" not in names:
         schemes = parse_schemes("none", TRACE_KINDS) + list(schemes)
     traced = [s.name for s in schemes]
-    prep = prepare(scene, schemes, rules, default_jobs(jobs), progress)
+    prep: Any = prepare(scene, schemes, rules, default_jobs(jobs), progress)
     bounds = scene.bounds()
-    if cam_given is None:
-        camera, cam_info = choose_default_camera(prep, w, h)
-    else:
+    if isinstance(cam_given, Camera):
         camera = cam_given
+    else:
+        camera, cam_info = choose_default_camera(prep, w, h)
     cam = camera.basis(w, h)
     budgets = [s for s in schemes if s.kind == "budget"]
     if budgets:

@@ -53,7 +53,7 @@ def decoded_pair_maps(sm: SchemeMaps, at) -> np.ndarray:
     """The (P, n, n) map every pair's hits read in a square scheme."""
     if sm.kind != "square":
         raise ValueError(f"2-state maps need a square scheme, not {sm.kind!r}")
-    uniq = sm.codec.decode_many(sm.data.reshape(-1, sm.row_bytes))
+    uniq = sm.codec.decode_many(sm.data.reshape(-1, sm.row_bytes))  # type: ignore[attr-defined]
     return uniq[sm.rows[at.pair_first]]
 
 
