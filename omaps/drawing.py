@@ -158,6 +158,56 @@ def place_labels(ax, xs, ys, labels, fontsize: float = 7, marker_px: float = 8.0
     return out
 
 
+def _text_length(renderer, text: str, prop) -> float:
+    """Display pixels of ``text``'s longest line in font ``prop`` (unrotated)."""
+    return max(renderer.get_text_width_height_descent(line, prop, ismath=False)[0]
+               for line in text.split("\n"))
+
+
+def wrap_to(renderer, text: str, prop, length: float) -> str:
+    """``text`` with its lines broken at spaces so that each is at most ``length`` display pixels
+    long in font ``prop`` (a word longer than that keeps a line of its own)."""
+    out = []
+    for para in text.split("\n"):
+        line = ""
+        for word in para.split(" "):
+            cand = f"{line} {word}" if line else word
+            if line and _text_length(renderer, cand, prop) > length:
+                out.append(line)
+                line = word
+            else:
+                line = cand
+        out.append(line)
+    return "\n".join(out)
+
+
+def fit_texts(fig, items, min_fontsize: float = 5.0, rounds: int = 4) -> None:
+    """Fit each text of ``items`` -- (Text, space) pairs, ``space(renderer)`` the display pixels
+    it may run along its direction (a rotated text: its height) -- by breaking its lines at
+    spaces, then, where one word alone is longer, a smaller font. The figure is drawn between
+    rounds, so a layout engine (constrained or tight) places what the new lines take; the texts'
+    first strings are the ones wrapped each round."""
+    first = [(t, t.get_text()) for t, _ in items]
+    for _ in range(rounds):
+        fig.canvas.draw()
+        r = fig.canvas.get_renderer()
+        changed = False
+        for (t, space), (_, text) in zip(items, first):
+            room = max(1.0, float(space(r)))
+            prop = t.get_fontproperties().copy()
+            new = wrap_to(r, text, prop, room)
+            while _text_length(r, new, prop) > room and prop.get_size_in_points() > min_fontsize:
+                prop.set_size(prop.get_size_in_points() - 0.5)
+                t.set_fontproperties(prop)
+                new = wrap_to(r, text, prop, room)
+                changed = True
+            if new != t.get_text():
+                t.set_text(new)
+                changed = True
+        if not changed:
+            return
+
+
 def state_key_handles():
     """Legend handles for the three states in the deck's colours."""
     from matplotlib.patches import Patch
@@ -191,6 +241,10 @@ def map_picture(path, map_states: np.ndarray, name: str, codec: str, dpi: int = 
                  f"known (T or O) {known_fraction(m):.1%} of the area", fontsize=9)
     ax.legend(handles=state_key_handles(), loc="upper left", bbox_to_anchor=(1.03, 1.0), fontsize=8,
               frameon=False, title="key", title_fontsize=8)
-    fig.tight_layout()
+    fig.set_layout_engine("tight")
+    # a map far wider than high (or the reverse): the labels along its short side fit it
+    fit_texts(fig, [(ax.title, lambda r: fig.bbox.width - 12),
+                    (ax.xaxis.label, lambda r: ax.get_window_extent(r).width),
+                    (ax.yaxis.label, lambda r: ax.get_window_extent(r).height)])
     fig.savefig(path, format="png", dpi=dpi)
     plt.close(fig)

@@ -30,6 +30,8 @@ def heatmap(path: str, runs: dict, names: list[str], shadows: bool, scene: str |
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
+    from ..drawing import fit_texts
+
     shadows = bool(shadows) and all(runs[n].shadow is not None for n in names if n in runs)
     shown = ["none"] + [n for n in names if n != "none"]
     imgs = [_tests_image(runs[n], shadows) for n in shown]
@@ -54,9 +56,14 @@ def heatmap(path: str, runs: dict, names: list[str], shadows: bool, scene: str |
         ax.axis("off")
     where = f" on {os.path.basename(scene)}" if scene else ""
     rays = ("a primary ray and, where it hits, a shadow ray per pixel" if shadows else "a primary ray per pixel")
-    fig.suptitle(f"Alpha tests per pixel{where}, {w}x{h}: {rays}", fontsize=11)
-    fig.colorbar(im, ax=axes, shrink=0.8, extend="max",
-                 label=f"alpha tests per pixel ({what}); top colour: {vmax:.0f} or more")
+    head = fig.suptitle(f"Alpha tests per pixel{where}, {w}x{h}: {rays}", fontsize=11)
+    bar = fig.colorbar(im, ax=axes, shrink=0.8, extend="max",
+                       label=f"alpha tests per pixel ({what})\ntop colour: {vmax:.0f} or more")
+    # every text within its room: the title across the figure, a panel's title over its panel,
+    # the bar's label along the bar (lines broken at spaces; a long name in a smaller font)
+    fit_texts(fig, [(head, lambda r: fig.bbox.width - 12)]
+              + [(ax.title, lambda r, ax=ax: ax.get_window_extent(r).width) for ax in list(axes.flat)[:len(shown)]]
+              + [(bar.ax.yaxis.label, lambda r: bar.ax.get_window_extent(r).height)])
     with atomic_path(path, suffix=".png") as tmp:
         fig.savefig(tmp, dpi=110, format="png")
     plt.close(fig)
