@@ -130,9 +130,19 @@ PAGE = """(() => {
           objects: [...document.querySelectorAll('.doc-object.doc-function, .doc-object.doc-class')].map(o => {
             const h = o.querySelector(':scope > .doc-heading');
             const s = o.querySelector(':scope > .doc-signature');
+            const table = [...o.querySelectorAll(':scope > .doc-contents table')].find(t => {
+              let e = t;  // (the theme wraps a table in scrolling boxes)
+              while (e.parentElement && !e.parentElement.classList.contains('doc-contents')) e = e.parentElement;
+              return t.closest('.doc-object') === o && e.previousElementSibling
+                && e.previousElementSibling.textContent.trim() === 'Parameters:';
+            });
+            const heads = table ? [...table.querySelectorAll('thead th')].map(th => th.textContent.trim()) : [];
+            const [n, d] = [heads.indexOf('Name'), heads.indexOf('Default')];
             return {kind: o.classList.contains('doc-class') ? 'class' : 'function', id: h ? h.id : null,
                     heading: h ? h.firstChild.textContent.trim() : null,
-                    signature: s ? s.textContent.trim() : null};
+                    signature: s ? s.textContent.trim() : null,
+                    defaults: n < 0 || d < 0 ? [] : [...table.querySelectorAll('tbody tr')].map(r =>
+                      [r.cells[n].textContent.trim(), r.cells[d].textContent.trim()])};
           }),
           built: [...document.querySelectorAll('article h2[id]:not(.doc-heading)')].map(h => {
             const n = h.nextElementSibling;
@@ -294,6 +304,37 @@ def _annotation_mismatch(name, expected, shown) -> list:
     text = expected if isinstance(expected, str) else inspect.formatannotation(expected)
     ok = _source(text) == _source(shown)
     return [] if ok else [f"{name}: annotation {expected!r} shown as {ast.unparse(shown)}"]
+
+
+@needs_chromium
+def test_parameter_tables_give_the_signatures_defaults(browsed):
+    """The Default column of each Parameters table is the signature's default of that parameter,
+    ``required`` where there is none (one docstring entry may describe several parameters, each
+    with its own default)."""
+    problems, checked = [], set()
+    alpha_test = importlib.import_module("omaps").StateRule.alpha_test
+    for ident, (_, o) in api_objects(browsed).items():
+        obj = _object(ident)
+        if not o.get("defaults"):
+            continue
+        params = inspect.signature(obj).parameters
+        scope = vars(sys.modules[obj.__module__])
+        for name, shown in o.get("defaults", []):
+            p = params.get(name)
+            if p is None or p.default is getattr(dataclasses, "_HAS_DEFAULT_FACTORY", object()):
+                continue
+            checked.add((obj, name))
+            if shown == "required":
+                ok = p.default is inspect.Parameter.empty
+            else:
+                try:
+                    ok = _same_value(eval(shown, scope), p.default)  # noqa: S307
+                except Exception:
+                    ok = False
+            if not ok:
+                problems.append(f"{ident}({name}): default {p.default!r} shown as {shown}")
+    assert problems == [], "\n".join(problems)
+    assert (alpha_test, "wrap") in checked and len(checked) > 20  # (the tables were read)
 
 
 def own_constructor(cls) -> bool:
