@@ -4,7 +4,7 @@ disk. Headless Chromium opens ``index.html`` from a file:// URL and follows ever
 navigation: each opens a page of the site (not a folder's listing, not an error page), nothing is
 requested from outside the site, no script fails, and the API reference shows every function's and
 class's signature as the code has it (names, kinds, annotations, defaults: compared with
-``inspect.signature``).
+``inspect.signature``), and each parameter table the signature's defaults.
 
 The site is built here when the docs extra is installed (``pip install -e '.[docs]'``); CI builds it
 once with ``mkdocs build --strict`` and points ``OMAPS_SITE`` at it."""
@@ -15,6 +15,7 @@ import html
 import importlib
 import importlib.util
 import inspect
+import json
 import os
 import pkgutil
 import re
@@ -157,7 +158,7 @@ def settle(page, url: str, timeout: float = 60.0) -> None:
     end = time.monotonic() + timeout
     while True:
         try:
-            if page.evaluate(SETTLE % repr(url)):
+            if page.evaluate(SETTLE % json.dumps(url)):
                 return
         except RuntimeError:
             pass  # the context being replaced
