@@ -330,7 +330,9 @@ def quad_report(tmp_path_factory):
     y, x = np.mgrid[:64, :64]
     alpha = np.where((x - 31.5) ** 2 + (y - 31.5) ** 2 < 26 ** 2, 255, 0).astype(np.uint8)
     scene = d / "quad.gltf"
-    write_quad_gltf(scene, alpha, material={"alphaMode": "MASK"})
+    # (a cutoff, filter and wrap modes of its own: the settings line must name these)
+    write_quad_gltf(scene, alpha, material={"alphaMode": "MASK", "alphaCutoff": 0.35},
+                    sampler={"magFilter": 9728, "wrapS": 33071, "wrapT": 33648})
     return build_report(scene, d / "quad.html", "none,tri3,sq8,sq16", size=48, jobs=1).path
 
 
@@ -364,3 +366,78 @@ def test_corpus_report_text(corpus_report):
     assert len(found["boxes"]) > 20
     problems = page_problems(found)
     assert problems == [], "\n".join(problems)
+
+
+# ---- what the report's words say -----------------------------------------------------------------
+
+def settings_line(path) -> str:
+    import html
+    import re
+
+    text = open(path, encoding="utf-8").read()
+    line = re.search(r'<p class="settings">Settings: (.*?)</p>', text).group(1)
+    return html.unescape(re.sub(r"<[^>]+>", "", line))
+
+
+def test_settings_name_the_materials_own_settings(quad_report):
+    """No override: the line says so and gives what the file's material and sampler hold."""
+    line = settings_line(quad_report)
+    assert "None" not in line
+    assert "none overridden" in line
+    assert "leaf: MASK, cutoff 0.35, filter nearest, wrap mode clamp (u), mirror (v)" in line
+
+
+def test_settings_name_the_overrides(tmp_path):
+    from gltf_files import write_quad_gltf
+    from omaps import MaterialRules
+    from omaps.report import build_report
+
+    scene = tmp_path / "quad.gltf"
+    write_quad_gltf(scene, np.full((8, 8), 255, np.uint8), material={"alphaMode": "MASK", "alphaCutoff": 0.35})
+    res = build_report(scene, tmp_path / "q.html", "none,tri2", size=16, jobs=1, view=False,
+                       rules=MaterialRules(cutoff=0.6, filter="nearest"))
+    line = settings_line(res.path)
+    assert "None" not in line
+    assert "cutoff 0.6, filter nearest for every material (overridden)" in line
+    assert "leaf: MASK, cutoff 0.6, filter nearest, wrap mode wrap" in line
+
+
+STATE_WORDS = {0: "cyan T", 1: "magenta O", 2: "green C"}
+
+
+def test_material_panel_colours_are_in_its_caption(quad_report):
+    """Each colour of a material panel is the alpha grey or a state colour blended over it; the
+    caption names every state colour shown and says how the grey changes them."""
+    import base64
+    import html
+    import io
+    import re
+
+    from PIL import Image
+
+    from omaps import states
+
+    text = open(quad_report, encoding="utf-8").read()
+    figures = re.findall(r'<figure><img src="data:image/png;base64,([^"]+)"[^>]*alt="material [^"]*">'
+                         r"<figcaption>(.*?)</figcaption>", text)
+    assert figures
+    for data, caption in figures:
+        caption = html.unescape(caption)
+        img = np.asarray(Image.open(io.BytesIO(base64.b64decode(data))).convert("RGB")).reshape(-1, 3).astype(int)
+        colours = np.unique(img, axis=0)
+        assert "grey" in caption
+        # the greys: texels no triangle covers, and the disc's alpha (0 or 255) under the triangles
+        grey = {0, 255} | {int(c[0]) for c in colours if c[0] == c[1] == c[2]}
+        shown = set()
+        for c in colours:
+            if c[0] == c[1] == c[2]:
+                continue
+            # a state colour blended over a grey the texture has (0.35 grey + 0.65 colour)
+            s = [k for k in STATE_WORDS for g in grey
+                 if np.all(np.abs(0.35 * g + 0.65 * states.COLOURS[k] - c) <= 1)]
+            assert s, f"colour {c} is neither grey nor a state colour over the alpha grey"
+            shown.add(s[0])
+        assert shown, "no state drawn"
+        for k in shown:
+            assert STATE_WORDS[k] in caption, (STATE_WORDS[k], caption)
+        assert "lighter over opaque" in caption and "darker over transparent" in caption

@@ -141,7 +141,46 @@ def build_report(input, output, schemes: str | None = None, *, size=512, shadows
     return ReportResult(out, kind, os.path.getsize(out), timings, numbers, info)
 
 
-def _settings_text(report: dict) -> str:
+def _names(names: list, most: int = 4) -> str:
+    shown = ", ".join(names[:most])
+    return shown + (f" and {len(names) - most} more" if len(names) > most else "")
+
+
+def _materials_text(report: dict, prep) -> str:
+    """How the alpha-tested materials were tested: which settings the options replaced, then per
+    group of materials alike the mode, cutoff, filter and wrap in effect."""
+    import numpy as np
+
+    from ..alpha_test import MaterialRules
+
+    rules = MaterialRules(**report["settings"]["materials"])
+    set_ = [f"{k} {v}" for k, v in (("cutoff", rules.cutoff), ("filter", rules.filter), ("wrap", rules.wrap))
+            if v is not None]
+    head = ("the scene's own per-material settings (none overridden)" if not set_ else
+            f"{', '.join(set_)} for every material (overridden), the rest each material's own")
+    scene = prep.scene
+    used = sorted({int(m) for m in np.unique(prep.alpha.material)}) if len(prep.alpha.material) else []
+    groups: dict = {}
+    for m in used:
+        mat = scene.materials[m]
+        if mat.alpha_mode == "BLEND":
+            mode = (f"BLEND, {rules.blend} at {rules.blend_cutoff:g}" if rules.blend == "levels"
+                    else f"BLEND, cutoff {rules.blend_cutoff:g}")
+        else:
+            mode = f"MASK, cutoff {rules.cutoff if rules.cutoff is not None else mat.cutoff:g}"
+        wrap_u, wrap_v = rules.wrap or mat.wrap_u, rules.wrap or mat.wrap_v
+        wrap = wrap_u if wrap_u == wrap_v else f"{wrap_u} (u), {wrap_v} (v)"
+        groups.setdefault(f"{mode}, filter {rules.filter or mat.filter}, wrap mode {wrap}", []).append(
+            mat.name or f"#{m}")
+    parts = [f"{pg.esc(_names(names))}: {pg.esc(what)}" for what, names in groups.items()]
+    skipped = [mat.name or f"#{k}" for k, mat in enumerate(scene.materials)
+               if mat.alpha_mode == "BLEND" and rules.blend == "skip"]
+    if skipped:
+        parts.append(f"{pg.esc(_names(skipped))}: BLEND, treated as opaque (blend skip)")
+    return f"materials: {pg.esc(head)} ({'; '.join(parts) if parts else 'no alpha-tested material'})"
+
+
+def _settings_text(report: dict, prep) -> str:
     st, cam = report["settings"], report["camera"]
     view = cam.get("view") or {}
     parts = [f"schemes <code>{pg.esc(','.join(st['schemes']))}</code>",
@@ -150,7 +189,7 @@ def _settings_text(report: dict) -> str:
              f"{pg.esc(','.join(f'{x:g}' for x in cam['target']))}:{cam['fov']:g}</code>"
              + (f" ({pg.esc(view.get('chosen', ''))})" if view.get("chosen") else ""),
              f"shadows {'on' if st['shadows'] else 'off'}",
-             f"materials {pg.esc(', '.join(f'{k} {v}' for k, v in st['materials'].items()))}",
+             _materials_text(report, prep),
              f"Embree {pg.esc(report['embree'])}"]
     return "; ".join(parts)
 
@@ -223,7 +262,7 @@ def _scene_page(src, schemes, size, shadows, camera, jobs, rules, view, progress
             f"<p class=\"settings\">{pg.esc(src)}: {s['instances']:,} instances of {s['prototypes']:,} meshes, "
             f"{s['triangles']:,} triangles ({s['alpha_triangles']:,} alpha-tested); {s['pairs']:,} prototype pairs, "
             f"{s['paired_fraction']:.1%} of alpha triangles paired. omaps {pg.esc(__version__)}.</p>",
-            f"<p class=\"settings\">Settings: {_settings_text(report)}.</p>",
+            f"<p class=\"settings\">Settings: {_settings_text(report, res.prep)}.</p>",
             "<p class=\"key\">States:<span style=\"background:#0ff\"></span>T transparent (hit ignored)"
             "<span style=\"background:#f0f\"></span>O opaque (hit accepted)"
             "<span style=\"background:#00c800\"></span>C check (any-hit shader runs)</p>",
@@ -258,8 +297,10 @@ def _scene_page(src, schemes, size, shadows, camera, jobs, rules, view, progress
             mat = data["view"]["materials"][m]
             body.append(f"<figure><img src=\"{per[first]}\" data-scheme-images=\"{pg.esc(json.dumps(per))}\" "
                         f"alt=\"material {pg.esc(mat['name'])}\"><figcaption>material {m} "
-                        f"({pg.esc(mat['name'])}): alpha grey, states of the scheme chosen above over its "
-                        "triangles' UVs</figcaption></figure>")
+                        f"({pg.esc(mat['name'])}): its alpha texture in grey (white opaque, black "
+                        "transparent); over its triangles' UVs, the states of the scheme chosen above "
+                        "blended in: cyan T, magenta O, green C, lighter over opaque texels and darker "
+                        "over transparent ones</figcaption></figure>")
         body.append("</div>")
     text = pg.page(f"omaps report: {name}", "\n".join(body), data, three=view)
     return text, report, timings, info
