@@ -737,8 +737,15 @@ class BatchPlan:
 
     def line(self) -> str:
         """The line ``omaps batch`` prints before it runs."""
-        return (f"omaps batch {self.command}: {count(len(self.found), 'input')}, {len(self.found) - len(self.jobs)} "
-                f"already done or refused, {len(self.jobs)} to run (scheduler {self.scheduler}"
+        done = sum(bool(r.get("resumed")) for r in self.records.values())
+        why: dict[str, int] = {}
+        for r in self.records.values():
+            if not r.get("resumed"):
+                why[r.get("refused", "an error")] = why.get(r.get("refused", "an error"), 0) + 1
+        parts = [f"{done} already done with these options (not run again)"] if done else []
+        parts += [f"{n} refused ({w}; each named after the run)" for w, n in why.items()]
+        return (f"omaps batch {self.command}: {count(len(self.found), 'input')}, "
+                + "".join(p + ", " for p in parts) + f"{len(self.jobs)} to run (scheduler {self.scheduler}"
                 + ("; each scene split into pieces)" if self.split else ")"))
 
 
@@ -832,10 +839,32 @@ def plan_batch(command: str, inputs, outdir, options: dict | None = None, *, sch
         if command == "omm" and os.path.isdir(out) and os.listdir(out) and "omm.json" not in os.listdir(out):
             records[name] = {"input": path, "output": os.path.relpath(out, outdir), "status": "error",
                              "error": f"{out}: folder is not empty and holds no omm.json (not written by omaps): "
-                                      "not replacing it"}
+                                      "not replacing it",
+                             "refused": "its output folder holds files omaps did not write"}
             continue
         jobs.append((command, with_root(command, options, path, rel), path, name, outdir, fp))
     return BatchPlan(command, outdir, options, scheduler, window, found, names, records, jobs, split)
+
+
+class BatchWarning(UserWarning):
+    """An input's warnings (its record's messages), one per input as it finishes."""
+
+
+def warn_input(rec: dict) -> None:
+    """An input's warnings as one ``BatchWarning`` (the first, and how many more the summary
+    holds): above a progress bar, which is drawn again below it. Its error, or the problems
+    it was done with, are said after the run (``BatchResult.messages``)."""
+    notes = [m for m in rec.get("messages", []) if not m.startswith("omaps: error:")]
+    if not notes:
+        return
+    first = notes[0].removeprefix("omaps: warning: ").removeprefix("omaps: ")
+    for named in (rec["input"], os.path.abspath(rec["input"])):  # (a scene's warnings name its file)
+        first = first.removeprefix(f"{named}: ")
+    more = f" (and {count(len(notes) - 1, 'more warning')} in the summary)" if len(notes) > 1 else ""
+    from tqdm import tqdm
+
+    with tqdm.external_write_mode(file=sys.stderr):
+        warnings.warn(f"{rec['input']}: {first}{more}", BatchWarning, stacklevel=3)
 
 
 def run_plan(plan: BatchPlan, progress: bool = False) -> BatchResult:
@@ -845,6 +874,7 @@ def run_plan(plan: BatchPlan, progress: bool = False) -> BatchResult:
     by_input = {j[2]: j[3] for j in plan.jobs}
     for rec in run_all(plan.command, plan.jobs, plan.scheduler, plan.window, progress, plan.split):
         records[by_input.get(rec["input"], rec["input"])] = rec
+        warn_input(rec)
     dt = time.perf_counter() - t0
     ordered = [records[n] for n in plan.names if n in records]
     ordered += [r for n, r in records.items() if n not in plan.names]

@@ -321,3 +321,36 @@ def test_counts_are_singular_for_one(tmp_path, capsys):
     assert "0 problems" in rows[-1]["status"] or "problem" not in rows[-1]["status"]
     assert engine.count(1, "error") == "1 error" and engine.count(2, "error") == "2 errors"
     assert engine.count(0, "input") == "0 inputs"
+
+
+# --- what the first line counts, and warnings on the terminal -------------------------------------
+
+def test_the_plan_line_tells_done_from_refused(tmp_path):
+    done, refused, todo = (_scene(tmp_path / n, seed=k) for k, n in enumerate(("done", "refused", "todo")))
+    out = tmp_path / "out"
+    options = {"level": 2, "jobs": 1}
+    engine.run_batch("omm", [done], out, options, scheduler="none")
+    (out / "refused").mkdir()
+    (out / "refused" / "notes.txt").write_text("someone else's file")
+    line = engine.plan_batch("omm", [done, refused, todo], out, options, scheduler="none").line()
+    assert "3 inputs, 1 already done with these options" in line, line
+    assert "1 refused (its output folder holds files omaps did not write" in line, line
+    assert "1 to run" in line and "or refused" not in line, line
+
+
+def test_an_inputs_warnings_reach_the_terminal_once(tmp_path, capsys):
+    warned = tmp_path / "warned" / "scene.gltf"
+    warned.parent.mkdir()
+    write_quad_gltf(str(warned), _alpha(), extra_images=["nothere.png", "gone.png"])  # two missing, unused
+    quiet = _scene(tmp_path / "quiet", seed=1)
+    out = tmp_path / "out"
+    assert main(["batch", "omm", str(warned), quiet, "-o", str(out), "--scheduler", "none", "--level", "2",
+                 "--quiet"]) == 0
+    err = capsys.readouterr().err
+    lines = [x for x in err.splitlines() if "warning" in x]
+    assert len(lines) == 1, err  # one line for the input, however many warnings it had
+    assert str(warned) in lines[0] and "nothere.png" in lines[0] and "1 more warning" in lines[0], lines
+    assert lines[0].count(str(warned)) == 1, lines  # the input named once
+    assert "quiet" not in err
+    rec = {r["input"]: r for r in _summary(out)[0]["inputs"]}[str(warned)]
+    assert len(rec["messages"]) == 2  # every warning in the summary
