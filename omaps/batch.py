@@ -255,18 +255,23 @@ TEST_GATE = "OMAPS_TEST_GATE"
 
 
 def _test_gate(what: str) -> None:
-    """Test-only (``TEST_GATE``): with the variable unset, nothing. Set to a folder: write
-    ``started-WHAT`` there, then wait until a file ``release`` or ``release-WHAT`` appears there,
-    or the folder is removed (or the process is interrupted or killed)."""
+    """Test-only (``TEST_GATE``): with the variable unset, nothing. Set to a folder: wait until
+    a file ``release`` or ``release-WHAT`` appears there, or the folder is removed (or the process
+    is interrupted or killed), writing ``held-WHAT`` there once waiting (the test acts on it);
+    then write ``passed-WHAT`` (a test checks that no task it held went on)."""
     folder = os.environ.get(TEST_GATE)
     if not folder:
         return
     what = "".join(c if c.isalnum() or c in "-_." else "_" for c in what)
-    with open(os.path.join(folder, f"started-{what}"), "w"):
-        pass
     go = (os.path.join(folder, "release"), os.path.join(folder, f"release-{what}"))
+    held = False
     while os.path.isdir(folder) and not any(os.path.exists(g) for g in go):
+        if not held:  # written from inside the wait: a gate that does not wait never says it holds
+            with open(os.path.join(folder, f"held-{what}"), "w"):
+                held = True
         time.sleep(0.01)
+    with contextlib.suppress(OSError), open(os.path.join(folder, f"passed-{what}"), "w"):
+        pass
 
 
 SETTINGS = ("level", "dynamic", "max_level", "budget", "format", "promote", "seed", "special", "dedup", "source",
@@ -808,8 +813,8 @@ def plan_batch(command: str, inputs, outdir, options: dict | None = None, *, sch
     scheduler's address, OUTDIR, the inputs and their output names, and the inputs finished
     before with the same options (resumed, not run again). ``split``: each omm scene's bake in
     pieces on every worker (``bake_split``; the same outputs)."""
-    if command not in COMMANDS:
-        raise InputError(f"unknown batch command {command!r} (choose from {', '.join(COMMANDS)})")
+    if not isinstance(command, str) or command not in COMMANDS:
+        raise InputError(f"unknown batch command {command!r} (choose from {', '.join(COMMANDS)})", param="command")
     options = {**(options or {}), **({"glb": True} if glb else {})}
     if scheduler not in ("none", "local") and not scheduler.startswith(("tcp://", "tls://", "inproc://")):
         raise InputError(f"--scheduler must be local, none or tcp://HOST:PORT, got {scheduler!r}")

@@ -24,22 +24,29 @@ def children(pid):
 
 def gate_env(env, folder):
     """``env`` with the batch's test-only gate on ``folder`` (created): every input task (not
-    split) and every piece task writes ``started-input-NAME`` / ``started-piece-…`` there, then
-    waits for ``release`` or ``release-…`` (``release``) there."""
+    split) and every piece task waits at its start for ``release`` or ``release-…`` there
+    (``release``), saying so with a file ``held-input-NAME`` / ``held-piece-…`` (``held``)."""
     os.makedirs(folder, exist_ok=True)
     return dict(env, **{TEST_GATE: os.fspath(folder)})
 
 
-def started(folder, kind=""):
-    """The names (``input-NAME``, ``piece-…``) of the gated tasks that have started, ``kind``
+def held(folder, kind=""):
+    """The names (``input-NAME``, ``piece-…``) of the tasks that the gate holds or held, ``kind``
     their prefix."""
-    return sorted(f[len("started-"):] for f in os.listdir(folder) if f.startswith("started-" + kind))
+    return sorted(f[len("held-"):] for f in os.listdir(folder) if f.startswith("held-" + kind))
 
 
 def release(folder, what=""):
     """Let the gated task ``what`` go on (all of them: ``what`` empty)."""
     with open(os.path.join(folder, "release-" + what if what else "release"), "w"):
         pass
+
+
+def went_on_unreleased(folder):
+    """The gated tasks that went past the gate (``passed-…``) though the test never released
+    them: none, while the gate holds."""
+    return sorted(f[len("passed-"):] for f in os.listdir(folder) if f.startswith("passed-") and not
+                  os.path.exists(os.path.join(folder, "release-" + f[len("passed-"):])))
 
 
 def wait_for(cond, what, p, limit=LIMIT):
@@ -73,7 +80,8 @@ def check_interrupted(p, out, wait, group=True, gate=None):
     ``omaps: interrupted`` alone, exits 130, writes no summary into ``out`` and leaves no process
     behind: every process it had when the signal went, and (``group``) every process of its
     session, ends (within the hang guard: the exit handlers of a process take a moment). ``gate``:
-    the gate's folder, its tasks released once the check is over, whatever its outcome."""
+    the gate's folder: no task the test held went on (the signal came while they were held), and
+    they are all released once the check is over, whatever its outcome."""
     import psutil
 
     kids = []
@@ -88,6 +96,8 @@ def check_interrupted(p, out, wait, group=True, gate=None):
         assert p.returncode == 130, err
         assert err == "omaps: interrupted\n", err
         assert not os.path.exists(os.path.join(out, "summary.json"))
+        if gate is not None:
+            assert not went_on_unreleased(gate), went_on_unreleased(gate)
         _, alive = psutil.wait_procs(kids, timeout=LIMIT)
         assert not alive, alive
         if group:

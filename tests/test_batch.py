@@ -105,7 +105,7 @@ def test_killed_batch_resumes_without_redoing_finished_inputs(tmp_path):
     """Killed (SIGKILL) while its third input runs, two finished: the re-run skips those two. The
     moment is an event: the batch's test-only gate (``omaps.batch.TEST_GATE``) holds each input
     at its start until the test releases it, so the kill never depends on the machine's speed."""
-    from interrupts import gate_env, release, started, wait_for
+    from interrupts import gate_env, held, release, wait_for, went_on_unreleased
 
     src = tmp_path / "tex"
     _textures(src, n=8, seed=3)
@@ -122,9 +122,9 @@ def test_killed_batch_resumes_without_redoing_finished_inputs(tmp_path):
 
     try:
         for name in ("t00", "t01"):  # (serial: in order, each one's marker written before the next starts)
-            wait_for(lambda: f"input-{name}" in started(gate), f"input {name} started", proc)
+            wait_for(lambda: f"input-{name}" in held(gate), f"input {name} held", proc)
             release(gate, f"input-{name}")
-        wait_for(lambda: "input-t02" in started(gate), "input t02 started", proc)
+        wait_for(lambda: "input-t02" in held(gate), "input t02 held", proc)
         proc.send_signal(signal.SIGKILL)
         proc.wait()
     finally:
@@ -132,6 +132,7 @@ def test_killed_batch_resumes_without_redoing_finished_inputs(tmp_path):
             proc.kill()
             proc.wait()
     assert proc.returncode == -signal.SIGKILL
+    assert not went_on_unreleased(gate), went_on_unreleased(gate)
     done = finished()
     assert done == ["t00.json", "t01.json"] and not (out / "summary.json").exists()
     for f in done:  # every marked input has its whole output

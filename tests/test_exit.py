@@ -169,7 +169,7 @@ def test_ctrl_c_while_a_local_cluster_batch_runs(tmp_path, phase):
     The moment is an event, not a time: the batch's test-only gate (``omaps.batch.TEST_GATE``)
     holds every task at its start until the test releases it, so the batch cannot finish (or
     not yet start its work) before the signal, however fast the machine."""
-    from interrupts import check_interrupted, gate_env, release, started, wait_for
+    from interrupts import check_interrupted, gate_env, held, release, wait_for
 
     out, gate = tmp_path / "out", tmp_path / "gate"
     if phase == "inputs":
@@ -186,18 +186,25 @@ def test_ctrl_c_while_a_local_cluster_batch_runs(tmp_path, phase):
     p = subprocess.Popen([sys.executable, "-m", "omaps", "batch", *cmd, "-o", str(out), "--scheduler", "local"],
                          env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, start_new_session=True)
 
+    markers = []  # the released input's
+
+    def finished():
+        return [f.name for f in (out / ".batch").iterdir() if not f.name.startswith(".")]
+
     def moment():
         if phase == "inputs":  # one input let through and finished (its marker written); the rest held
-            wait_for(lambda: started(gate, "input-"), "an input started on a worker", p)
-            first = started(gate, "input-")[0]
+            wait_for(lambda: held(gate, "input-"), "an input held on a worker", p)
+            first = held(gate, "input-")[0]
             release(gate, first)
-            marker = out / ".batch" / (first[len("input-"):] + ".json")
-            wait_for(marker.is_file, f"the marker of {first}", p)
-            assert [f.name for f in (out / ".batch").iterdir() if not f.name.startswith(".")] == [marker.name]
+            markers.append(first[len("input-"):] + ".json")
+            wait_for(lambda: (out / ".batch" / markers[0]).is_file(), f"the marker of {first}", p)
+            assert finished() == markers
         else:  # a piece has started on a worker: this process waits for the pieces
-            wait_for(lambda: started(gate, "piece-"), "a piece started on a worker", p)
+            wait_for(lambda: held(gate, "piece-"), "a piece held on a worker", p)
 
     check_interrupted(p, out, moment, gate=gate)
+    if phase == "inputs":  # the released input finished, no other
+        assert finished() == markers
 
 
 GC_SCRIPT = """
