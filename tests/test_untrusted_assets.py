@@ -126,9 +126,9 @@ def test_system_file_is_neither_read_nor_sized(tree, capsys):
 
 
 @pytest.mark.parametrize("kind", ["images", "buffers"])
-@pytest.mark.parametrize("uri, scheme", [("http://example.com/leaf.png", "an http:"),
-                                         ("https://example.com/leaf.png", "an https:"),
-                                         ("ftp://example.com/leaf.png", "a ftp:")])
+@pytest.mark.parametrize("uri, scheme", [("http://127.0.0.1:9/leaf.png", "an http:"),
+                                         ("https://127.0.0.1:9/leaf.png", "an https:"),
+                                         ("ftp://127.0.0.1:9/leaf.png", "a ftp:")])
 def test_scheme_uris_are_never_fetched(tree, capsys, kind, uri, scheme):
     tmp, asset, outside, scene = tree
     set_uri(scene, kind, uri)

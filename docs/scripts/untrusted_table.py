@@ -58,7 +58,7 @@ def main() -> None:
              ("symlink out of the folder", "link.bin", inline),
              ("percent-encoded ..", "%2e%2e/outside/quad.bin", inline),
              ("file: image", "quad.bin", "file://" + os.path.join(outside, "leaf.png")),
-             ("http: image", "quad.bin", "http://example.com/leaf.png")]
+             ("http: image", "quad.bin", "http://127.0.0.1:9/leaf.png")]
     rows = []
     for k, (what, buf, img) in enumerate(cases):
         path = os.path.join(asset, f"case{k}.gltf")
