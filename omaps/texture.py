@@ -315,3 +315,21 @@ def find_images(paths) -> tuple[list[str], list[str]]:
         else:
             raise InputError("no such file or folder", p)
     return images, skipped
+
+
+def without_alpha(path) -> str | None:
+    """Why an image found in a folder is not an alpha mask, from its header alone (nothing is
+    decoded): it has no alpha channel, so reading it without a channel given would fail (RGB
+    photographs and screenshots, normal maps, a palette without transparency). None for an image
+    with one (or a single band, read as coverage), and for a file Pillow cannot open (reading it
+    reports that)."""
+    try:
+        with Image.open(path) as im:
+            mode, bands, info = im.mode, im.getbands(), im.info
+    except Exception:  # (not readable: the read that follows says why)
+        return None
+    if mode == "P":
+        return None if "transparency" in info else "palette image without transparency"
+    if len(bands) == 1 or "A" in bands or "a" in bands or mode == "PA":
+        return None
+    return f"no alpha channel, mode {mode}"

@@ -135,6 +135,44 @@ def test_missing_and_no_alpha(tmp_path, capsys):
     assert main(["eval", str(tmp_path / "rgb.png"), "--channel", "R", "--quiet"]) == 0
 
 
+def test_folder_images_without_alpha_are_skipped_in_one_line(tmp_path, capsys):
+    """In a folder (a glTF sample's, say) the images with no alpha channel -- screenshots, normal
+    maps, a palette without transparency -- are not alpha masks: skipped, counted in one line
+    naming one and why, not errors; the images with alpha, the asset's foliage too, are read."""
+    y, x = np.mgrid[:32, :32]
+    disc = np.where((x - 16) ** 2 + (y - 16) ** 2 < 144, 255, 0).astype(np.uint8)
+    rgba = np.dstack([np.full((32, 32, 3), 90, np.uint8), disc])
+    d = tmp_path / "scenes"
+    (d / "asset").mkdir(parents=True)
+    Image.fromarray(rgba).save(d / "leaf.png")
+    Image.fromarray(rgba).save(d / "asset" / "foliage.png")
+    Image.fromarray(rgba[..., :3]).save(d / "asset" / "screenshot.png")
+    Image.fromarray(rgba[..., :3]).save(d / "asset" / "screenshot.jpg")
+    Image.fromarray(rgba[..., :3]).convert("P").save(d / "asset" / "palette.png")
+    (d / "asset" / "scene.gltf").write_text("{}")
+    j = tmp_path / "r.json"
+    assert main(["eval", str(d), "--quiet", "--jobs", "1", "--schemes", "sq4", "--json", str(j)]) == 0
+    out, err = capsys.readouterr()
+    assert "2 textures from 2 files" in out
+    said = [line for line in err.splitlines() if "without alpha" in line]
+    assert len(said) == 1 and "skipped 3 images without alpha" in said[0], err
+    assert "palette.png (palette image without transparency)" in said[0], said  # the first found, and why
+    assert "could not be read" not in err and "error" not in err
+    assert sorted(os.path.basename(t["name"]) for t in json.loads(j.read_text())["textures"]) == [
+        "foliage.png", "leaf.png"]
+    # a band picked: every image is read
+    assert main(["eval", str(d), "--quiet", "--jobs", "1", "--schemes", "sq4", "--channel", "R"]) == 0
+    out, err = capsys.readouterr()
+    assert "5 textures from 5 files" in out and "without alpha" not in err
+    # only images without alpha: nothing to evaluate, said so (exit 2)
+    assert main(["eval", str(d / "asset" / "screenshot.png"), str(d / "asset" / "palette.png")]) == 2
+    assert "screenshot.png: image has no alpha channel" in capsys.readouterr().err
+    for f in ("leaf.png", "asset/foliage.png"):
+        (d / f).unlink()
+    assert main(["eval", str(d), "--quiet", "--jobs", "1", "--schemes", "sq4"]) == 2
+    assert "no image with an alpha channel found (3 images without one" in capsys.readouterr().err
+
+
 def test_bake(tmp_path, textures, capsys):
     out = tmp_path / "m.npy"
     assert main(["bake", str(textures / "t1.png"), "--scheme", "sq16", "-o", str(out)]) == 0

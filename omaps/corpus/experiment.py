@@ -74,6 +74,10 @@ class CorpusResult:
     skipped_other : list of str
         Files in the folders given without an image extension.
     seconds : float
+    no_alpha : list of (str, str)
+        Images found in the folders given that are not alpha masks (no alpha channel: photographs,
+        screenshots, normal maps), with the reason; left out unless ``config.channel`` picks a band.
+        An image named itself is read, and is an error when it has no alpha.
     """
 
     results: list
@@ -84,6 +88,7 @@ class CorpusResult:
     small: list = field(default_factory=list)
     skipped_other: list = field(default_factory=list)
     seconds: float = 0.0
+    no_alpha: list = field(default_factory=list)
 
     @property
     def means(self) -> dict:
@@ -177,7 +182,7 @@ def evaluate_corpus(paths: PathsOrArrays | None = None, schemes: str | Sequence[
     >>> res.source, sorted(res.means), 0 < res.means["sq16"]["savings"] < 1
     ('the embedded procedural corpus', ['sq16', 'tri3'], True)
     """
-    from ..texture import find_images
+    from ..texture import find_images, without_alpha
     from .procedural import default_corpus
 
     if config is not None and not isinstance(config, EvalConfig):
@@ -192,18 +197,25 @@ def evaluate_corpus(paths: PathsOrArrays | None = None, schemes: str | Sequence[
     given = [] if paths is None else _inputs(paths)
     files: list[str] = [p for p in given if isinstance(p, str)]
     skipped_other: list = []
+    no_alpha: list = []
     named: set = set()
     if given:
         items: list = []
         for p in given:
             if isinstance(p, str):
                 found, other = find_images([p])
+                if os.path.isdir(p) and config.channel is None:  # a folder's images that are not alpha masks
+                    why = [without_alpha(f) for f in found]
+                    no_alpha += [(f, w) for f, w in zip(found, why) if w is not None]
+                    found = [f for f, w in zip(found, why) if w is None]
                 items += found
                 skipped_other += other
             else:
                 items.append(p)
         if not items:
-            raise InputError("no image files found", ", ".join(files))
+            raise InputError("no image files found" if not no_alpha else
+                             f"no image with an alpha channel found ({plural(len(no_alpha), 'image')} without "
+                             f"one, e.g. {no_alpha[0][0]}: {no_alpha[0][1]})", ", ".join(files))
         named = {p for p in files if not os.path.isdir(p)} | {p[0] for p in given if isinstance(p, tuple)}
         source = plural(len(items), "file" if all(isinstance(it, str) for it in items) else "texture")
     else:
@@ -224,4 +236,5 @@ def evaluate_corpus(paths: PathsOrArrays | None = None, schemes: str | Sequence[
         raise exc
     settings = {"source": source, **config.settings(), "min_size": min_size,
                 "schemes": {s.name: s.settings() for s in schemes}}
-    return CorpusResult(results, names, settings, source, unreadable, small, list(skipped_other), seconds)
+    return CorpusResult(results, names, settings, source, unreadable, small, list(skipped_other), seconds,
+                        no_alpha)

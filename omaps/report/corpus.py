@@ -27,7 +27,7 @@ def corpus_page(folder: str, schemes: str | None, min_size: int = 0, config=None
     from ..corpus import EvalConfig, evaluate_many
     from ..corpus.report import plot_savings, show_texture, to_json
     from ..schemes import DEFAULT_SCHEMES, EVAL_KINDS, parse_schemes
-    from ..texture import find_images
+    from ..texture import find_images, without_alpha
 
     config = EvalConfig() if config is None else config
     parsed = parse_schemes(schemes or ",".join(DEFAULT_SCHEMES), EVAL_KINDS, config.encoder, config.effort,
@@ -36,8 +36,14 @@ def corpus_page(folder: str, schemes: str | None, min_size: int = 0, config=None
     if min_size < 0:
         raise InputError(f"--min-size must be >= 0, got {min_size}")
     items, _ = find_images([folder])
+    no_alpha = []
+    if config.channel is None:  # images that are not alpha masks (as omaps eval on a folder)
+        why = [without_alpha(f) for f in items]
+        no_alpha = [(f, w) for f, w in zip(items, why) if w is not None]
+        items = [f for f, w in zip(items, why) if w is None]
     if not items:
-        raise InputError("no image files found", folder)
+        raise InputError("no image files found" if not no_alpha else
+                         f"no image with an alpha channel found ({len(no_alpha)} without one)", folder)
     timings = {}
     t = time.perf_counter()
     unreadable: list = []
@@ -78,6 +84,7 @@ def corpus_page(folder: str, schemes: str | None, min_size: int = 0, config=None
             f"<p class=\"settings\">{len(results)} textures from {pg.esc(folder)}"
             + (f"; {len(small)} smaller than {min_size} px skipped" if small else "")
             + (f"; {len(unreadable)} unreadable" if unreadable else "")
+            + (f"; {len(no_alpha)} images without alpha skipped (not alpha masks)" if no_alpha else "")
             + f". Settings: rule {pg.esc(st.get('mode', ''))}, filter {pg.esc(st['filter'])}, wrap "
             f"{pg.esc(st['wrap'])}; schemes <code>{pg.esc(','.join(names))}</code>. omaps {pg.esc(__version__)}.</p>",
             "<p class=\"key\">States:<span style=\"background:#0ff\"></span>T"
@@ -90,6 +97,9 @@ def corpus_page(folder: str, schemes: str | None, min_size: int = 0, config=None
             "<h2>Textures</h2>",
             pg.table(heads, rows, caption="Click a column to sort. Each texture covers the corpus pair.",
                      cls="sortable panel")]
+    if no_alpha:
+        body.append("<h2>Skipped: images without alpha</h2><ul>"
+                    + "".join(f"<li>{pg.esc(p)}: {pg.esc(w)}</li>" for p, w in no_alpha) + "</ul>")
     if unreadable:
         body.append("<h2>Unreadable</h2><ul>" + "".join(f"<li>{pg.esc(p)}: {pg.esc(w)}</li>" for p, w in unreadable)
                     + "</ul>")
