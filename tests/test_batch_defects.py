@@ -138,6 +138,12 @@ def test_batch_help_lists_only_what_batch_accepts(command, single):
 
 # --- an unreachable scheduler ------------------------------------------------------------------
 
+# How the address check failed shows in its message (a refused connection, or the check's own
+# CONNECT_SECONDS deadline); the time taken is only bounded against a hang (the kernel's own
+# connection attempt gives up after about 2 minutes, a silent server never), never to decide a result
+HANG_GUARD = engine.CONNECT_SECONDS + 60
+
+
 def _free_port():
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
@@ -151,9 +157,10 @@ def test_unreachable_scheduler_fails_quickly_naming_it(tmp_path, capsys):
     t0 = time.monotonic()
     rc = main(["batch", "eval", str(src), "-o", str(tmp_path / "out"), "--scheduler", address, "--quiet"])
     dt = time.monotonic() - t0
-    assert rc == 2 and dt < engine.CONNECT_SECONDS + 10, dt  # (a refused connection: at once; generous bound)
+    assert rc == 2 and dt < HANG_GUARD, dt
     err = capsys.readouterr().err
     assert address in err and "scheduler" in err and len(err.strip().splitlines()) == 1, err
+    assert "refused" in err.lower(), err
     assert not (tmp_path / "out").exists()
 
 
@@ -228,9 +235,9 @@ def test_a_dask_scheduler_passes_the_check():
 def test_a_scheduler_address_that_is_not_a_dask_scheduler_fails_quickly_naming_it(tmp_path, capsys, kind):
     """A server that takes the connection but is silent or speaks another protocol (Dask's own
     client failed there with a traceback, or waited its whole timeout), and an address whose
-    connection is never answered (``_Unanswered``, on loopback): exit 2 within the connection
-    check's time (``CONNECT_SECONDS``; the bound here is generous: a slow machine must not fail
-    it), one line naming the address and what happened, nothing written."""
+    connection is never answered (``_Unanswered``, on loopback): exit 2 after the connection
+    check's own deadline (``CONNECT_SECONDS``, which its message names) at most, one line naming
+    the address and what happened, nothing written."""
     src = tmp_path / "tex"
     _textures(src, n=1)
     if kind == "unanswered":
@@ -248,9 +255,10 @@ def test_a_scheduler_address_that_is_not_a_dask_scheduler_fails_quickly_naming_i
     assert rc == 2, err
     assert address in err and "scheduler" in err and len(err.strip().splitlines()) == 1, err
     assert "Traceback" not in err
-    said = {"silent": "sent no Dask handshake", "http": "not a Dask scheduler", "unanswered": "no answer"}[kind]
+    said = {"silent": f"sent no Dask handshake in {engine.CONNECT_SECONDS} s", "http": "not a Dask scheduler",
+            "unanswered": f"no answer in {engine.CONNECT_SECONDS} s"}[kind]
     assert said in err, err
-    assert dt < engine.CONNECT_SECONDS + 10, dt
+    assert dt < HANG_GUARD, dt
     assert not (tmp_path / "out").exists()
 
 
