@@ -489,7 +489,9 @@ def _self_contained(c: Container, out_path) -> SelfContained:
     doc = c.doc
     glb = os.fspath(out_path).lower().endswith(".glb")
     buffers, images = _items(doc, "buffers"), _items(doc, "images")
-    views = doc.setdefault("bufferViews", []) if glb else _items(doc, "bufferViews")
+    views = _items(doc, "bufferViews")
+    if glb:
+        doc["bufferViews"] = views
     out = SelfContained()
     # every image URI checked under the policy first: a refused one is an error, nothing written
     for i, im in enumerate(images):
@@ -511,7 +513,7 @@ def _self_contained(c: Container, out_path) -> SelfContained:
             if isinstance(v, dict) and isinstance(v.get("buffer"), int) and v["buffer"] in shift:
                 k = v["buffer"]
                 v["buffer"] = 0
-                if shift[k]:
+                if shift[k] and isinstance(v.get("byteOffset", 0), int):
                     v["byteOffset"] = v.get("byteOffset", 0) + shift[k]
         for i, im in enumerate(images):
             uri = im.get("uri")
