@@ -168,27 +168,51 @@ def test_eval_counts_read_in_the_singular(tmp_path, leaf, capsys):
 # ---- the wait for the kernels compiled before a command runs ---------------------------------
 
 STUB = """
-import sys, time
+import os, sys, time
 for f in sys.argv[1:]:
-    time.sleep(float(dict(a.split("=") for a in {delays!r}.split(","))[f]))
+    while not os.path.exists(os.path.join({gate!r}, "go-" + f)):  # the test's clock says when
+        time.sleep(0.001)
     print(f, flush=True)
 """
+HANG_GUARD = 300  # seconds: a stub that never reports fails the test instead of hanging it
 
 
 class _Clock:
-    """The waiting loop's clock, virtual: ``sleep`` advances it by what was asked (after a real
-    millisecond, so that the stub processes run on), ``perf_counter`` reads it. The cadence the
-    test checks is then the loop's own, whatever the machine's load."""
+    """The waiting loop's clock, virtual: ``sleep`` advances it by what was asked, ``perf_counter``
+    reads it. The compile processes (stubs) are driven by it: once the clock has passed the time a
+    family takes (``delays``, one after the other in its process), the stub is told to report it
+    (a file ``go-FAMILY`` in ``gate``) and the clock waits until it has (and, for its last family,
+    until the process has ended). What the loop sees at each virtual time is then the same on any
+    machine, however loaded."""
 
-    def __init__(self):
+    def __init__(self, gate, delays):
         self.t = 0.0
+        self.gate, self.delays = gate, dict(a.split("=") for a in delays.split(","))
+        self.started, self.released = None, set()
 
     def perf_counter(self):
         return self.t
 
     def sleep(self, s):
-        real_time.sleep(0.001)
         self.t += max(s, 0.001)  # a real sleep always takes some time
+        for g, p, _, _ in self.started.procs if self.started else []:
+            at = 0.0
+            for i, f in enumerate(g):
+                at += float(self.delays[f])
+                if at > self.t or f in self.released:
+                    continue
+                (self.gate / f"go-{f}").touch()
+                self.released.add(f)
+                deadline = real_time.monotonic() + HANG_GUARD
+                while f not in self.started.done():
+                    assert real_time.monotonic() < deadline and p.poll() is None, f"the stub never reported {f}"
+                    real_time.sleep(0.001)
+                if i == len(g) - 1:
+                    p.wait(HANG_GUARD)
+
+
+def _stub(gate, delays):
+    return lambda group, evaluation=False: [sys.executable, "-c", STUB.format(gate=str(gate)), *group]
 
 
 class _Stamped:
@@ -211,17 +235,17 @@ class _Stamped:
         return False
 
 
-def test_waiting_for_the_compile_shows_progress(monkeypatch):
-    """Slow compile processes (stubs that sleep): while the command waits for them, a line at
-    least every PROGRESS_EVERY seconds says which families are done, which still compile, and
-    the time so far (on a virtual clock: no timing of this machine is asserted)."""
+def test_waiting_for_the_compile_shows_progress(monkeypatch, tmp_path):
+    """Slow compile processes (stubs that report each family when the virtual clock has passed
+    its time): while the command waits for them, a line at least every PROGRESS_EVERY seconds
+    says which families are done, which still compile, and the time so far (no timing of this
+    machine is asserted)."""
     delays = "vq4=0.3,synth=1.6,wavelet=1.2,trace=0.2,vq2=0.2,omm=0.2,budget=0.2"
-    clock = _Clock()
+    clock = _Clock(tmp_path, delays)
     monkeypatch.setattr(precompile, "time", clock)
     monkeypatch.setattr(precompile, "PROGRESS_EVERY", 0.4)
     monkeypatch.setattr(precompile, "uncached", lambda families: list(families))
-    monkeypatch.setattr(precompile, "_command", lambda group, evaluation=False: [
-        sys.executable, "-c", STUB.format(delays=delays), *group])
+    monkeypatch.setattr(precompile, "_command", _stub(tmp_path, delays))
     monkeypatch.delenv("OMAPS_PRECOMPILE", raising=False)
     monkeypatch.setenv("OMAPS_PROGRESS", "1")
     monkeypatch.setattr(precompile, "_cores", lambda: 2)
@@ -232,6 +256,7 @@ def test_waiting_for_the_compile_shows_progress(monkeypatch):
     args = type("A", (), {"command": "eval", "schemes": "vq4-synth"})()
     started = precompile.compile_first(args)
     assert started is not None
+    clock.started = started
     assert "about" in err.lines[0][1]
     t0 = clock.t
     precompile.finish_ahead(started)
@@ -299,17 +324,22 @@ def test_status_when_every_family_is_done_but_the_processes_run_on(tmp_path):
     assert not re.search(r"compiling +\(", line), line
 
 
-def test_a_silent_compile_is_waited_for(monkeypatch, capsys):
-    """Off a terminal (no OMAPS_PROGRESS) the compile still runs first and is waited for, silently
-    (the wait loop once read the time of a line it had not printed: TypeError)."""
+def test_a_silent_compile_is_waited_for(monkeypatch, capsys, tmp_path):
+    """Off a terminal (no OMAPS_PROGRESS) the compile still runs first and is waited for, silently,
+    over several turns of the wait loop (the wait loop once read the time of a line it had not
+    printed: TypeError)."""
+    delays = "square=0.3,micromap=0.2"
+    clock = _Clock(tmp_path, delays)
+    monkeypatch.setattr(precompile, "time", clock)
     monkeypatch.setenv("OMAPS_PROGRESS", "0")
     monkeypatch.delenv("OMAPS_PRECOMPILE", raising=False)
     monkeypatch.setattr(precompile, "uncached", lambda families: list(families))
-    monkeypatch.setattr(precompile, "_command", lambda group, evaluation=False: [sys.executable, "-c", STUB.format(
-        delays="square=0.3,micromap=0.2"), *group])
+    monkeypatch.setattr(precompile, "_command", _stub(tmp_path, delays))
     args = type("A", (), {"command": "eval", "paths": [], "schemes": "sq16,tri3"})()
     started = precompile.compile_first(args)
     assert started is not None
+    clock.started = started
     precompile.finish_ahead(started)
+    assert clock.t >= 0.3 and clock.released == {"square", "micromap"}
     assert all(p.poll() is not None for _, p, _, _ in started.procs)
     assert capsys.readouterr().err == ""
