@@ -229,6 +229,8 @@ def test_python_examples_run(tmp_path, page):
     env.pop("OMAPS_PROGRESS", None)
     r = subprocess.run([sys.executable, str(script)], cwd=repo, env=env, capture_output=True, text=True)
     assert r.returncode == 0, f"a python example of {_rel(page)} failed:\n{r.stderr[-4000:]}"
+    # run from the repository root, an example writes only under out/ (git-ignored)
+    assert sorted(os.listdir(repo)) in ([], ["out"]), f"{_rel(page)} wrote {sorted(os.listdir(repo))} beside out/"
 
 
 def _results_module():
