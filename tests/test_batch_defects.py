@@ -232,7 +232,8 @@ def test_a_dask_scheduler_passes_the_check():
 
 
 @pytest.mark.parametrize("kind", ["silent", "http", "unanswered"])
-def test_a_scheduler_address_that_is_not_a_dask_scheduler_fails_quickly_naming_it(tmp_path, capsys, kind):
+def test_a_scheduler_address_that_is_not_a_dask_scheduler_fails_quickly_naming_it(tmp_path, capsys, monkeypatch,
+                                                                                    kind):
     """A server that takes the connection but is silent or speaks another protocol (Dask's own
     client failed there with a traceback, or waited its whole timeout), and an address whose
     connection is never answered (``_Unanswered``, on loopback): exit 2 after the connection
@@ -244,6 +245,8 @@ def test_a_scheduler_address_that_is_not_a_dask_scheduler_fails_quickly_naming_i
         server = _Unanswered()
     else:
         server = _Server(b"HTTP/1.1 400 Bad Request\r\n\r\n" if kind == "http" else None)
+    if kind == "http":  # its reply is read whenever the server's thread sends it (never a race with the deadline)
+        monkeypatch.setattr(engine, "CONNECT_SECONDS", HANG_GUARD)
     address = server.address
     try:
         t0 = time.monotonic()
