@@ -199,6 +199,8 @@ def test_output_never_names_a_file_outside_the_root(tree, capsys):
         assert real.startswith(root + os.sep), (u, real)
     rc, err = run(capsys, "omm", "--verify", out_dir / "scene.gltf")
     assert rc == 0, err
+
+
 def test_sizes_over_the_cap(tree, capsys, monkeypatch):
     tmp, asset, outside, scene = tree
     blob = (asset / "scene.bin").read_bytes()

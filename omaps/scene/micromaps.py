@@ -18,7 +18,6 @@ facts (record layout, level limit, sizes, record checks) are ``omm_format``'s.
 from __future__ import annotations
 
 import base64
-import os
 from dataclasses import dataclass, field
 
 import numpy as np
