@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import contextlib
 import types
+from pathlib import Path
 from unittest import mock
 
 import numpy as np
@@ -324,6 +325,7 @@ def test_the_page_check_finds_clipped_and_overlapping_text(tmp_path):
 @pytest.fixture(scope="module")
 def quad_report(tmp_path_factory):
     from gltf_files import write_quad_gltf
+
     from omaps.report import build_report
 
     d = tmp_path_factory.mktemp("layout")
@@ -374,7 +376,7 @@ def settings_line(path) -> str:
     import html
     import re
 
-    text = open(path, encoding="utf-8").read()
+    text = Path(path).read_text(encoding="utf-8")
     line = re.search(r'<p class="settings">Settings: (.*?)</p>', text).group(1)
     return html.unescape(re.sub(r"<[^>]+>", "", line))
 
@@ -389,6 +391,7 @@ def test_settings_name_the_materials_own_settings(quad_report):
 
 def test_settings_name_the_overrides(tmp_path):
     from gltf_files import write_quad_gltf
+
     from omaps import MaterialRules
     from omaps.report import build_report
 
@@ -417,7 +420,7 @@ def test_material_panel_colours_are_in_its_caption(quad_report):
 
     from omaps import states
 
-    text = open(quad_report, encoding="utf-8").read()
+    text = Path(quad_report).read_text(encoding="utf-8")
     figures = re.findall(r'<figure><img src="data:image/png;base64,([^"]+)"[^>]*alt="material [^"]*">'
                          r"<figcaption>(.*?)</figcaption>", text)
     assert figures
