@@ -106,9 +106,8 @@ def cmd_eval(a) -> int:
         print(f"omaps: skipping {plural(len(res.skipped_other), 'file')} without an image extension "
               f"(e.g. {res.skipped_other[0]})", file=sys.stderr)
     if res.no_alpha:
-        path, why = res.no_alpha[0]
         print(f"omaps: skipped {plural(len(res.no_alpha), 'image')} without alpha, not alpha masks (--channel "
-              f"reads one of their bands instead): e.g. {path} ({why})", file=sys.stderr)
+              f"reads one of their bands instead): e.g. {res.no_alpha[0][0]} ({res.no_alpha[0][1]})", file=sys.stderr)
     if res.small:
         print(f"omaps: skipped {plural(len(res.small), 'texture')} smaller than {a.min_size} px", file=sys.stderr)
     print(res.heading())
