@@ -210,6 +210,11 @@ def parse_schemes(text: str | Scheme | Sequence[str | Scheme], kinds: Sequence[s
     Raises an ``InputTypeError`` naming ``param`` for anything else, an ``InputError`` for an
     unknown scheme, for none at all, or for a scheme whose kind (``kinds``) ``command`` cannot use.
     """
+    param = checks.text(param, "param")
+    command = checks.text(command, "command")
+    if isinstance(kinds, str) or not isinstance(kinds, (list, tuple)) or not all(isinstance(k, str) for k in kinds):
+        raise InputTypeError(f"kinds must be a tuple of scheme kinds ({', '.join(KINDS)}), got {kinds!r:.60}",
+                             param="kinds")
     if isinstance(text, (str, Scheme)):
         items: list[object] = [text]
     elif isinstance(text, (list, tuple)):

@@ -60,6 +60,7 @@ from ..flag_table import MARGIN, box_flag, flag_table
 from ..parallel import fetch_add
 from ..raster import rows_flag
 from ..sampling import FootprintGrid
+from ..checks import typed
 
 __all__ = ["bake_micromaps", "bake_micromap_rows", "dynamic_levels", "micro_starts", "check_level",
            "check_uv_triangles", "flag_table", "locality_order", "GROW_TEXEL", "MAX_LEVEL"]
@@ -71,6 +72,7 @@ __all__ = ["bake_micromaps", "bake_micromap_rows", "dynamic_levels", "micro_star
 GROW_TEXEL = 2.0 ** -20
 
 
+@typed
 def check_level(level: object, name: str = "level") -> int:
     """A subdivision level of the APIs (0 .. 12); an ``InputError`` naming ``name`` otherwise."""
     from ..checks import integer
@@ -399,6 +401,7 @@ def micro_starts(levels: ArrayLike) -> np.ndarray:
     return np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64)
 
 
+@typed
 def bake_micromaps(grid: FootprintGrid, tris_uv: ArrayLike, levels: int | ArrayLike, grow: float = 0.0,
                    sat: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Micromaps of UV triangles (T, 3, 2), triangle t at ``levels[t]`` (or one level for all).
@@ -438,6 +441,7 @@ def bake_micromaps(grid: FootprintGrid, tris_uv: ArrayLike, levels: int | ArrayL
     return out, starts
 
 
+@typed
 def bake_micromap_rows(grid: FootprintGrid, tris_uv: ArrayLike, level: int, grow: float = 0.0) -> np.ndarray:
     """``bake_micromaps`` at one level: states (T, 4**level)."""
     level = check_level(level)
@@ -462,6 +466,7 @@ def texel_areas(tris_uv, width: int, height: int) -> np.ndarray:
     return out
 
 
+@typed
 def dynamic_levels(tris_uv: ArrayLike, width: int, height: int, scale: float, max_level: int) -> np.ndarray:
     """Per-triangle level from its texel area: the smallest level whose micro-triangles cover at
     most ``scale``² texels each (as the OMM SDKs' dynamic subdivision scale), capped at

@@ -39,6 +39,7 @@ from ..pair import square_uv
 from ..sampling import FootprintGrid
 from ..flag_table import MARGIN, box_flag, flag_table
 from ..parallel import fetch_add
+from ..checks import typed
 
 __all__ = ["bake_pair_squares", "bake_pair_flags", "or_downsample", "flags_to_states", "MAX_SQUARE",
            "check_square_size"]
@@ -46,6 +47,7 @@ __all__ = ["bake_pair_squares", "bake_pair_flags", "or_downsample", "flags_to_st
 MAX_SQUARE = 128
 
 
+@typed
 def check_square_size(n: object, param: str = "n") -> int:
     """A square map size: a power of two from 1 to MAX_SQUARE (an ``InputError`` naming ``param``)."""
     from ..checks import integer
@@ -275,6 +277,7 @@ def _bake_pairs(sat, grid, off, w, h, uv, has_b, n, grow, out, n_workers):
                             buf_b, st_i, st_j, st_n)
 
 
+@typed
 def bake_pair_flags(grid: FootprintGrid, corner_uv: ArrayLike, has_b: ArrayLike, n: int,
                     grow: float = 0.0) -> np.ndarray:
     """Footprint flags (P, n, n) uint8 of the pairs' square maps (0: a cell no hit reaches).
@@ -303,6 +306,7 @@ def bake_pair_flags(grid: FootprintGrid, corner_uv: ArrayLike, has_b: ArrayLike,
     return out
 
 
+@typed
 def bake_pair_squares(grid: FootprintGrid, corner_uv: ArrayLike, has_b: ArrayLike, n: int,
                       grow: float = 0.0) -> np.ndarray:
     """States (P, n, n) of the pairs' N x N square maps, ``map[j, i]`` (0 T, 1 O, 2 C).

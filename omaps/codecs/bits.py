@@ -94,8 +94,16 @@ def kernel_bytes(data) -> np.ndarray:
     of bytes) would cost a second compile of every decoder and lookup it reaches."""
     if isinstance(data, (bytes, bytearray, memoryview)):
         return np.frombuffer(bytearray(data), dtype=np.uint8)
-    b = np.ascontiguousarray(data, dtype=np.uint8)
-    return b if b.flags.writeable else b.copy()
+    if isinstance(data, np.ndarray) and data.dtype == np.uint8:
+        b = np.ascontiguousarray(data)
+        return b if b.flags.writeable else b.copy()
+    from ..checks import array
+    from ..errors import InputError
+
+    a = array(data, "data", kinds="iu")
+    if a.size and (a.min() < 0 or a.max() > 255):
+        raise InputError("data must hold bytes 0..255", param="data")
+    return np.ascontiguousarray(a, dtype=np.uint8)
 
 
 def unpack_many(blocks, pos, width) -> np.ndarray:

@@ -36,10 +36,12 @@ from __future__ import annotations
 
 import numpy as np
 from numba import njit
+from numpy.typing import ArrayLike
 
 from ..birdcurve import MAX_LEVEL
 from ..errors import InputError
 from .bits import bit_length, get_bits, kernel_bytes
+from ..checks import typed
 
 __all__ = ["ref_bits", "build", "pack", "encode", "decode", "lookup", "blob_bits", "check", "HEADER_BITS", "csm_build", "csm_encode",
            "csm_decode", "csm_lookup", "csm_bits", "csm_pack", "csm_check"]
@@ -52,6 +54,7 @@ def ref_bits(n_nodes: int) -> int:
     return int(n_nodes + 2).bit_length()
 
 
+@typed
 def blob_bits(n_nodes: int, n_maps: int) -> int:
     """Exact size in bits of a set's blob: 32 + W · (4 N + P)."""
     return HEADER_BITS + ref_bits(n_nodes) * (4 * int(n_nodes) + int(n_maps))
@@ -127,14 +130,19 @@ def _build(maps, level):
 
 
 def _check(maps, level: int) -> np.ndarray:
-    if not isinstance(level, (int, np.integer)) or not 0 <= level <= MAX_LEVEL:
-        raise InputError(f"a csm micromap's level is an integer in 0..{MAX_LEVEL}, got {level!r}")
-    a = np.ascontiguousarray(maps, dtype=np.uint8)
+    from ..checks import array, integer
+
+    level = integer(level, "level", 0, MAX_LEVEL)
+    a = array(maps, "maps", kinds="biu")
+    if a.size and (a.min() < 0 or a.max() > 2):
+        raise InputError(f"csm stores micromaps of states 0..2", param="maps")
+    a = np.ascontiguousarray(a, dtype=np.uint8)
     if a.ndim != 2 or a.shape[1] != 4 ** level or (a.size and a.max() > 2):
         raise InputError(f"csm stores level-{level} micromaps (P, {4 ** level}) of states 0..2, got shape {a.shape}")
     return a
 
 
+@typed
 def build(maps, level: int) -> tuple[np.ndarray, np.ndarray]:
     """The merged DAG of micromaps (P, 4^L): (nodes (N, 4) int64: each distinct mixed node's
     children's references, roots (P,) int64: each micromap's root reference); a reference is a
@@ -172,11 +180,20 @@ def _pack(nodes, roots, w, out):
         pos += w
 
 
-def pack(nodes, roots) -> bytes:
+@typed
+def pack(nodes: ArrayLike, roots: ArrayLike) -> bytes:
     """The blob of a merged DAG (``build``'s nodes and any roots: a micromap's root may be listed
     for each triangle that uses it), ``ceil(blob_bits / 8)`` bytes."""
-    nodes = np.ascontiguousarray(nodes, dtype=np.int64).reshape(-1, 4)
-    roots = np.ascontiguousarray(roots, dtype=np.int64).ravel()
+    from ..checks import array
+
+    nodes = array(nodes, "nodes", kinds="iu", dtype=np.int64)
+    if nodes.size % 4:
+        raise InputError(f"nodes must have shape (M, 4), got {nodes.shape}", param="nodes")
+    nodes = np.ascontiguousarray(nodes).reshape(-1, 4)
+    roots = np.ascontiguousarray(array(roots, "roots", kinds="iu", dtype=np.int64)).ravel()
+    if (nodes.size and (nodes.min() < 0 or nodes.max() >= 3 + len(nodes))) or (
+            roots.size and (roots.min() < 0 or roots.max() >= 3 + len(nodes))):
+        raise InputError("nodes and roots must hold references 0 .. 2 + M", param="nodes")
     if len(nodes) >= 1 << 32:
         raise InputError("a csm set holds fewer than 2^32 mixed nodes")
     out = np.zeros(-(-blob_bits(len(nodes), len(roots)) // 8), np.uint8)
@@ -184,6 +201,7 @@ def pack(nodes, roots) -> bytes:
     return out.tobytes()
 
 
+@typed
 def encode(maps, level: int) -> tuple[bytes, int]:
     """A set of micromaps (P, 4^L) -> (its blob, ``ceil(blob_bits / 8)`` bytes; the number N of
     distinct mixed nodes)."""
@@ -242,6 +260,7 @@ _PROBLEMS = {1: "a node references itself, a later node or no node (nodes are st
              2: "a root references no node", 3: "a root's descent is deeper than the level"}
 
 
+@typed
 def check(data, level: int, n_maps: int) -> np.ndarray:
     """``data`` (bytes or uint8) as the uint8 array of a level-``level`` set of ``n_maps``
     micromaps, after checking every field a lookup reads: an InputError unless the node count,
@@ -264,6 +283,8 @@ def check(data, level: int, n_maps: int) -> np.ndarray:
     if not isinstance(n_maps, (int, np.integer)) or n_maps < 0:
         raise InputError(f"a csm set's micromap count is a non-negative integer, got {n_maps!r}")
     buf = kernel_bytes(data)
+    if buf.ndim != 1:
+        raise InputError(f"data must be bytes or a 1-D uint8 array, got shape {buf.shape}", param="data")
     if len(buf) * 8 < HEADER_BITS:
         raise InputError(f"a csm set is at least {HEADER_BITS} bits (its node count), got {8 * len(buf)}")
     n = int(get_bits(buf, 0, 32))
@@ -296,6 +317,7 @@ def _decode(data, level, n_maps):
     return out
 
 
+@typed
 def decode(data, level: int, n_maps: int) -> np.ndarray:
     """The ``n_maps`` micromaps (n_maps, 4^L) of a set's blob (bytes or uint8 array); an
     InputError for a blob ``check`` refuses."""

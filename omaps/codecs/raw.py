@@ -21,18 +21,40 @@ from __future__ import annotations
 
 import numpy as np
 from numba import njit
+from numpy.typing import ArrayLike
+from ..checks import typed
 
 __all__ = ["pack_states", "unpack_states", "row_bytes", "read_state", "square_lookup"]
 
 
+@typed
 def row_bytes(regions: int, bits: int = 2) -> int:
-    """Bytes of one packed row (at least one)."""
-    return max(1, (int(regions) * bits + 7) // 8)
+    """Bytes of one packed row (at least one); ``bits`` per state: 1, 2, 4 or 8."""
+    from ..checks import integer
+
+    regions = integer(regions, "regions", 0)
+    _check_bits(bits)
+    return max(1, (regions * bits + 7) // 8)
 
 
-def pack_states(rows, bits: int = 2) -> np.ndarray:
+def _check_bits(bits: int) -> None:
+    from ..errors import InputError
+
+    if bits not in (1, 2, 4, 8):
+        raise InputError(f"bits must be 1, 2, 4 or 8, got {bits}", param="bits")
+
+
+@typed
+def pack_states(rows: ArrayLike, bits: int = 2) -> np.ndarray:
     """Rows of states (R, K) -> packed (R, row_bytes(K, bits)) uint8."""
-    s = np.asarray(rows, dtype=np.uint8)
+    from ..checks import array
+    from ..errors import InputError
+
+    _check_bits(bits)
+    s = array(rows, "rows", ndim=(1, 2), kinds="biu")
+    if s.size and (s.min() < 0 or s.max() >= 1 << bits):
+        raise InputError(f"rows must hold states 0..{(1 << bits) - 1}", param="rows")
+    s = s.astype(np.uint8, copy=False)
     if s.ndim == 1:
         s = s[None]
     r, k = s.shape
@@ -49,9 +71,18 @@ def pack_states(rows, bits: int = 2) -> np.ndarray:
     return out
 
 
-def unpack_states(packed, regions: int, bits: int = 2) -> np.ndarray:
+@typed
+def unpack_states(packed: ArrayLike, regions: int, bits: int = 2) -> np.ndarray:
     """Inverse of ``pack_states``: (R, bytes) -> (R, regions) states."""
-    p = np.asarray(packed, dtype=np.uint8)
+    from ..checks import array, integer
+    from ..errors import InputError
+
+    _check_bits(bits)
+    regions = integer(regions, "regions", 0)
+    p = array(packed, "packed", ndim=(1, 2), kinds="iu")
+    if p.size and (p.min() < 0 or p.max() > 255):
+        raise InputError("packed must hold bytes 0..255", param="packed")
+    p = p.astype(np.uint8, copy=False)
     if p.ndim == 1:
         p = p[None]
     per_byte = 8 // bits

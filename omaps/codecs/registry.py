@@ -40,6 +40,7 @@ from .. import states
 from ..birdcurve import MAX_LEVEL
 from ..errors import InputError
 from .options import EFFORTS, ENCODERS
+from ..checks import typed
 
 __all__ = ["Codec", "CodecEntry", "PairMicromaps", "ENTRIES", "get_codec", "codec_names", "entry", "budget_options", "format_names",
            "COMPILE_FAMILIES", "ENCODERS", "EFFORTS", "check_choice"]
@@ -341,6 +342,7 @@ def entry(name: str) -> CodecEntry:
     return _BY_NAME[key]
 
 
+@typed
 def budget_options(variable: bool = False) -> tuple[str, ...]:
     """The codecs a byte budget may choose for a pair, in registry order: those of fixed bytes (a
     budget's default options) and, with ``variable``, also those whose bytes depend on the
@@ -348,6 +350,7 @@ def budget_options(variable: bool = False) -> tuple[str, ...]:
     return tuple(e.name for e in ENTRIES if e.budget and (variable or not e.variable))
 
 
+@typed
 def format_names() -> tuple[str, ...]:
     """Every format code's codec name, indexed by code (0: ``none``, no map)."""
     names = ["none"] * (1 + max(e.code for e in ENTRIES))
@@ -359,6 +362,7 @@ def format_names() -> tuple[str, ...]:
 _CACHE: dict[str, Codec] = {}
 
 
+@typed
 def codec_names() -> list[str]:
     """The compressed codecs (raw maps are ``sqN``, N a power of two up to 128)."""
     return list(_COMPRESSED)

@@ -41,6 +41,7 @@ from numba import njit
 from ..birdcurve import MAX_LEVEL
 from ..errors import InputError
 from .bits import bit_length, get_bits, kernel_bytes
+from ..checks import typed
 
 __all__ = ["header_bits", "tree_counts", "encoded_bits", "encode", "encode_many", "decode", "lookup", "blob_bits", "check",
            "pair_encode", "pair_lookup",
@@ -343,6 +344,7 @@ _PROBLEMS = {1: "its header runs past the end of the data", 2: "its node count n
              6: "its leaf states run past the end of the data", 7: "a leaf holds code 3, which is no state"}
 
 
+@typed
 def check(data, level: int, start: int = 0) -> int:
     """The size in bits of the level-``level`` succinct blob at bit ``start`` of ``data`` (bytes
     or uint8), after checking every field a lookup reads: an InputError unless the header, the
@@ -361,6 +363,8 @@ def check(data, level: int, start: int = 0) -> int:
     if not isinstance(level, (int, np.integer)) or not 0 <= level <= MAX_LEVEL:
         raise InputError(f"a succinct micromap's level is an integer in 0..{MAX_LEVEL}, got {level!r}")
     buf = kernel_bytes(data)
+    if buf.ndim != 1:
+        raise InputError(f"data must be bytes or a 1-D uint8 array, got shape {buf.shape}", param="data")
     if not isinstance(start, (int, np.integer)) or not 0 <= start <= 8 * len(buf):
         raise InputError(f"a succinct micromap's start bit is in 0..{8 * len(buf)}, got {start!r}")
     err, size = _validate(buf, np.int64(start), int(level))
@@ -370,11 +374,15 @@ def check(data, level: int, start: int = 0) -> int:
 
 
 def _check(m, level: int, many: bool = False) -> np.ndarray:
-    if not isinstance(level, (int, np.integer)) or not 0 <= level <= MAX_LEVEL:
-        raise InputError(f"a succinct micromap's level is an integer in 0..{MAX_LEVEL}, got {level!r}")
-    a = np.ascontiguousarray(m, dtype=np.uint8)
+    from ..checks import array, integer
+
+    level = integer(level, "level", 0, MAX_LEVEL)
+    a = array(m, "maps" if many else "m", kinds="biu")
+    if a.size and (a.min() < 0 or a.max() > 2):
+        raise InputError(f"a level-{level} micromap holds states 0..2", param="maps" if many else "m")
+    a = np.ascontiguousarray(a, dtype=np.uint8)
     shape = (a.shape[0], 4 ** level) if many and a.ndim == 2 else (4 ** level,)
-    if a.shape != shape or (a.size and a.max() > 2):
+    if a.shape != shape:
         raise InputError(f"a level-{level} micromap holds {4 ** level} states 0..2, got shape {a.shape}")
     return a
 
@@ -394,6 +402,7 @@ def encoded_bits(maps, level: int) -> np.ndarray:
     return _sizes(a, level, _offsets(level))
 
 
+@typed
 def encode_many(maps, level: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Micromaps (P, 4^L) -> (data, byte offsets (P + 1,), bits (P,)): blob i is
     ``data[offsets[i]:offsets[i + 1]]``, each starting on a byte, ``bits[i]`` of it used."""
@@ -440,20 +449,25 @@ def pair_encode(first, second, has_second, level: int) -> tuple[np.ndarray, np.n
     return data, pair_starts
 
 
+@typed
 def encode(m, level: int) -> bytes:
     """One micromap (4^L states in bird-curve order) -> its blob, ``ceil(bits / 8)`` bytes."""
     data, _, _ = encode_many(_check(m, level)[None], level)
     return data.tobytes()
 
 
-def decode(data, level: int, start: int = 0) -> np.ndarray:
+@typed
+def decode(data: bytes | bytearray | np.ndarray, level: int, start: int = 0) -> np.ndarray:
     """The micromap (4^L states) of the blob at bit ``start`` of ``data`` (bytes or uint8); an
     InputError for a blob ``check`` refuses."""
     buf = kernel_bytes(data)
+    if buf.ndim != 1:
+        raise InputError(f"data must be bytes or a 1-D uint8 array, got shape {buf.shape}", param="data")
     check(buf, level, start)
     return _decode(buf, int(start), int(level))
 
 
+@typed
 def succinct_bits(maps, level: int):
     """Exact size in bits of one micromap's blob (an int), or of each of many (P, 4^L) (an array)."""
     bits = encoded_bits(maps, level)

@@ -31,6 +31,7 @@ from ..names import EFFORTS, ENCODERS
 from ..schemes import EVAL_KINDS, Scheme, parse_schemes
 from ..texture import AlphaTexture, as_texture, load_alpha
 from ..workers import process_pool
+from ..checks import typed
 
 __all__ = ["EvalConfig", "TextureResult", "evaluate_texture", "evaluate_many", "mean_results", "scheme_map",
            "scheme_bits"]
@@ -136,6 +137,7 @@ class TextureResult:
     path: str | None = None
 
 
+@typed
 def evaluate_texture(texture, schemes, config: EvalConfig = EvalConfig(),
                      keep_maps: bool = False) -> TextureResult:
     """Every scheme's savings and bits on one texture (the corpus pair over its whole area).
@@ -216,8 +218,10 @@ def warm_up(schemes: list[Scheme], config: EvalConfig) -> None:
     evaluate_texture(tex, schemes, config)
 
 
+@typed
 def evaluate_many(items, schemes: list[Scheme], config: EvalConfig = EvalConfig(), jobs: int | None = None,
-                  keep_maps: bool = False, min_size: int = 0, progress: bool = True, unreadable: list | None = None):
+                  keep_maps: bool = False, min_size: int = 0, progress: bool = True, unreadable: list | None = None,
+                  errors: dict | None = None):
     """Evaluate textures (AlphaTexture objects, paths, or (name, array) pairs). Returns
     (results, skipped_small):
     results in input order; paths of textures below ``min_size`` in ``skipped_small``.
@@ -256,6 +260,8 @@ def evaluate_many(items, schemes: list[Scheme], config: EvalConfig = EvalConfig(
     skipped = [_label(it) for it, r in zip(items, out) if r is None]
     if unreadable is not None:
         unreadable += [(_label(it), r.problem) for it, r in zip(items, out) if isinstance(r, InputError)]
+        if errors is not None:  # the errors themselves (their parameter), by the input's label
+            errors.update((_label(it), r) for it, r in zip(items, out) if isinstance(r, InputError))
     return results, skipped
 
 
@@ -265,6 +271,7 @@ def _label(item) -> str:
     return item.name if isinstance(item, AlphaTexture) else str(item)
 
 
+@typed
 def mean_results(results: list[TextureResult], scheme_names: list[str]) -> dict[str, dict]:
     """Mean savings and mean bits per scheme over the textures (each texture weighs the same)."""
     out = {}

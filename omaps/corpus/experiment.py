@@ -223,12 +223,13 @@ def evaluate_corpus(paths: PathsOrArrays | None = None, schemes: str | Sequence[
         source = "the embedded procedural corpus"
     t0 = time.perf_counter()
     unreadable: list = []
+    errors: dict = {}
     results, small = evaluate_many(items, schemes, config, jobs, keep_maps=keep_maps, min_size=min_size,
-                                   progress=progress, unreadable=unreadable)
+                                   progress=progress, unreadable=unreadable, errors=errors)
     seconds = time.perf_counter() - t0
     for path, problem in unreadable:
         if path in named:  # a file named on the command line is bad input
-            raise InputError(problem, path)
+            raise errors.get(path) or InputError(problem, path)
     if not results:
         exc = (InputError("no texture could be read", ", ".join(files)) if unreadable
                else InputError(f"no texture is at least {min_size} px"))

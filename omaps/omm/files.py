@@ -15,6 +15,7 @@ import os
 import numpy as np
 
 from .. import atomic
+from ..checks import typed
 from ..errors import InputError
 from .. import omm_format
 from .inputs import check_spec
@@ -27,7 +28,8 @@ def check_target(folder) -> str:
     return atomic.check_folder(folder, omm_format.SUMMARY_FILE)
 
 
-def write(folder, result: OmmResult, extra_summary: dict | None = None) -> None:
+@typed
+def write(folder: str | os.PathLike[str], result: OmmResult, extra_summary: dict | None = None) -> None:
     """Write the folder whole or not at all (an earlier OMM folder there is replaced)."""
     with atomic.atomic_folder(folder, omm_format.SUMMARY_FILE) as tmp:
         write_into(tmp, result, extra_summary)
@@ -137,7 +139,8 @@ def _pair_blocks_info(summary: dict, path) -> int:
     return n
 
 
-def read(folder) -> OmmResult:
+@typed
+def read(folder: str | os.PathLike[str]) -> OmmResult:
     """Load and check an OMM folder."""
     folder = os.fspath(folder)
     if not os.path.isdir(folder):

@@ -19,6 +19,7 @@ from .. import pair, states
 from ..bake.square import check_square_size
 from ..birdcurve import micro_triangles
 from ..errors import InputError
+from ..checks import typed
 
 __all__ = ["level_of_size", "micro_cells", "expand", "merge", "corpus_pairing"]
 
@@ -43,6 +44,7 @@ def micro_cells(level: int, corners: tuple = tuple(pair.A_CORNERS)) -> np.ndarra
     return out
 
 
+@typed
 def expand(square_maps: np.ndarray, pair_of: np.ndarray, corners: np.ndarray) -> np.ndarray:
     """Square maps (P, N, N) -> micromaps (T, 4**log2 N) of triangles: triangle t in pair
     ``pair_of[t]`` with corner codes ``corners[t]`` (3,)."""
@@ -60,16 +62,22 @@ def expand(square_maps: np.ndarray, pair_of: np.ndarray, corners: np.ndarray) ->
     return out
 
 
+@typed
 def merge(micromaps: np.ndarray, has_b: np.ndarray | None = None) -> np.ndarray:
     """The corpus pairs' micromaps (P, 2, 4**L) -> square maps (P, N, N): each cell the OR of its
     two micro-triangles' flags. ``has_b[p]`` False: pair p has no triangle B (its cells stay C)."""
-    mm = np.asarray(micromaps)
-    p, _, m = mm.shape
+    from ..checks import array
+
+    mm = array(micromaps, "micromaps", ndim=3, kinds="iu")
+    p, two, m = mm.shape
     level = (m.bit_length() - 1) // 2
     n = 1 << level
+    if two != 2 or m != 4 ** level or (mm.size and (mm.min() < 0 or mm.max() > states.C)):
+        raise InputError(f"micromaps must be states 0..2 of shape (P, 2, 4**L), got {mm.shape}", param="micromaps")
     flags = states.STATE_TO_FLAG[mm]
     if has_b is not None:
-        flags[~np.asarray(has_b, dtype=bool), 1] = 0
+        hb = array(has_b, "has_b", shape=(p,), kinds="biu")
+        flags[~hb.astype(bool), 1] = 0
     acc = np.zeros((p, n * n), dtype=np.uint8)
     rows = np.arange(p)[:, None]
     for tri, corners in ((0, tuple(pair.A_CORNERS)), (1, tuple(pair.B_CORNERS))):

@@ -37,6 +37,7 @@ from ..errors import InputError
 from ..names import PROMOTIONS
 from ..omm_format import Packer
 from . import resolve
+from ..checks import typed
 
 # The square sources (--from SCHEME: the pair baker, the codecs, the encoding workers, the
 # expansion) are imported where they are used, so that baking from the texture loads none of
@@ -105,6 +106,19 @@ class OmmSettings:
     budget: int | None = None  # bytes of micromap data + records: levels and formats per triangle (omm.budget)
 
     def __post_init__(self):
+        from .. import checks
+
+        checks.choice(self.format, "format", tuple(omm_format.FORMAT_NAMES))
+        checks.choice(self.promotion, "promote", PROMOTIONS)
+        if self.dynamic_scale is not None:
+            checks.number(self.dynamic_scale, "dynamic", 0, open_lo=True)
+        checks.text(self.source, "source")
+        checks.integer(self.seed, "seed", 0)
+        checks.integer(self.jobs, "jobs", 1)
+        checks.boolean(self.special, "special")
+        checks.boolean(self.dedup, "dedup")
+        if self.budget is not None:
+            checks.integer(self.budget, "budget", 1)
         if self.format not in omm_format.FORMAT_NAMES:
             raise InputError(f"unknown OMM format {self.format!r} (choose from {', '.join(omm_format.FORMAT_NAMES)})",
                              param="format")
@@ -321,6 +335,7 @@ def _counts_of(s3: np.ndarray, omm: np.ndarray, starts: np.ndarray) -> np.ndarra
     return out
 
 
+@typed
 def build(geometries: list[Geometry], settings: OmmSettings = OmmSettings(),
           progress: Progress | None = None, *, plans: list[GeometryPlan] | None = None,
           chunks=None) -> OmmResult:

@@ -17,6 +17,7 @@ from ..pair import corner_uvs
 from ..rows import first_occurrences
 from .model import Scene
 from .pairing import pair_triangles
+from ..checks import typed
 
 __all__ = ["AlphaTriangles", "alpha_triangles", "pair_corner_uvs", "distinct_rows"]
 
@@ -45,6 +46,7 @@ class AlphaTriangles:
         return len(self.mesh_tri)
 
 
+@typed
 def alpha_triangles(scene: Scene, rules: MaterialRules = MaterialRules(), improve_pairing: bool = True) -> AlphaTriangles:
     alpha = scene.alpha_tested(rules)
     base = [0]

@@ -7,6 +7,7 @@ from __future__ import annotations
 import os
 
 from ..errors import InputError
+from ..checks import typed
 
 __all__ = ["SCENE_SUFFIXES", "SCENE_RULE", "is_scene_file", "check_scene_file"]
 
@@ -14,12 +15,14 @@ SCENE_SUFFIXES = (".gltf", ".glb")
 SCENE_RULE = "a scene must end in .gltf or .glb"
 
 
-def is_scene_file(path) -> bool:
+@typed
+def is_scene_file(path: str | os.PathLike[str]) -> bool:
     """Whether ``path`` is named as a scene (.gltf or .glb, any case)."""
     return os.fspath(path).lower().endswith(SCENE_SUFFIXES)
 
 
-def check_scene_file(path) -> None:
+@typed
+def check_scene_file(path: str | os.PathLike[str]) -> None:
     """An ``InputError`` naming ``path`` unless it is named as a scene (``SCENE_RULE``)."""
     if not is_scene_file(path):
         raise InputError(f"not a glTF scene: {SCENE_RULE}", os.fspath(path))

@@ -107,7 +107,9 @@ def load_scene(path, *, root=None, allow_outside: bool = False, max_bytes: int |
         >>> scene.counts()["alpha_triangles"]                         # doctest: +SKIP
         3840
     """
-    path = os.fspath(path)
+    from ..checks import path as checked_path
+
+    path = checked_path(path, "path")
     check_scene_file(path)
     if not os.path.exists(path):
         raise InputError("no such file", path)

@@ -66,6 +66,13 @@ class Primitive:
     unknown: np.ndarray | None = None  # (T,) bool: triangles whose maps must be all C (see scene.gltf)
 
     def __post_init__(self):
+        from .. import checks
+
+        for name in ("mesh", "index", "material"):
+            checks.integer(getattr(self, name), name)
+        checks.array(self.positions, "positions", shape=(None, 3), kinds="iuf")
+        checks.array(self.uvs, "uvs", shape=(None, 2), kinds="iuf")
+        checks.array(self.triangles, "triangles", shape=(None, 3), kinds="iu")
         if self.unknown is None:
             self.unknown = np.zeros(len(self.triangles), bool)
 

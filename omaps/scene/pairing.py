@@ -22,6 +22,8 @@ import numpy as np
 from numba import njit
 
 from ..pair import CORNER_00, CORNER_01, CORNER_10, CORNER_11, CORNERS  # noqa: F401 (CORNERS re-exported)
+from ..checks import typed
+from ..errors import InputError
 
 __all__ = ["Pairing", "pair_triangles", "weld", "adjacency", "CORNERS"]
 
@@ -235,12 +237,19 @@ def augment_paths(offsets, nbrs, mate, max_rounds):
     return mate
 
 
+@typed
 def pair_triangles(triangles: np.ndarray, positions: np.ndarray, material: np.ndarray,
                    selected: np.ndarray | None = None, improve: bool = True) -> Pairing:
     """Pair the selected triangles (default: all) of one mesh; see the module docstring."""
-    t = np.asarray(triangles, dtype=np.int64)
+    from ..checks import array
+
+    t = array(triangles, "triangles", shape=(None, 3), kinds="iu", dtype=np.int64)
     n = len(t)
-    selected = np.ones(n, bool) if selected is None else np.asarray(selected, bool)
+    positions = array(positions, "positions", shape=(None, 3), kinds="iuf", dtype=np.float64)
+    material = array(material, "material", shape=(n,), kinds="iu")
+    if n and (t.min() < 0 or t.max() >= len(positions)):
+        raise InputError(f"triangles must index the {len(positions)} positions", param="triangles")
+    selected = np.ones(n, bool) if selected is None else array(selected, "selected", shape=(n,), kinds="biu").astype(bool)
     welded = weld(positions)
     offsets, nbrs = adjacency(t, material, welded, selected)
     mate = greedy_matching(offsets, nbrs)

@@ -4,10 +4,16 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from ..errors import InputError
+from ..checks import typed
+
+if TYPE_CHECKING:
+    from ..scene import Scene
+    from .prepare import Prepared
 
 __all__ = ["Camera", "default_camera", "choose_default_camera", "gltf_camera", "framed", "DEFAULT_LIGHT",
            "SHADOW_TNEAR", "light_direction", "parse_camera", "parse_light"]
@@ -65,7 +71,8 @@ class Camera:
         return out
 
 
-def gltf_camera(scene, index: int) -> Camera:
+@typed
+def gltf_camera(scene: Scene, index: int) -> Camera:
     """Camera ``index`` of the file (``Scene.cameras``): its node's world position, view direction
     and up (roll), its vertical field of view; the aspect ratio is the traced image's. Raises
     ``InputError`` naming the file when there is no such camera or it cannot be used
@@ -121,6 +128,7 @@ def framed(box: np.ndarray, direction=FRONT, fov: float = 50.0, aspect: float = 
     return Camera(c + radius / math.sin(half) * d, c, fov)
 
 
+@typed
 def default_camera(bounds: np.ndarray, alpha_bounds: np.ndarray | None = None, aspect: float = 1.0) -> Camera:
     """The preferred default view, from the scene's ``bounds`` and the box of its alpha-tested
     geometry (``Scene.alpha_bounds``; None: the scene's). A wide scene (horizontally at least
@@ -129,8 +137,14 @@ def default_camera(bounds: np.ndarray, alpha_bounds: np.ndarray | None = None, a
     of its height, looking slightly up; a wide alpha box elsewhere is crossed the same way; any
     other alpha box (a tree) is framed whole, from the front, low, through its crown (a flat one,
     ground cover, from the front and well above)."""
-    bounds = np.asarray(bounds, float)
-    box = bounds if alpha_bounds is None else np.asarray(alpha_bounds, float)
+    from ..checks import array, number
+
+    bounds = array(bounds, "bounds", shape=(2, 3), kinds="iuf", dtype=np.float64)
+    box = bounds if alpha_bounds is None else array(alpha_bounds, "alpha_bounds", shape=(2, 3), kinds="iuf",
+                                                   dtype=np.float64)
+    number(aspect, "aspect", 0, open_lo=True)
+    if not (np.isfinite(bounds).all() and np.isfinite(box).all()):
+        raise InputError("bounds must be finite", param="bounds")
     size, asize = bounds[1] - bounds[0], box[1] - box[0]
     if _wide(bounds) and asize[0] >= 0.5 * size[0] and asize[2] >= 0.5 * size[2]:
         return _grazing(bounds)
@@ -161,7 +175,8 @@ def _candidates(box: np.ndarray, aspect: float) -> list[tuple[str, Camera]]:
     return out
 
 
-def choose_default_camera(prep, width: int, height: int) -> tuple[Camera, dict]:
+@typed
+def choose_default_camera(prep: Prepared, width: int, height: int) -> tuple[Camera, dict]:
     """The default camera of a prepared scene (``trace.prepare``), checked to show its
     alpha-tested geometry: ``default_camera`` if alpha-tested surfaces are the first surface hit
     in at least MIN_ALPHA_FRACTION of a small probe image (opaque-only traversal), otherwise the
@@ -170,7 +185,7 @@ def choose_default_camera(prep, width: int, height: int) -> tuple[Camera, dict]:
     from .embree import GEOM_ALPHA
     from .rays import run_primary
 
-    scene = prep.scene
+    scene: Scene = prep.scene  # type: ignore[assignment]
     bounds = scene.bounds()
     abox = scene.alpha_bounds(prep.rules)
     aspect = width / height
@@ -208,6 +223,7 @@ def _floats(text: str, n: int, what: str) -> np.ndarray:
     return v
 
 
+@typed
 def parse_camera(text: str) -> Camera | int:
     """A camera as ``omaps trace --camera`` writes it: ``X,Y,Z:TX,TY,TZ:FOV[:UX,UY,UZ]`` (eye,
     target, vertical field of view in degrees, optional up) gives a ``Camera``; ``gltf[:N]`` gives
@@ -250,6 +266,7 @@ def parse_camera(text: str) -> Camera | int:
     return cam
 
 
+@typed
 def parse_light(text: str | None) -> np.ndarray:
     """The unit direction towards the light from ``X,Y,Z`` text (None: ``DEFAULT_LIGHT``)."""
     try:

@@ -28,6 +28,7 @@ from ..text import count, format_table, plural
 from .camera import Camera, choose_default_camera, gltf_camera, light_direction, parse_camera, parse_light
 from .timing import TIMING_ROUNDS, time_side_by_side
 from .two_state import parse_modes
+from ..checks import typed
 
 if TYPE_CHECKING:
     from ..scene import Scene
@@ -393,6 +394,7 @@ def format_memory(report: dict, names: list) -> str:
     return head + "\n" + format_table(cols, rows)
 
 
+@typed
 def format_report(report: dict, names: list, shadows: bool) -> str:
     """A trace report (``TraceResult.report``) as ``omaps trace`` prints it: a heading line, one
     row per scheme, the opaque traversal and timings, and the 2-state errors when traced."""

@@ -4,16 +4,19 @@ exactly what ``none`` saw (differing pixels and shadow rays)."""
 from __future__ import annotations
 
 import numpy as np
+from ..checks import typed
 
 __all__ = ["differing_pixels", "summary", "coverage_error"]
 
 
+@typed
 def differing_pixels(a: PrimaryResult, b: PrimaryResult) -> int:
     """Pixels whose visible result differs: hit instance, geometry, triangle or distance."""
     d = (a.inst != b.inst) | (a.geom != b.geom) | (a.prim != b.prim) | (a.dist != b.dist)
     return int(np.count_nonzero(d))
 
 
+@typed
 def summary(run: SchemeRun, ref: SchemeRun, sm, w: int, h: int) -> dict:
     n = w * h
     p = run.primary
@@ -51,7 +54,8 @@ def summary(run: SchemeRun, ref: SchemeRun, sm, w: int, h: int) -> dict:
     return out
 
 
-def coverage_error(run, ref) -> dict:
+@typed
+def coverage_error(run: SchemeRun, ref: SchemeRun) -> dict:
     """Per-pixel visibility error of a 2-state run against the alpha-tested reference: pixels
     whose hit differs, split into those where the 2-state ray stopped earlier (a transparent
     region taken as opaque) and later (an opaque region taken as transparent)."""

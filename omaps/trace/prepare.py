@@ -15,6 +15,7 @@ from .lookups import state_function
 from .maps import build_scheme_maps
 from .rays import PrimaryResult, ShadowResult, run_primary, run_shadow
 from .tables import base_tables, scheme_tables
+from ..checks import typed
 
 __all__ = ["Prepared", "prepare", "SchemeRun", "trace_scheme"]
 
@@ -35,7 +36,9 @@ class Prepared:
     cache: dict = field(default_factory=dict)  # pair flags and encoded maps, for budget schemes (trace.budget)
 
 
-def prepare(scene, schemes, rules: MaterialRules = MaterialRules(), jobs: int = 1, progress: bool = False,
+@typed
+def prepare(scene: Scene, schemes: list[Scheme], rules: MaterialRules = MaterialRules(), jobs: int = 1,
+            progress: bool = False,
             embree_config: str = "") -> Prepared:
     """Pair, bake and store every scheme's maps (``schemes``: ``omaps.schemes.Scheme`` objects),
     and build the Embree scene.
@@ -86,6 +89,7 @@ class SchemeRun:
     deferred: ShadowResult | None = None
 
 
+@typed
 def trace_scheme(prep: Prepared, name: str | None, cam: np.ndarray, w: int, h: int, light=None, tnear: float = 0.0,
                  deferred: bool = False) -> SchemeRun:
     """Trace one scheme (``None``: opaque-only traversal, no filter at all)."""

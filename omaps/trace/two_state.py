@@ -30,7 +30,7 @@ MODES = PROMOTIONS  # nearest (majority), opaque, transparent, hashed
 def parse_modes(text) -> list[str]:
     """The 2-state rules of ``--two-state`` text (comma-separated ``MODES`` or ``all``; empty or
     None: none), or a list of them, checked and without repeats."""
-    if not text:
+    if text is None or (isinstance(text, (str, list, tuple)) and not text):
         return []
     if isinstance(text, str):
         modes = (list(MODES) if text.strip().lower() == "all"
