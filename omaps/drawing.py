@@ -184,12 +184,31 @@ def wrap_to(renderer, text: str, prop, length: float) -> str:
 def fit_texts(fig, items, min_fontsize: float = 5.0, rounds: int = 4) -> None:
     """Fit each text of ``items`` -- (Text, space) pairs, ``space(renderer)`` the display pixels
     it may run along its direction (a rotated text: its height) -- by breaking its lines at
-    spaces, then, where one word alone is longer, a smaller font. The figure is drawn between
-    rounds, so a layout engine (constrained or tight) places what the new lines take; the texts'
-    first strings are the ones wrapped each round."""
+    spaces, then, where one word alone is longer, a smaller font. The figure is laid out between
+    rounds (drawn without rendering pixels), so a layout engine (constrained or tight) places
+    what the new lines take; the texts' first strings are the ones wrapped each round. The
+    layout the texts settled in is kept (the engine is then set to none): call this last, just
+    before saving, on a figure made at the dpi it is saved at."""
     first = [(t, t.get_text()) for t, _ in items]
+    # (the images are hidden meanwhile: a layout does not depend on them, resampling them is slow)
+    images = [im for ax in fig.axes for im in ax.images if im.get_visible()]
+    for im in images:
+        im.set_visible(False)
+    try:
+        settled = _fit_rounds(fig, items, first, min_fontsize, rounds)
+    finally:
+        for im in images:
+            im.set_visible(True)
+    if settled and fig.get_layout_engine() is not None:
+        # the last layout is the one for these texts: kept, so that saving does not lay out again
+        # (a layout in figure fractions holds at any dpi)
+        fig.set_layout_engine("none")
+
+
+def _fit_rounds(fig, items, first, min_fontsize, rounds) -> bool:
+    """True when the last layout was made with the texts as they are left."""
     for _ in range(rounds):
-        fig.canvas.draw()
+        fig.draw_without_rendering()
         r = fig.canvas.get_renderer()
         changed = False
         for (t, space), (_, text) in zip(items, first):
@@ -205,7 +224,8 @@ def fit_texts(fig, items, min_fontsize: float = 5.0, rounds: int = 4) -> None:
                 t.set_text(new)
                 changed = True
         if not changed:
-            return
+            return True
+    return False
 
 
 def state_key_handles():

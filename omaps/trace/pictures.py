@@ -39,8 +39,9 @@ def heatmap(path: str, runs: dict, names: list[str], shadows: bool, scene: str |
     cols = min(len(shown), 4)
     rows = math.ceil(len(shown) / cols)
     h, w = imgs[0].shape
+    dpi = 110  # (laid out at the dpi it is saved at: fit_texts keeps that layout)
     fig, axes = plt.subplots(rows, cols, figsize=(3.2 * cols * w / h + 1.2, 3.4 * rows + 0.5), squeeze=False,
-                             constrained_layout=True)
+                             constrained_layout=True, dpi=dpi)
     what = "primary + shadow rays" if shadows else "primary rays"
     for ax, n, img in zip(axes.flat, shown, imgs):
         im = ax.imshow(img, cmap="inferno", vmin=0, vmax=vmax, interpolation="nearest")
@@ -65,7 +66,7 @@ def heatmap(path: str, runs: dict, names: list[str], shadows: bool, scene: str |
               + [(ax.title, lambda r, ax=ax: ax.get_window_extent(r).width) for ax in list(axes.flat)[:len(shown)]]
               + [(bar.ax.yaxis.label, lambda r: bar.ax.get_window_extent(r).height)])
     with atomic_path(path, suffix=".png") as tmp:
-        fig.savefig(tmp, dpi=110, format="png")
+        fig.savefig(tmp, dpi=dpi, format="png")
     plt.close(fig)
 
 
