@@ -339,8 +339,9 @@ def quad_report(tmp_path_factory):
 
 
 @needs_chromium
-def test_scene_report_text(quad_report):
-    found = text_boxes(quad_report)
+@pytest.mark.parametrize("size", [(1440, 900), (1280, 800), (1920, 1080)], ids=lambda s: f"{s[0]}x{s[1]}")
+def test_scene_report_text(quad_report, size):
+    found = text_boxes(quad_report, *size)
     assert len(found["boxes"]) > 40  # the headings, settings, table, captions were all found
     problems = page_problems(found)
     assert problems == [], "\n".join(problems)
