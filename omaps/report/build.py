@@ -164,8 +164,7 @@ def _materials_text(report: dict, prep) -> str:
     for m in used:
         mat = scene.materials[m]
         if mat.alpha_mode == "BLEND":
-            mode = (f"BLEND, {rules.blend} at {rules.blend_cutoff:g}" if rules.blend == "levels"
-                    else f"BLEND, cutoff {rules.blend_cutoff:g}")
+            mode = f"BLEND, blend rule {rules.blend}, blend cutoff {rules.blend_cutoff:g}"
         else:
             mode = f"MASK, cutoff {rules.cutoff if rules.cutoff is not None else mat.cutoff:g}"
         wrap_u, wrap_v = rules.wrap or mat.wrap_u, rules.wrap or mat.wrap_v
