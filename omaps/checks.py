@@ -319,6 +319,8 @@ def _matches(value: object, hint: Any) -> bool:
     if origin is not None:
         if origin in (Callable, collections.abc.Callable):
             return callable(value)
+        if origin is list and isinstance(value, tuple):  # (a tuple serves where a list is read)
+            origin = collections.abc.Sequence
         if not isinstance(origin, type) or not isinstance(value, origin):
             return not isinstance(origin, type)
         if origin in (list, collections.abc.Sequence) and len(args) == 1 and not isinstance(value, str):
@@ -331,6 +333,8 @@ def _matches(value: object, hint: Any) -> bool:
     if hint is bool:
         return isinstance(value, (bool, np.bool_))
     if isinstance(hint, type):
+        if getattr(hint, "_is_protocol", False):  # a protocol: what it needs, not a class
+            return not getattr(hint, "_is_runtime_protocol", False) or isinstance(value, hint)
         return isinstance(value, hint)
     return True  # a construct not checked here
 
@@ -348,7 +352,9 @@ def _describe(hint: Any) -> str:
     if origin is not None:
         args = typing.get_args(hint)
         name = getattr(origin, "__name__", str(origin))
-        return f"a {name} of {_describe(args[0])}" if name in ("list", "Sequence") and len(args) == 1 else f"a {name}"
+        if name in ("list", "Sequence") and len(args) == 1:
+            return f"a {name} of {_describe(args[0]).removeprefix('a ').removeprefix('an ')}"
+        return f"a {name}"
     names = {int: "an integer", float: "a number", bool: "True or False", str: "a string"}
     if hint in names:
         return names[hint]

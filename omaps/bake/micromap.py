@@ -401,7 +401,6 @@ def micro_starts(levels: ArrayLike) -> np.ndarray:
     return np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64)
 
 
-@typed
 def bake_micromaps(grid: FootprintGrid, tris_uv: ArrayLike, levels: int | ArrayLike, grow: float = 0.0,
                    sat: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Micromaps of UV triangles (T, 3, 2), triangle t at ``levels[t]`` (or one level for all).
@@ -441,7 +440,6 @@ def bake_micromaps(grid: FootprintGrid, tris_uv: ArrayLike, levels: int | ArrayL
     return out, starts
 
 
-@typed
 def bake_micromap_rows(grid: FootprintGrid, tris_uv: ArrayLike, level: int, grow: float = 0.0) -> np.ndarray:
     """``bake_micromaps`` at one level: states (T, 4**level)."""
     level = check_level(level)
