@@ -522,7 +522,8 @@ def dask_client(scheduler: str):
         if scheduler == "local":
             n = max(1, os.cpu_count() or 1)
             with dask.config.set(LOCAL_CONFIG):
-                cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=":0",
+                cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
+                                       dashboard_address="127.0.0.1:0",  # (loopback only, as the scheduler)
                                        silence_logs=logging.CRITICAL, loop=runner.loop, env=WORKER_ENV)
             stack.callback(_close, cluster)
             client = Client(cluster, loop=runner.loop)

@@ -250,7 +250,7 @@ if __name__ == "__main__":
 
         @contextlib.contextmanager
         def plain():
-            with LocalCluster(n_workers=1, threads_per_worker=1, processes=True, dashboard_address=":0") as c:
+            with LocalCluster(n_workers=1, threads_per_worker=1, processes=True, dashboard_address="127.0.0.1:0") as c:
                 with Client(c) as client:
                     yield client
         cluster = plain()
