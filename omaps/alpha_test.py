@@ -246,6 +246,17 @@ class StateRule:
         return {"mode": "cutoff", "cutoff": self.cutoff}
 
 
+def as_grid(value: object, param: str = "grid") -> FootprintGrid:
+    """A footprint grid (``omaps.sampling.FootprintGrid``) as it is; an ``AlphaTest`` gives its
+    ``grid()``; anything else raises an ``InputTypeError`` naming ``param``."""
+    if isinstance(value, AlphaTest):
+        return value.grid()
+    if not isinstance(value, FootprintGrid):
+        raise InputTypeError(f"{param} must be a FootprintGrid (AlphaTest.grid()) or an AlphaTest, got "
+                             f"{checks._show(value)}", param=param)
+    return value
+
+
 # ---- the glTF material rule -------------------------------------------------------------------
 
 @dataclass(frozen=True)

@@ -32,7 +32,7 @@ from .errors import InputError, InputTypeError
 F = TypeVar("F", bound=Callable[..., Any])
 
 __all__ = ["integer", "number", "boolean", "choice", "text", "path", "paths", "path_or_array", "paths_or_arrays",
-           "array", "size", "input_name", "grid", "typed"]
+           "array", "size", "input_name", "typed"]
 
 
 def _show(value: object) -> str:
@@ -215,19 +215,6 @@ def size(value: object, param: str = "size", hi: int = 8192) -> tuple[int, int]:
     w = integer(value[0], param, 1, hi)
     h = integer(value[-1], param, 1, hi)
     return w, h
-
-
-def grid(value: object, param: str = "grid") -> Any:
-    """A footprint grid (``omaps.sampling.FootprintGrid``); an ``AlphaTest`` gives its ``grid()``."""
-    from .alpha_test import AlphaTest
-    from .sampling import FootprintGrid
-
-    if isinstance(value, AlphaTest):
-        return value.grid()
-    if not isinstance(value, FootprintGrid):
-        raise InputTypeError(f"{param} must be a FootprintGrid (AlphaTest.grid()) or an AlphaTest, got "
-                             f"{_show(value)}", param=param)
-    return value
 
 
 # ---- the types of annotated parameters ------------------------------------------------------------

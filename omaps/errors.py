@@ -8,6 +8,7 @@ and names its own option for the parameter (``--level must be ...``).
 
 from __future__ import annotations
 
+import numbers
 import os
 import re
 from typing import Any
@@ -78,6 +79,8 @@ def check_count(value: object, param: str = "jobs") -> int | None:
     """
     if value is None:
         return None
-    from .checks import integer
-
-    return integer(value, param, 1)
+    if isinstance(value, bool) or not isinstance(value, numbers.Integral):
+        raise InputTypeError(f"{param} must be an integer >= 1, got {value!r:.60}", param=param)
+    if value < 1:
+        raise InputError(f"{param} must be >= 1, got {value}", param=param)
+    return int(value)

@@ -416,7 +416,9 @@ def bake_micromaps(grid: FootprintGrid, tris_uv: ArrayLike, levels: int | ArrayL
     ``InputTypeError`` / ``InputError`` naming it."""
     from .. import checks
 
-    grid = checks.grid(grid)
+    from ..alpha_test import as_grid
+
+    grid = as_grid(grid)
     grow = checks.number(grow, "grow", 0)
     t = np.ascontiguousarray(check_uv_triangles(tris_uv))
     lv_in = checks.array(levels, "levels", ndim=(0, 1), kinds="iu")

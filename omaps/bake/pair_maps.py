@@ -19,19 +19,15 @@ Example::
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
-
 import numpy as np
 from numpy.typing import ArrayLike
 
 from .. import checks, pair, states
+from ..alpha_test import AlphaTest, as_grid
 from ..errors import InputError
 from ..sampling import FootprintGrid
 from .micromap import bake_micromap_rows
 from .square import bake_pair_squares
-
-if TYPE_CHECKING:
-    from ..alpha_test import AlphaTest
 
 __all__ = ["bake_square", "bake_pair_triangles", "known_fraction", "texel_limit"]
 
@@ -41,14 +37,14 @@ def bake_square(grid: FootprintGrid | AlphaTest, n: int) -> np.ndarray:
 
     ``grid``: a footprint grid (``AlphaTest.grid()``) or the ``AlphaTest`` itself; ``n`` a power
     of two from 1 to 128. A wrong argument raises an ``InputTypeError`` / ``InputError`` naming it."""
-    return bake_pair_squares(checks.grid(grid), pair.PAIR_CORNER_UV, np.ones(1, bool), n)[0]
+    return bake_pair_squares(as_grid(grid), pair.PAIR_CORNER_UV, np.ones(1, bool), n)[0]
 
 
 def bake_pair_triangles(grid: FootprintGrid | AlphaTest, level: int) -> np.ndarray:
     """The per-triangle micromaps of the corpus pair: states (2, 4**level), A then B.
 
     ``grid``: a footprint grid or an ``AlphaTest``; ``level`` 0..12."""
-    return bake_micromap_rows(checks.grid(grid), pair.PAIR, level)
+    return bake_micromap_rows(as_grid(grid), pair.PAIR, level)
 
 
 def known_fraction(map_states: ArrayLike) -> float:
@@ -65,5 +61,5 @@ def texel_limit(grid: FootprintGrid | AlphaTest) -> float:
     regions are the cells (under ``nearest`` the most any map can save; under exact bilinear a
     finer map can save more, knowing the parts of a mixed cell on either side of the cut-off).
     ``grid``: a footprint grid or an ``AlphaTest``."""
-    f, w = checks.grid(grid).cells_within_texture()
+    f, w = as_grid(grid).cells_within_texture()
     return float((w * (f != states.FLAG_C)).sum() / w.sum())

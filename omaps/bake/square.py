@@ -285,7 +285,9 @@ def bake_pair_flags(grid: FootprintGrid, corner_uv: ArrayLike, has_b: ArrayLike,
     raises an ``InputTypeError`` / ``InputError`` naming it."""
     from .. import checks
 
-    grid = checks.grid(grid)
+    from ..alpha_test import as_grid
+
+    grid = as_grid(grid)
     n = check_square_size(n)
     grow = checks.number(grow, "grow", 0)
     uv = checks.array(corner_uv, "corner_uv", kinds="iuf", dtype=np.float64)
