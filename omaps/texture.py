@@ -242,7 +242,7 @@ def open_image(source, path) -> Image.Image:
     except UnidentifiedImageError:
         raise InputError("not an image Pillow can read", path) from None
     except Exception as exc:  # the third-party decode boundary, message kept
-        raise InputError(f"cannot decode image ({exc or type(exc).__name__})", path) from None
+        raise InputError(f"cannot decode image ({type(exc).__name__}: {exc})", path) from None
     try:
         im.load()
         if im.width <= 0 or im.height <= 0:
@@ -253,7 +253,7 @@ def open_image(source, path) -> Image.Image:
         raise
     except Exception as exc:  # as above: truncated data, bad chunks, unsupported variants
         im.close()
-        raise InputError(f"cannot decode image ({exc or type(exc).__name__})", path) from None
+        raise InputError(f"cannot decode image ({type(exc).__name__}: {exc})", path) from None
 
 
 def _alpha_from_image(im: Image.Image, name: str, path: str, channel) -> AlphaTexture:
