@@ -376,10 +376,14 @@ def get_codec(name: str) -> Codec:
     key = text(name, "name").strip().lower()
     if key not in _CACHE:
         m = re.fullmatch(r"sq(\d+)", key)
-        if m and key not in _BY_NAME:
-            from ..bake.square import check_square_size
+        if m and key not in _BY_NAME:  # its own message for a size that is no codec
+            from ..bake.square import MAX_SQUARE
 
-            key = f"sq{check_square_size(int(m.group(1)), 'N of sqN')}"  # its own message for a size that is no codec
+            n = int(m.group(1))
+            if not 1 <= n <= MAX_SQUARE or n & (n - 1):
+                raise InputError(f"unknown codec {name!r}: the N of sqN is a power of two from 1 to {MAX_SQUARE}, "
+                                 f"got {n}", param="name")
+            key = f"sq{n}"
         e = entry(key)
         if e.variable:
             raise InputError(f"{e.name} stores a pair's micromaps as trees of variable bytes (a byte budget's "
