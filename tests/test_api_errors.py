@@ -20,6 +20,7 @@ from hypothesis import strategies as st
 from PIL import Image
 
 import omaps
+from conftest import SCENES, needs_scenes
 from omaps.cli import main
 from omaps.cli.main import error_text
 from omaps.errors import InputError, InputTypeError
@@ -172,6 +173,16 @@ def test_trace_scene_takes_a_list_of_schemes(tmp_path):
     with pytest.raises(InputTypeError) as e:
         omaps.trace_scene(str(tmp_path / "missing.glb"), ["none", 4])
     assert e.value.param == "schemes"
+
+
+@needs_scenes
+def test_trace_scene_traces_a_list_of_schemes():
+    by_list = omaps.trace_scene(str(SCENES / "palm.glb"), ["none", omaps.get_scheme("tri3")], size="16x8", jobs=1)
+    assert by_list.passed and list(by_list.report["schemes"]) == ["none", "tri3"]
+    assert (by_list.report["camera"]["width"], by_list.report["camera"]["height"]) == (16, 8)
+    by_text = omaps.trace_scene(str(SCENES / "palm.glb"), "none,tri3", size=(16, 8), jobs=1)
+    key = "alpha_tests_per_primary_ray"
+    assert by_text.report["schemes"]["tri3"][key] == by_list.report["schemes"]["tri3"][key]
 
 
 @pytest.mark.parametrize("size", ["abc", "0", -3, 1.5, (4, "x"), None])
