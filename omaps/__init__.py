@@ -30,6 +30,14 @@ import os as _os
 # the caller set stays.
 _os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 
+# numba's cache keys each omaps kernel on the content of every module it imports, not on its own
+# file alone (``kernel_cache``): a kernel that inlines a codec's lookup or the registry's format
+# codes is recompiled when they change, never loaded stale
+from . import kernel_cache as _kernel_cache  # noqa: E402
+
+_kernel_cache.watch(_os.path.dirname(_os.path.abspath(__file__)), __name__)
+_kernel_cache.watch_numba()
+
 # the public names, imported on first use (PEP 562): ``import omaps`` (and so parsing a command
 # line, ``omaps omm --help``) loads neither numpy nor numba until a name is used
 _LAZY = {

@@ -2,10 +2,10 @@
 holds them, and their compile before the command runs -- in parallel processes, one per core,
 announced with an estimate and a line at least every ``PROGRESS_EVERY`` seconds.
 
-Kernels are compiled with ``cache=True``: once per machine (and per change of their source), then
-loaded in about a second. A *family* is the set of modules one kind of work compiles; a module
-counts as cached when numba's index of at least one of its kernels matches the module's current
-source (what numba itself checks before loading).
+Kernels are compiled with ``cache=True``: once per machine (and per change of their source or of
+any module they import: ``omaps.kernel_cache``), then loaded in about a second. A *family* is the
+set of modules one kind of work compiles; a module counts as cached when numba's index of at
+least one of its kernels matches that key (what numba itself checks before loading).
 
 The compile runs the library calls the commands make on tiny inputs written to a temporary
 folder (``python -m omaps.cli.precompile FAMILY...``; with no family: every one), so it compiles

@@ -6,10 +6,10 @@ per *distinct* (instance, triangle) of a ray -- Embree may report one hit twice 
 and a repeated report is one candidate and at most one alpha test -- and alpha tests. In record
 mode (deferred shadow rays) C candidates are recorded untested instead.
 
-numba's on-disk cache keys a kernel on its own file only: these filters compile the state
-functions of ``lookups`` and the codecs' ``block_state`` (format codes from the codec registry)
-into themselves, so a change there needs this file touched too (a change to the format codes
-did, and the hierarchical micromaps' state functions).
+These filters compile the state functions of ``lookups`` and the codecs' ``block_state`` (every
+registered codec's lookup, its format code a constant) into themselves; their cached kernels are
+keyed on every module they import, the registry and each codec's modules included
+(``omaps.kernel_cache``), so a new or changed codec recompiles them in the next process.
 """
 
 from __future__ import annotations

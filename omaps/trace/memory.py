@@ -28,9 +28,8 @@ misses per ray of a fully associative LRU cache of that many KiB shared by an 8 
 pixels: it starts empty at each tile, whose 64 rays run one after another in row-major order,
 each ray's lookups in the order the filter made them.
 
-numba's on-disk cache keys a kernel on its own file: the walks compile ``pair.hit_st``,
-``pair.uv_to_cell`` and ``birdcurve.bary_to_index`` into themselves, so a change there needs this
-file touched too.
+The walks compile ``pair.hit_st``, ``pair.uv_to_cell`` and ``birdcurve.bary_to_index`` into
+themselves; their cached kernels are keyed on those modules too (``omaps.kernel_cache``).
 """
 
 from __future__ import annotations
