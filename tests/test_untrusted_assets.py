@@ -93,7 +93,7 @@ def test_buffer_out_of_the_folder_refused_then_allowed(tree, capsys, case):
     assert rc == 2
     assert str(scene) in err and repr(uri) in err and says in err
     assert str((outside / "secret.bin").resolve()) in err  # where it resolves
-    assert "--root DIR" in err and "--allow-outside" in err
+    assert "(--root: a folder holding both; --allow-outside: if you trust this asset)" in err
     assert not out.exists() and not any(p.name.startswith(".omaps") for p in tmp.iterdir())
     # allowed: a root holding both, or no check at all; the output is made of the outside quad
     for options in (["--root", tmp], ["--allow-outside"]):
@@ -235,8 +235,9 @@ def test_sizes_over_the_cap(tree, capsys, monkeypatch):
 def test_library_keywords(tree):
     tmp, asset, outside, scene = tree
     set_uri(scene, "buffers", "../outside/secret.bin")
-    with pytest.raises(InputError, match="--allow-outside"):
+    with pytest.raises(InputError, match="allow_outside") as e:  # the keywords, in Python terms
         load_scene(scene)
+    assert "--" not in str(e.value) and set(e.value.params) == {"root", "allow_outside"}
     import omaps
 
     for kw in ({"root": tmp}, {"allow_outside": True}):
@@ -282,7 +283,7 @@ def test_batch_records_the_refusal(tree):
     by_input = {os.path.basename(x["input"]): x for x in summary["inputs"]}
     assert by_input["good.gltf"]["status"] == "ok"
     bad = by_input["scene.gltf"]
-    assert bad["status"] == "error" and "../outside/secret.bin" in bad["error"] and "--allow-outside" in bad["error"]
+    assert bad["status"] == "error" and "../outside/secret.bin" in bad["error"] and "allow_outside" in bad["error"]
     secret = (outside / "secret.bin").read_bytes()[:48]  # the outside quad's positions
     for root, _, files in os.walk(out):
         for f in files:

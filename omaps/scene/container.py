@@ -38,7 +38,7 @@ The policy, for assets that may come from strangers (docs/guide/untrusted.md sta
   allocated; a buffer's ``byteLength`` larger than its file is refused before the file is read.
 
 Every refusal is an ``InputError`` naming the asset file, the URI, where it resolves and the
-option that would allow it.
+parameter that would allow it (``root``, ``allow_outside``; the command line names its options).
 """
 
 from __future__ import annotations
@@ -63,7 +63,6 @@ __all__ = ["DEFAULT_MAX_BYTES", "MAX_BYTES_ENV", "AssetPolicy", "Container", "Lo
 
 DEFAULT_MAX_BYTES = 2 << 30  # 2 GiB: any one asset file, buffer, image file or data URI
 MAX_BYTES_ENV = "OMAPS_MAX_ASSET_BYTES"
-ROOT_OPTION, OUTSIDE_OPTION = "--root DIR", "--allow-outside"
 GLB_MAGIC, JSON_CHUNK, BIN_CHUNK = 0x46546C67, 0x4E4F534A, 0x004E4942
 _SCHEME = re.compile(r"^([A-Za-z][A-Za-z0-9+.\-]*):")
 _DRIVE = re.compile(r"^[A-Za-z]:([\\/]|$)")
@@ -143,17 +142,19 @@ class Container:
         self.folder = os.path.dirname(os.path.abspath(path))
         given = policy.root is not None
         self.root = os.path.realpath(policy.root if given else self.folder)
-        self._root_label = "the --root folder" if given else "the asset's folder"
+        self._root_label = "the {root} folder" if given else "the asset's folder"
 
     # -- where a URI leads ------------------------------------------------------------------
-    def _refuse(self, what, uri, problem):
-        raise InputError(f"{what}: URI {_show(uri)} {problem}", self.path)
+    def _refuse(self, what, uri, problem, params=()):
+        """An ``InputError``; ``problem`` names the parameters ``params`` as ``{root}``,
+        ``{allow_outside}`` (the command line names its options there)."""
+        raise InputError(f"{what}: URI {_show(uri)} {problem}", self.path, param=tuple(params) or None)
 
     def _never_read(self, what, uri, problem, unread_ok):
         if unread_ok and self.policy.allow_outside:
             return Location("unread", problem=f"{what}: URI {_show(uri)} {problem}")
-        tail = (f"; give {OUTSIDE_OPTION} to go on without it" if unread_ok else "")
-        self._refuse(what, uri, problem + tail)
+        tail = " ({allow_outside}: go on without it)" if unread_ok else ""
+        self._refuse(what, uri, problem + tail, ("allow_outside",) if unread_ok else ())
 
     def locate(self, uri: str, what: str, unread_ok: bool = False) -> Location:
         """Where ``uri`` (of ``what``: "buffer 0", "image 2") leads under the policy; an
@@ -189,8 +190,8 @@ class Container:
         kind = ("is a file: URI" if local is not None else "is an absolute path" if os.path.isabs(decoded)
                 else "leads")
         self._refuse(what, uri, f"{kind} to {real}, outside {self.root} ({self._root_label}): omaps reads only "
-                                f"files under it; give {ROOT_OPTION} with a folder holding both, or "
-                                f"{OUTSIDE_OPTION} if you trust this asset")
+                                "files under it ({root}: a folder holding both; {allow_outside}: if you trust "
+                                "this asset)", ("root", "allow_outside"))
 
     # -- reading ----------------------------------------------------------------------------
     def check_data_size(self, uri: str, what: str) -> None:
@@ -267,8 +268,14 @@ def read_container(path, policy: AssetPolicy | None = None) -> Container:
         else:
             js = raw
         doc = json.loads(js.decode("utf-8"))
-    except (ValueError, RecursionError) as exc:  # JSONDecodeError and UnicodeDecodeError are ValueErrors
-        raise InputError(f"cannot read glTF ({type(exc).__name__}: {exc})", path) from None
+    except InputError:  # the GLB's own checks name the problem
+        raise
+    except UnicodeDecodeError as exc:
+        raise InputError(f"cannot read glTF: its JSON is not UTF-8 ({exc.reason} at byte {exc.start})", path) from None
+    except ValueError as exc:  # json.JSONDecodeError
+        raise InputError(f"cannot read glTF: not JSON ({exc})", path) from None
+    except RecursionError:
+        raise InputError("cannot read glTF: its JSON nests too deeply", path) from None
     if not isinstance(doc, dict):
         raise InputError(f"cannot read glTF (its JSON is {type(doc).__name__}, not an object)", path)
     return Container(path, doc, bin_chunk, policy)
