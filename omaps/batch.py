@@ -340,7 +340,7 @@ def run_one(command: str, options: dict, path: str, name: str, outdir: str, fp: 
                 messages = [f"omaps: warning: {w.message}" for w in caught] + messages
     except InputError as exc:
         if command == "eval" and exc.problem.startswith("no texture is at least"):
-            rec["status"], rec["reason"] = "skipped", f"smaller than --min-size {options.get('min_size')} px"
+            rec["status"], rec["reason"] = "skipped", f"smaller than min_size {options.get('min_size')} px"
         else:
             rec["status"], rec["error"] = "error", str(exc) if exc.path else f"{path}: {exc.problem}"
     except OSError as exc:
@@ -705,7 +705,7 @@ def precheck(command: str, options: dict) -> None:
         if options.get("schemes") is not None:
             parse_schemes(options["schemes"], EVAL_KINDS, config.encoder, config.effort, "omaps eval")
         if options.get("min_size", 0) < 0:
-            raise InputError(f"--min-size must be >= 0, got {options['min_size']}")
+            raise InputError(f"min_size must be >= 0, got {options['min_size']}", param="min_size")
     elif command == "trace":
         from .trace import parse_camera, parse_light
         from .trace.two_state import parse_modes
@@ -744,11 +744,13 @@ class BatchPlan:
     def line(self) -> str:
         """The line ``omaps batch`` prints before it runs."""
         done = sum(bool(r.get("resumed")) for r in self.records.values())
+        no_alpha = sum(bool(r.get("without_alpha")) and not r.get("resumed") for r in self.records.values())
         why: dict[str, int] = {}
         for r in self.records.values():
-            if not r.get("resumed"):
+            if not r.get("resumed") and not r.get("without_alpha"):
                 why[r.get("refused", "an error")] = why.get(r.get("refused", "an error"), 0) + 1
         parts = [f"{done} already done with these options (not run again)"] if done else []
+        parts += [f"{no_alpha} skipped (images without an alpha channel; give --channel to read them)"] if no_alpha else []
         parts += [f"{n} refused ({w}; each named after the run)" for w, n in why.items()]
         return (f"omaps batch {self.command}: {count(len(self.found), 'input')}, "
                 + "".join(p + ", " for p in parts) + f"{len(self.jobs)} to run (scheduler {self.scheduler}"
@@ -797,15 +799,17 @@ def check_split(command: str, options: dict) -> None:
     """A batch that splits each input into pieces: omm, with options whose bake splits
     (``omaps.omm.split.splittable``), else an ``InputError`` saying why."""
     if command != "omm":
-        raise InputError(f"--split splits an omm bake; omaps batch {command} runs one task per input")
+        raise InputError(f"{{split}} splits an omm bake; a batch of {command} runs one task per input",
+                         param="split")
     from .jobs import omm_settings
     from .omm.split import splittable
 
     why = splittable(omm_settings(**{k: v for k, v in options.items() if k in SETTINGS}))
     if why is None and options.get("weights", "area") != "area":
-        why = "--weights view goes with --budget"
+        why = "{weights} view goes with {budget}"
     if why is not None:
-        raise InputError(f"--split: this bake does not split into pieces ({why}); drop --split")
+        raise InputError(f"{{split}}: this bake does not split into pieces ({why}); leave {{split}} off",
+                         param=("split", "weights", "budget", "source"))
 
 
 def plan_batch(command: str, inputs, outdir, options: dict | None = None, *, scheduler: str = "local",
@@ -818,13 +822,13 @@ def plan_batch(command: str, inputs, outdir, options: dict | None = None, *, sch
         raise InputError(f"unknown batch command {command!r} (choose from {', '.join(COMMANDS)})", param="command")
     options = {**(options or {}), **({"glb": True} if glb else {})}
     if scheduler not in ("none", "local") and not scheduler.startswith(("tcp://", "tls://", "inproc://")):
-        raise InputError(f"--scheduler must be local, none or tcp://HOST:PORT, got {scheduler!r}")
+        raise InputError(f"scheduler must be local, none or tcp://HOST:PORT, got {scheduler!r}", param="scheduler")
     check_scheduler(scheduler)
     precheck(command, {k: v for k, v in options.items() if k != "glb"})
     if split:
         check_split(command, options)
     if window is not None and window < 1:
-        raise InputError(f"--window must be >= 1, got {window}")
+        raise InputError(f"window must be >= 1, got {window}", param="window")
     outdir = os.fspath(outdir)
     if os.path.lexists(outdir) and not os.path.isdir(outdir):
         raise InputError("exists and is not a folder; -o is the batch's output folder", outdir)
@@ -835,7 +839,14 @@ def plan_batch(command: str, inputs, outdir, options: dict | None = None, *, sch
     library_call(command)  # importable before any work
     records: dict[str, dict] = {}
     jobs = []
+    no_alpha = _found_without_alpha(command, inputs or [], found, options)
     for (path, rel), name in zip(found, names):
+        if path in no_alpha:  # as omaps eval on a folder: an image that is not an alpha mask
+            records[name] = {"input": path, "output": os.path.relpath(output_path(command, outdir, name, options),
+                                                                        outdir),
+                             "status": "skipped", "reason": f"not an alpha mask: {no_alpha[path]} (give a channel "
+                             "to read one of its channels)", "without_alpha": True}
+            continue
         fp = fingerprint(command, path, options)
         out = output_path(command, outdir, name, options)
         done = finished(command, out, marker_path(outdir, name), fp)
@@ -850,6 +861,24 @@ def plan_batch(command: str, inputs, outdir, options: dict | None = None, *, sch
             continue
         jobs.append((command, with_root(command, options, path, rel), path, name, outdir, fp))
     return BatchPlan(command, outdir, options, scheduler, window, found, names, records, jobs, split)
+
+
+def _found_without_alpha(command: str, given, found, options: dict) -> dict[str, str]:
+    """The eval inputs found in a folder or by a pattern (not named one by one) that are images
+    without an alpha channel, with why (``texture.without_alpha``; none when a channel is
+    given): skipped, as ``omaps eval`` skips them in a folder, not run into an error each."""
+    if command != "eval" or getattr(options.get("config"), "channel", None) is not None:
+        return {}
+    from .texture import without_alpha
+
+    named = {os.path.abspath(os.fspath(g)) for g in given if os.path.isfile(os.fspath(g))}
+    out = {}
+    for path, _ in found:
+        if os.path.abspath(path) not in named:
+            why = without_alpha(path)
+            if why is not None:
+                out[path] = why
+    return out
 
 
 class BatchWarning(UserWarning):

@@ -298,3 +298,24 @@ def test_the_guides_worker_configuration_keeps_the_default_allocator(tmp_path):
     guided = _worker_environments(tmp_path, "dask", DASK_CONFIG=str(tmp_path / "config"))
     assert default[0]["MALLOC_TRIM_THRESHOLD_"] is not None  # Dask's default sets it (else this checks nothing)
     assert guided[0]["MALLOC_TRIM_THRESHOLD_"] is None
+
+
+def test_batch_eval_skips_images_without_alpha_found_in_a_folder(tmp_path, capsys):
+    """As ``omaps eval`` on a folder: an image found there without an alpha channel (a
+    screenshot) is recorded as skipped, with why, not run into an error; named alone, it is an
+    error; with --channel it is read."""
+    src = tmp_path / "src"
+    _textures(src, n=2)
+    Image.fromarray(np.zeros((32, 32, 3), np.uint8)).save(tmp_path / "src" / "shot.png")
+    out = tmp_path / "out"
+    assert main(["batch", "eval", str(src), "-o", str(out), "--scheduler", "none", "--schemes", "sq4"]) == 0
+    said = capsys.readouterr()
+    assert "1 skipped (images without an alpha channel" in said.out + said.err
+    recs = {os.path.basename(r["input"]): r for r in _summary(out)[0]["inputs"]}
+    assert recs["shot.png"]["status"] == "skipped" and "no alpha channel, mode RGB" in recs["shot.png"]["reason"]
+    assert sum(r["status"] == "ok" for r in recs.values()) == 2
+    assert main(["batch", "eval", str(src / "shot.png"), "-o", str(tmp_path / "one"), "--scheduler", "none",
+                 "--schemes", "sq4"]) == 1
+    assert main(["batch", "eval", str(src), "-o", str(tmp_path / "all"), "--scheduler", "none", "--schemes", "sq4",
+                 "--channel", "R"]) == 0
+    assert {r["status"] for r in _summary(tmp_path / "all")[0]["inputs"]} == {"ok"}

@@ -44,11 +44,12 @@ MIN_PIECE_MICRO_TRIANGLES = 1 << 16  # a piece smaller than this costs more to s
 
 
 def splittable(settings: OmmSettings) -> str | None:
-    """None when a bake with these settings splits into pieces, else why not."""
+    """None when a bake with these settings splits into pieces, else why not (the parameter it
+    names as ``{budget}`` or ``{source}``, as ``InputError`` templates do)."""
     if settings.budget is not None:
-        return "a --budget bake chooses every triangle's level over the whole scene at once"
+        return "a {budget} bake chooses every triangle's level over the whole scene at once"
     if settings.source != "texture":
-        return "a --from bake encodes its pair maps with the codec's own worker processes"
+        return "a {source} bake encodes its pair maps with the codec's own worker processes"
     return None
 
 
@@ -87,7 +88,7 @@ def plan_pieces(geometries: list[Geometry], settings: OmmSettings, pieces: int) 
     ``MIN_PIECE_MICRO_TRIANGLES``, whole triangles), in ``build``'s order."""
     why = splittable(settings)
     if why is not None:
-        raise InputError(f"this bake does not split into pieces: {why}")
+        raise InputError(f"this bake does not split into pieces: {why}", param=("budget", "source"))
     plans = [plan_geometry(g, settings) for g in geometries]
     total = sum(int(np.sum(np.left_shift(np.int64(1), 2 * p.levels))) for p in plans)
     target = max(total // max(int(pieces), 1), MIN_PIECE_MICRO_TRIANGLES)

@@ -34,7 +34,7 @@ def corpus_page(folder: str, schemes: str | None, min_size: int = 0, config=None
                            "omaps report")
     names = [s.name for s in parsed]
     if min_size < 0:
-        raise InputError(f"--min-size must be >= 0, got {min_size}")
+        raise InputError(f"min_size must be >= 0, got {min_size}", param="min_size")
     items, _ = find_images([folder])
     no_alpha = []
     if config.channel is None:  # images that are not alpha masks (as omaps eval on a folder)
