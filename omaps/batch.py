@@ -750,7 +750,8 @@ class BatchPlan:
             if not r.get("resumed") and not r.get("without_alpha"):
                 why[r.get("refused", "an error")] = why.get(r.get("refused", "an error"), 0) + 1
         parts = [f"{done} already done with these options (not run again)"] if done else []
-        parts += [f"{no_alpha} skipped (images without an alpha channel; give --channel to read them)"] if no_alpha else []
+        if no_alpha:
+            parts.append(f"{no_alpha} skipped (images without an alpha channel; give --channel to read them)")
         parts += [f"{n} refused ({w}; each named after the run)" for w, n in why.items()]
         return (f"omaps batch {self.command}: {count(len(self.found), 'input')}, "
                 + "".join(p + ", " for p in parts) + f"{len(self.jobs)} to run (scheduler {self.scheduler}"

@@ -1,20 +1,19 @@
 """numba's on-disk cache, keyed on everything a kernel can inline, not on its own file alone.
 
 numba keys a cached kernel on its own source file (modification time and size): a kernel that
-inlines a function of another module (the tracer's filters inline every codec's lookup, the
-codec registry's format codes are compile-time constants) is loaded from the cache unchanged
-after that other module changed, and computes with the old code -- wrong figures without an
-error, or, with swapped format codes, maps read through the wrong codec.
+inlines a function of another module (the tracer's filters inline every codec's lookup, the codec
+registry's format codes are compile-time constants) is loaded from the cache unchanged after that
+other module changed, and computes with the old code -- wrong figures without an error, or, with
+swapped format codes, maps read through the wrong codec.
 
-Here a kernel of a file under a watched package (omaps itself, and the packages of codecs
-registered from outside) is keyed on the *content* of its file and of every module it imports,
-transitively: module-level and function-level imports (a package's ``__init__``: module-level
-ones, those its import runs); for a name a package exports lazily
-(``omaps.lazy``: its ``__getattr__`` imports the module on first use), every module of the
-package that mentions the name; and, in a module that calls ``importlib.import_module``, a module
-named by a string (``"vq2_block"``, ``"omaps.codecs.vq2_block"``). The key over-covers:
-an edit may recompile a kernel that did not need it, never the reverse. Changing, adding or removing a codec then recompiles, in a fresh process,
-exactly the kernels whose imports reach it, and nothing else; the compile-ahead check
+Here a kernel of a file under a watched package (omaps itself; ``watch`` adds another) is keyed on the *content* of its file and of every module it imports,
+transitively: module-level and function-level imports (a package's ``__init__``: module-level ones,
+those its import runs); for a name a package exports lazily (``omaps.lazy``: its ``__getattr__``
+imports the module on first use), every module of the package that mentions the name; and, in a
+module that calls ``importlib.import_module``, a module named by a string (``"vq2_block"``,
+``"omaps.codecs.vq2_block"``). The key over-covers: an edit may recompile a kernel that did not
+need it, never the reverse. Changing, adding or removing a codec then recompiles, in a fresh
+process, the kernels whose imports reach it and no other; the compile-ahead check
 (``omaps.cli.precompile``) reads the same key through numba's own index.
 
 ``install()`` puts the key in place; ``omaps/__init__`` calls it when numba's caching module is

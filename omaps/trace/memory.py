@@ -100,7 +100,7 @@ def record_lookups(prep, name: str, cam: np.ndarray, w: int, h: int, calls: np.n
         tables.table[word] = a.ctypes.data
     primary = run_primary(prep.bvh, tables, make_recording_filter(state_function(sm)).address, cam, w, h)
     if not np.array_equal(count, start[1:] - start[:-1]):
-        raise RuntimeError(f"trace --memory: scheme {name}'s recording run made other lookups than its traced run")
+        raise RuntimeError(f"memory model: scheme {name}'s recording run made other lookups than its traced run")
     m = int(start[-1])
     return Lookups(start, tri[:m], bary[0:2 * m:2].copy(), bary[1:2 * m:2].copy(), st[:m], w, h), primary
 
@@ -439,7 +439,7 @@ def measure(lay: Layout, lk: Lookups, cache_kib: float | None = None) -> dict:
     reads, starts, st, lines = touches(lay, lk)
     ok = st >= 0
     if not np.array_equal(st[ok], lk.state[ok].astype(np.int64)):
-        raise RuntimeError(f"trace --memory: the {lay.name} layout's walk read other states than the tracer")
+        raise RuntimeError(f"memory model: the {lay.name} layout's walk read other states than the tracer")
     n_pix = lk.width * lk.height
     out = {"layout": lay.description, "map_bytes": int(lay.map_bytes),
            "map_reads_per_lookup": float(reads.mean()) if len(reads) else 0.0,
@@ -464,7 +464,7 @@ def scheme_memory(prep, name: str, run, cam: np.ndarray, w: int, h: int, cache_k
     else:
         lk, rec = record_lookups(prep, name, cam, w, h, run.primary.calls)
         if not (np.array_equal(rec.tests, run.primary.tests) and np.array_equal(rec.prim, run.primary.prim)):
-            raise RuntimeError(f"trace --memory: scheme {name}'s recording run differs from its traced run")
+            raise RuntimeError(f"memory model: scheme {name}'s recording run differs from its traced run")
         lookups = lk.count / (w * h)
     out = {"lookups_per_primary_ray": lookups, "tile_pixels": TILE if cache_kib is not None else None,
            "cache_kib": cache_kib}
