@@ -6,7 +6,7 @@ What is flagged (``findings``), in Python string literals (docstrings and commen
 code), in the lines of shell code and in Python examples:
 
 * a URL's host (``tcp://``, ``http://``, ``https://``, any ``scheme://``) that is not loopback;
-* a literal that is an IP address and nothing else (``"10.0.0.1"``, ``"10.0.0.1:8786"``,
+* a literal that is an IP address and nothing else (``"192.0.2.1"``, ``"192.0.2.1:8786"``,
   ``"2001:db8::1"``), not loopback;
 * the host given to a socket call that contacts it (``connect``, ``create_connection``,
   ``getaddrinfo``…: ``("example.com", 80)``), not loopback.
@@ -164,13 +164,13 @@ def test_code_and_examples_name_loopback_only():
 # --- the scanner itself, on made-up code (this file is the one the scan above leaves out) ---------
 
 @pytest.mark.parametrize("code, want", [
-    ("c = Client('tcp://10.255.255.1:8786')", ["tcp://10.255.255.1"]),
+    ("c = Client('tcp://198.51.100.1:8786')", ["tcp://198.51.100.1"]),
     ("requests.get('https://example.com/x.png')", ["https://example.com"]),
     ("u = f'http://user@files.example.org:8080/{name}'", ["http://files.example.org"]),
     ("u = 'ws://[2001:db8::1]:80/'", ["ws://[2001:db8::1]"]),
     ("s.connect(('192.0.2.7', 80))", ["192.0.2.7", "connect('192.0.2.7', …)"]),
     ("socket.create_connection(('scheduler.example.net', 8786))", ["create_connection('scheduler.example.net', …)"]),
-    ("addr = '10.0.0.1:8786'", ["10.0.0.1:8786"]),
+    ("addr = '192.0.2.1:8786'", ["192.0.2.1:8786"]),
     ("hosts = ['2001:db8::5']", ["2001:db8::5"]),
     ("socket.getaddrinfo('pypi.org', 443)", ["getaddrinfo('pypi.org', …)"]),
 ])
@@ -192,7 +192,7 @@ def test_scanner_flags_outside_addresses(code, want):
     "s.connect(('::1', port))",
     "deps = ['numpy>=1.2.3.4,<3']",
     "__version__ = '1.2.3.4'",
-    "setup(version='10.2.0.1')",
+    "setup(version='203.0.113.2')",
     "ratio = '1.25.3.7 times'",
     'def f():\n    """See http://example.com/docs."""\n    return 1',  # a docstring: text, not contacted
     "x = 1  # http://example.com in a comment",
@@ -205,14 +205,14 @@ def test_scanner_reads_shell_lines_and_page_examples(tmp_path):
     assert shell_findings("pip install 'numpy==1.2.3.4'") == []
     assert shell_findings("omaps batch eval t -o out --scheduler tcp://127.0.0.1:8786") == []
     assert shell_findings("curl -O https://example.com/a.png") == ["https://example.com"]
-    assert shell_findings("ping -c1 10.1.2.3") == ["10.1.2.3"]
+    assert shell_findings("ping -c1 192.0.2.3") == ["192.0.2.3"]
     page = tmp_path / "docs" / "page.md"
     page.parent.mkdir()
-    page.write_text("Text naming http://example.com is prose.\n\n```sh\nomaps eval t\ncurl http://10.9.8.7/x\n```\n\n"
-                    "```console\nssh 10.9.8.7\n```\n\n```python\nimport socket\n"
-                    "socket.create_connection(('10.9.8.6', 80))\n```\n")
-    assert findings(page, tmp_path) == ["docs/page.md:5: http://10.9.8.7", "docs/page.md:14: 10.9.8.6",
-                                        "docs/page.md:14: create_connection('10.9.8.6', …)"]
+    page.write_text("Text naming http://example.com is prose.\n\n```sh\nomaps eval t\ncurl http://198.51.100.7/x\n```\n\n"
+                    "```console\nssh 198.51.100.7\n```\n\n```python\nimport socket\n"
+                    "socket.create_connection(('198.51.100.6', 80))\n```\n")
+    assert findings(page, tmp_path) == ["docs/page.md:5: http://198.51.100.7", "docs/page.md:14: 198.51.100.6",
+                                        "docs/page.md:14: create_connection('198.51.100.6', …)"]
     script = tmp_path / "run"
-    script.write_text("#!/bin/sh\n# http://example.com: a comment\npip install --index-url http://10.1.1.1/ x\n")
-    assert findings(script, tmp_path) == ["run:3: http://10.1.1.1"]
+    script.write_text("#!/bin/sh\n# http://example.com: a comment\npip install --index-url http://203.0.113.1/ x\n")
+    assert findings(script, tmp_path) == ["run:3: http://203.0.113.1"]
