@@ -37,6 +37,7 @@ from functools import lru_cache
 __all__ = ["install", "watch", "source_key", "dependencies"]
 
 _ROOTS: dict[str, str] = {}  # top-level package name -> its folder (absolute, real path)
+_SELF = os.path.realpath(__file__)  # imported by omaps/__init__, compiled into no kernel: in no key
 _IMPORT = (r"^[ \t]*(?:from[ \t]+(\.*[\w.]*)[ \t]+import[ \t]+(\([^)]*\)|[^\n#;]*)"
                      r"|import[ \t]+([\w.]+(?:[ \t]+as[ \t]+\w+)?(?:[ \t]*,[ \t]*[\w.]+(?:[ \t]+as[ \t]+\w+)?)*))")
 
@@ -143,7 +144,7 @@ def _direct(path: str) -> tuple[str, ...]:
             _module_file(top, here + dotted) if len(dotted) == 1 else None)
         if f:
             found.append(f)
-    return tuple(f for f in dict.fromkeys(found) if f != path)
+    return tuple(f for f in dict.fromkeys(found) if f != path and f != _SELF)
 
 
 @lru_cache(maxsize=None)
