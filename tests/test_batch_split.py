@@ -87,7 +87,7 @@ def test_pieces_run_in_any_order_and_cover_every_triangle_once(monkeypatch):
 def test_bakes_that_do_not_split_say_why():
     assert splittable(OmmSettings(level=4)) is None
     assert "budget" in splittable(OmmSettings(budget=4096))
-    assert "--from" in splittable(OmmSettings(source="sq16"))
+    assert "{source}" in splittable(OmmSettings(source="sq16"))  # the parameter (the command line: --from)
     with pytest.raises(InputError, match="budget"):
         plan_pieces(_geometries(n=1, tris=10), OmmSettings(budget=4096), 4)
 

@@ -74,11 +74,10 @@ def test_frontier_plot(tmp_path, memory):
 def test_eval_plot_marks_the_front(tmp_path):
     from omaps.corpus import report
 
-    class R:  # the fields mean_results reads
-        def __init__(self, bits, sav):
-            self.bits, self.savings, self.name, self.width, self.height = bits, sav, "t", 64, 64
+    from omaps.corpus.evaluate import TextureResult
 
-    results = [R({"sq16": 512, "vq4": 512, "tri3": 256}, {"sq16": 0.4, "vq4": 0.5, "tri3": 0.3})]
+    results = [TextureResult("t", 64, 64, {"sq16": 0.4, "vq4": 0.5, "tri3": 0.3},
+                             {"sq16": 512, "vq4": 512, "tri3": 256})]
     report.plot_savings(tmp_path / "p.png", results, ["sq16", "vq4", "tri3"])
     assert Image.open(tmp_path / "p.png").size[0] > 500
 

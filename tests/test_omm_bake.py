@@ -157,7 +157,7 @@ def test_dynamic_levels():
     np.testing.assert_array_equal(lv, [1, 2, 5])
     np.testing.assert_array_equal(micromap.dynamic_levels(tris, 64, 64, 2.0, 3), [1, 2, 3])
     np.testing.assert_array_equal(micromap.dynamic_levels(tris, 64, 64, 100.0, 8), [0, 0, 0])
-    with pytest.raises(InputError, match="positive"):
+    with pytest.raises(InputError, match="scale must be > 0"):
         micromap.dynamic_levels(tris, 64, 64, 0.0, 8)
 
 
