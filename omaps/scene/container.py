@@ -194,6 +194,22 @@ class Container:
                                 "this asset)", ("root", "allow_outside"))
 
     # -- reading ----------------------------------------------------------------------------
+    def buffer_data(self, i: int, uri: str | None, length: int):
+        """The bytes of buffer ``i`` (at least ``length``: its byteLength): the binary chunk when
+        ``uri`` is None, else the file or data URI it names; an ``InputError`` naming the asset
+        when there is none, it is missing or unreadable, or it is shorter than ``length``."""
+        if uri is None:
+            data = self.bin
+            if data is None:
+                raise InputError(f"buffer {i} has no URI and the file has no binary chunk", self.path)
+        else:
+            data = self.read(uri, f"buffer {i}", None if uri.startswith("data:") else length)
+            if data is None:
+                raise InputError(f"buffer {i}: file {_show(uri)} is missing or unreadable", self.path)
+        if len(data) < length:
+            raise InputError(f"buffer {i} holds {len(data)} bytes, byteLength says {length}", self.path)
+        return data
+
     def check_data_size(self, uri: str, what: str) -> None:
         """An ``InputError`` when a data URI would decode to more bytes than the cap."""
         size = len(uri) // 4 * 3
@@ -415,7 +431,7 @@ def self_contained(c: Container, out_path) -> SelfContained:
         return _self_contained(c, out_path)
     except InputError as exc:
         if exc.path is None:
-            raise InputError(exc.problem, c.path) from None
+            raise InputError(exc.template, c.path, param=exc.param) from None
         raise
 
 
@@ -426,19 +442,9 @@ def _buffer_bytes(c: Container, i: int, b) -> bytes:
     if isinstance(length, bool) or not isinstance(length, int) or length < 0:
         raise InputError(f"buffer {i}: byteLength is {length!r}, not a number of bytes")
     uri = b.get("uri")
-    if uri is None:
-        if c.bin is None:
-            raise InputError(f"buffer {i} has no URI and the file has no binary chunk")
-        raw = c.bin
-    elif not isinstance(uri, str):
+    if uri is not None and not isinstance(uri, str):
         raise InputError(f"buffer {i}: uri is {uri!r}, not a string")
-    else:
-        raw = c.read(uri, f"buffer {i}", None if uri.startswith("data:") else length)
-        if raw is None:
-            raise InputError(f"buffer {i}: file {_show(uri)} is missing or unreadable")
-    if len(raw) < length:
-        raise InputError(f"buffer {i} holds {len(raw)} bytes, byteLength says {length}")
-    return bytes(raw[:length])
+    return bytes(c.buffer_data(i, uri, length)[:length])
 
 
 def _image_bytes(c: Container, i: int, uri: str):

@@ -9,7 +9,7 @@ One reader, one policy per case, for ``omaps trace``, ``omaps omm`` and all late
   KTX2 textures, GPU instancing, ...): an ``InputError`` naming the extension;
 * every URI (buffers, images) is resolved under one policy (``scene.container``: relative paths
   and data URIs only, under the asset's folder or ``root``, no network, size caps): a URI it
-  refuses is an ``InputError`` naming the file, the URI, where it leads and the option that would
+  refuses is an ``InputError`` naming the file, the URI, where it leads and the parameter that would
   allow it, before anything is read;
 * a buffer file that is missing: an ``InputError`` naming it (the geometry is not there to trace
   or bake); buffers nobody reads are never opened;
@@ -226,17 +226,7 @@ class _Reader:
             b = self.g.buffers[i]
             uri = self._uri(b.uri, f"buffer {i}")
             length = self._int(b.byteLength, f"buffer {i}: byteLength")
-            if uri is None:
-                data = self.container.bin
-                if data is None:
-                    raise InputError(f"buffer {i} has no URI and the file has no binary chunk", self.path)
-            else:
-                data = self.container.read(uri, f"buffer {i}", None if uri.startswith("data:") else length)
-                if data is None:
-                    raise InputError(f"buffer {i}: file {uri!r} is missing or unreadable", self.path)
-            if len(data) < length:
-                raise InputError(f"buffer {i} holds {len(data)} bytes, byteLength says {length}", self.path)
-            self._buffers[i] = bytes(data)
+            self._buffers[i] = bytes(self.container.buffer_data(i, uri, length))
         return self._buffers[i]
 
     def view_bytes(self, vi: int) -> tuple[bytes, int | None]:
