@@ -25,9 +25,10 @@ from .codecs.registry import budget_options
 __all__ = ["HIT_LEVEL", "parse_bytes", "triangle_weights", "half_known", "PAIR_OPTIONS", "pair_option_bytes",
            "allocate"]
 
-# What a pair may store under a budget: no map (all C), a raw N x N square up to 64, or a block of a
-# codec the registry marks as a budget option; the tracer reads each by its codec's format code.
-PAIR_OPTIONS = ("none",) + budget_options()
+# What a pair may store under a budget by default: no map (all C), a raw N x N square up to 64, or a
+# block of a codec the registry marks as a default budget option (``CodecEntry.budget_default``);
+# the tracer reads each by its codec's format code. ``budget:BYTES:OPTS`` names others.
+PAIR_OPTIONS = ("none",) + budget_options(default=True)
 
 # Where a view's candidate hits are recorded (``view.view_samples``): the micro-triangle
 # at this subdivision level, so that a budget can value any coarser level by the hits it knows.

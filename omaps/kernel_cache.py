@@ -16,6 +16,13 @@ need it, never the reverse. Changing, adding or removing a codec then recompiles
 process, the kernels whose imports reach it and no other; the compile-ahead check
 (``omaps.cli.precompile``) reads the same key through numba's own index.
 
+Codec plug-ins (``omaps.plugins``) are code the registry runs at start-up: a kernel whose imports
+reach the registry (the tracer's dispatch inlines every codec's lookup, the format codes are the
+registry's) is also keyed on every installed plug-in: its entry point and the content of its
+package and of what that imports (each plug-in package is watched). Such a kernel is cached under
+a name of its own while plug-ins are installed, so the kernels of omaps with and without them do
+not evict each other.
+
 ``install()`` puts the key in place; ``omaps/__init__`` calls it when numba's caching module is
 imported (or at once, when it already is), before any omaps kernel is declared.
 
@@ -46,8 +53,11 @@ def watch(package_dir: str, name: str | None = None) -> None:
     """Key the kernels of the package in ``package_dir`` (a folder with ``__init__.py``) on their
     imports' content too. ``name``: the package's import name (default: the folder's name)."""
     path = os.path.realpath(package_dir)
-    _ROOTS[name or os.path.basename(path)] = path
-    for cached in (source_key, _direct, _file_of, _package_words):
+    name = name or os.path.basename(path)
+    if _ROOTS.get(name) == path:
+        return
+    _ROOTS[name] = path
+    for cached in (source_key, _direct, _file_of, _package_words, plugins_key):
         cached.cache_clear()
 
 
@@ -99,14 +109,14 @@ def _direct(path: str) -> tuple[str, ...]:
     text = _read(path).decode("utf-8", "replace")
     found: list[str] = []
 
-    def add(mod_parts: list[str], names: list[str]) -> None:
+    def add(mod_parts: list[str], names: list[str], root: str = top) -> None:
         for i in range(len(mod_parts) + 1):  # each package on the way runs its __init__
-            f = _module_file(top, mod_parts[:i])
+            f = _module_file(root, mod_parts[:i])
             if f:
                 found.append(f)
-        init = _module_file(top, mod_parts)
+        init = _module_file(root, mod_parts)
         for n in names:
-            f = _module_file(top, mod_parts + [n])  # `from pkg import submodule`
+            f = _module_file(root, mod_parts + [n])  # `from pkg import submodule`
             if f:
                 found.append(f)
             elif init and init.endswith("__init__.py") and _lazy(init):
@@ -119,19 +129,20 @@ def _direct(path: str) -> tuple[str, ...]:
         if plain is not None:
             for item in plain.split(","):
                 dotted = item.split()[0].split(".")
-                if dotted[0] == top:
-                    add(dotted[1:], [])
+                if dotted[0] in _ROOTS:  # this package or another watched one (a plug-in's omaps imports)
+                    add(dotted[1:], [], dotted[0])
             continue
         listed = [n.split()[0] for n in names.strip().strip("()").split(",") if n.split()]
+        root = top
         if frm.startswith("."):
             level = len(frm) - len(frm.lstrip("."))
             mod = here[:len(here) - level + 1] + [p for p in frm.lstrip(".").split(".") if p]
         else:
             dotted = frm.split(".")
-            if dotted[0] != top:
+            if dotted[0] not in _ROOTS:
                 continue
-            mod = dotted[1:]
-        add(mod, listed)
+            root, mod = dotted[0], dotted[1:]
+        add(mod, listed, root)
     # modules imported by name at run time, in a module that calls ``importlib.import_module``: a
     # string naming a module of this package (``"vq2_block"``) or a dotted path
     # (``"omaps.codecs.vq2_block"``); not in a lazily exporting package's ``__init__``, whose
@@ -201,6 +212,44 @@ def source_key(path: str) -> str:
         named.append(("/".join([where[0], *where[1]]) if where else f, f))
     for name, f in sorted(named):
         h.update(name.encode() + b"\0" + hashlib.sha256(_read(f)).digest())
+    if _reaches_registry(deps):
+        h.update(b"plugins\0" + plugins_key().encode())
+    return h.hexdigest()
+
+
+def _reaches_registry(deps) -> bool:
+    """Whether a kernel's files include the codec registry (it then depends on the plug-ins)."""
+    registry = _module_file("omaps", ["codecs", "registry"]) if "omaps" in _ROOTS else None
+    return registry is not None and registry in deps
+
+
+@lru_cache(maxsize=None)
+def plugins_key() -> str:
+    """SHA-256 over the installed codec plug-ins: each entry point (in the registry's order) and
+    the content of every file of its package and of the watched modules those import; "" when
+    none is installed (or plug-ins are off)."""
+    import hashlib
+
+    from .plugins import codec_entry_points, describe, package_folder
+
+    eps = codec_entry_points()
+    if not eps:
+        return ""
+    h = hashlib.sha256()
+    for ep in eps:
+        h.update(describe(ep).encode() + b"\0")
+        pkg = package_folder(ep)
+        if pkg is None:
+            continue  # (the registry refuses it)
+        watch(pkg[1], pkg[0])
+        files = []
+        for folder, dirs, names in os.walk(pkg[1]):
+            dirs[:] = sorted(d for d in dirs if d != "__pycache__")
+            files += [os.path.join(folder, n) for n in sorted(names) if n.endswith(".py")]
+        for f in sorted({d for f in files for d in dependencies(f)}):
+            where = _package_of(f)
+            name = "/".join([where[0], *where[1]]) if where else f
+            h.update(name.encode() + b"\0" + hashlib.sha256(_read(f)).digest())
     return h.hexdigest()
 
 
@@ -216,6 +265,14 @@ def _keyed(cls):
 
         def get_source_stamp(self):
             return ("omaps-imports", source_key(self._py_file))
+
+        def get_disambiguator(self):
+            # with plug-ins installed, a kernel that depends on them is cached under a name of its own
+            base = super().get_disambiguator()
+            plugins = plugins_key()
+            if plugins and _reaches_registry(dependencies(self._py_file)):
+                return f"{base}-plugins-{plugins[:12]}"
+            return base
 
     Keyed.__name__ = Keyed.__qualname__ = "Imports" + cls.__name__
     return Keyed

@@ -6,18 +6,21 @@
     succinctL            the same micromaps, each its pruned 4-way tree with rank support (lossless)
     csmL                 the same micromaps, identical subtrees of the whole set stored once (lossless)
     sqN                  the raw N x N square map over a pair, N a power of two up to 128
-    CODEC[-VARIANT]      vq2, vq4, vq4x64, vq4-synth or wavelet3; VARIANT: paper (the deck's
-                         encoder; vq2, vq4, vq4x64) or an effort of
-                         our encoder (fast, medium, thorough); none: the command's --encoder /
-                         --effort, else the codec's defaults
+    CODEC[-VARIANT]      a compressed codec of the registry (``codecs.codec_names()``: omaps'
+                         own and the plug-ins'); VARIANT: paper (the deck's encoder, for the
+                         codecs that have it) or an effort of the codec's encoder (fast, medium,
+                         thorough); none: the command's --encoder / --effort where the codec has
+                         them (else its defaults, and the scheme's ``notes`` say so)
     omm                  (trace) the EXT_mesh_opacity_micromap micromaps stored in the traced file
     file:CODEC           (trace) the OMAPS_pair_opacity_maps pair blocks stored in the traced file,
                          CODEC the codec they were stored with (sqN, vq2, vq4, vq4x64)
-    budget:BYTES         (trace) per pair the option (none, sqN up to 64, vq2, vq4, vq4x64) that saves
-                         the most alpha tests per byte, all pairs within BYTES (1263936, 1.2MiB, 800KiB)
-    budget:BYTES:OPTS    the same with the options OPTS, '+'-separated: budget options (those above,
+    budget:BYTES         (trace) per pair the default option (none, sqN up to 64 and the codecs
+                         that opt in: ``budget.PAIR_OPTIONS``) that saves the most alpha tests per
+                         byte, all pairs within BYTES (1263936, 1.2MiB, 800KiB)
+    budget:BYTES:OPTS    the same with the options OPTS, '+'-separated: budget options (every
+                         codec the registry marks as one: ``codecs.budget_options(variable=True)``;
                          succinctL: the pair's two level-L micromaps as succinct trees, bytes per
-                         pair) or ``default`` (the options above): budget:120KiB:default+succinct6
+                         pair) or ``default`` (the default options): budget:120KiB:default+succinct6
 
 A ``Scheme`` says what is stored (its ``kind``: none, texel, micromap -- with its
 ``representation``: raw, succinct or csm -- or square with its ``codec``) and what it costs
@@ -65,6 +68,9 @@ class Scheme:
     budget: int | None = None  # budget: the scene's map bytes
     options: tuple[str, ...] | None = None  # budget: the pair options (none first); None: the default
     representation: str = "raw"  # micromap: raw (2 bits per micro-triangle), succinct or csm (lossless trees)
+    # what the command's encoder or effort could not be for a codec of this scheme, and what was
+    # used instead (``Codec.fallback``); commands print them with their results
+    notes: tuple[str, ...] = ()
 
     @property
     def family(self) -> str:
@@ -106,6 +112,8 @@ class Scheme:
             out.update(budget_bytes=self.budget, encoder=self.encoder, effort=self.effort)
             if self.options is not None:
                 out["options"] = list(self.options)
+        if self.notes:
+            out["notes"] = list(self.notes)
         if self.codec is not None:
             out.update(codec=self.codec.name, map_size=self.codec.map_size, bits=self.codec.bits)
             if self.codec.compressed:
@@ -157,7 +165,7 @@ def get_scheme(name: str, encoder: str | None = None, effort: str | None = None)
     Raises an ``InputTypeError`` for a name that is no string, an ``InputError`` for an unknown
     scheme (its message lists the known ones)."""
     check_choice("encoder", encoder, ("paper", "best"))
-    check_choice("effort", effort, tuple(EFFORTS))
+    check_choice("effort", effort, tuple(EFFORTS))  # (a codec's own names go in its variant)
     key = checks.text(name, "name").strip().lower()
     if key in ("none", "texel"):
         return Scheme(key, key)
@@ -168,10 +176,16 @@ def get_scheme(name: str, encoder: str | None = None, effort: str | None = None)
 
         size, _, opts = key[len("budget:"):].partition(":")
         nbytes = parse_bytes(size)
-        enc, eff = get_codec("vq4").options(encoder, effort)  # the codecs' options (every codec shares them)
+        enc, eff = encoder or "best", effort or "medium"  # our encoder's defaults; each option's codec falls back
         options = _budget_options(name, opts) if opts else None
         suffix = ":" + "+".join(t.strip() for t in opts.split("+")) if opts else ""  # as written
-        return Scheme(f"budget:{nbytes}{suffix}", "budget", encoder=enc, effort=eff, budget=nbytes, options=options)
+        from .budget import PAIR_OPTIONS
+        from .codecs.registry import entry
+
+        notes = tuple(n for o in (options or PAIR_OPTIONS)[1:] if not entry(o).variable
+                      for n in [get_codec(o).fallback(enc, eff)[2]] if n)
+        return Scheme(f"budget:{nbytes}{suffix}", "budget", encoder=enc, effort=eff, budget=nbytes, options=options,
+                      notes=notes)
     if key.startswith("file:"):
         codec_name = key[len("file:"):]
         if not (_SQ.fullmatch(codec_name) or codec_name in codec_names()):
@@ -188,15 +202,17 @@ def get_scheme(name: str, encoder: str | None = None, effort: str | None = None)
     base, _, variant = (key, "", "") if key in codec_names() else key.rpartition("-")
     if base in codec_names():
         codec = get_codec(base)
-        if variant == "paper":
-            encoder = "paper"
-        elif variant:
-            if variant not in EFFORTS:
+        if variant:
+            if variant not in codec_variants(base):
                 raise InputError(f"unknown variant {variant!r} of {base} (choose from "
-                                 f"{', '.join(codec_variants(base))})")
-            encoder, effort = "best", variant
-        enc, eff = codec.options(encoder, effort)
-        return Scheme(key, "square", codec=codec, encoder=enc, effort=eff)
+                                 f"{', '.join(codec_variants(base)) or 'none: it has no encoder choices'})")
+            if variant == "paper":
+                enc, eff = codec.options("paper", effort if effort in codec.efforts else None)
+            else:
+                enc, eff = codec.options(None, variant)
+            return Scheme(key, "square", codec=codec, encoder=enc, effort=eff)
+        enc, eff, note = codec.fallback(encoder, effort)
+        return Scheme(key, "square", codec=codec, encoder=enc, effort=eff, notes=(note,) if note else ())
     raise InputError(f"unknown scheme {name!r} (known: none, texel, triL, succinctL, csmL, omm, file:CODEC, budget:BYTES, "
                      f"{square_scheme_choices()})")
 

@@ -30,8 +30,10 @@ __all__ = ["FAMILIES", "uncached", "families_for", "compile_first", "finish_ahea
 # family: (modules whose kernels it compiles (``module:function``: that kernel), seconds its
 # compile process took with an empty cache on the 2-core reference machine, two such processes at
 # a time: imports, the warm-up's tiny runs and the cache writes included)
-# (the codecs' own families, vq2, vq4, synth and wavelet, are declared in the codec registry;
-# ``FAMILIES`` is both, read on first use so that parsing a command line imports no codec)
+# (the codecs' own families, vq2, vq4, synth, wavelet and any plug-in's, are declared by their
+# entries in the codec registry (``CompileFamily``), their warm-up derived from them: encoding a
+# made-up map with every encoder and effort of each codec that declares the family; ``FAMILIES`` is
+# both, read on first use so that parsing a command line imports no codec)
 COMMAND_FAMILIES = {
     "square": (("omaps.flag_table", "omaps.raster", "omaps.bake.square"), 49),
     "micromap": (("omaps.flag_table", "omaps.bake.micromap"), 39),
@@ -41,6 +43,9 @@ COMMAND_FAMILIES = {
     # the tracer's budget:BYTES scheme: its allocation, and its mixed maps' reader (other families
     # compile other kernels of both modules)
     "budget-maps": (("omaps.allocate:allocate_arrays", "omaps.trace.lookups:mixed_map_state"), 98),
+    # the micromaps' lossless tree representations (``succinctL``, ``csmL``; the registry's
+    # ``succinctL`` budget options name it)
+    "hierarchical": (("omaps.codecs.succinct", "omaps.codecs.csm"), 70),
 }
 
 
@@ -107,11 +112,11 @@ def _scheme_families(text) -> list[str]:
         if s.kind == "micromap":
             out += ["micromap"] + (["hierarchical"] if s.representation != "raw" else [])
         elif s.kind == "square":
-            out += list(entry(s.codec.name).families)
+            out += list(entry(s.codec.name).family_names)
         elif s.kind == "budget":
             from ..budget import PAIR_OPTIONS
 
-            out += [f for o in (s.options or PAIR_OPTIONS)[1:] for f in entry(o).families] + ["budget-maps"]
+            out += [f for o in (s.options or PAIR_OPTIONS)[1:] for f in entry(o).family_names] + ["budget-maps"]
     return out
 
 
@@ -390,6 +395,7 @@ def warm(families, report=None, evaluation_only: bool = False) -> None:
     import numpy as np
 
     from .. import bake_omms, evaluate_corpus, trace_scene, verify_omms
+    from ..codecs.registry import COMPILE_FAMILIES, family_codecs
 
     with tempfile.TemporaryDirectory(prefix="omaps-precompile-") as tmp:
         scene = _quad_scene(tmp)
@@ -485,16 +491,14 @@ def warm(families, report=None, evaluation_only: bool = False) -> None:
             "square": [ev("sq4,sq16"), or_downsample],
             "micromap": [ev("tri2,tri3")],
             "trace": [tr("none", shadows=True), tracer],
-            "vq2": [enc("vq2")],
-            "vq4": [enc("vq4", "vq4x64")],
             "omm": [omm("omm"), omm("omm_2", format="2state", promote="hashed"), omm("omm.glb"),
                     lambda: verify_omms(os.path.join(tmp, "omm")),
                     tr("none,omm", path=os.path.join(tmp, "omm.glb"))],
-            "synth": [enc("vq4-synth")],
-            "wavelet": [enc("wavelet3")],
             "hierarchical": [ev("succinct3,csm3"), tr("none,succinct3,csm3")],
             "budget": [budget],
             "budget-maps": [budget_maps],
+            # each codec family of the registry: its codecs' encoders
+            **{f: [enc(*family_codecs(f))] for f in COMPILE_FAMILIES},
         }
         failed = []
         for f in families:  # one family failing (no Embree, say) leaves the others compiled

@@ -1,11 +1,14 @@
 """Stored square maps by name: the raw ``sqN`` map and the compressed codecs, one interface.
 
-This module is the one list of codecs: each declares itself once in ``ENTRIES`` (a
-``CodecEntry``: its name, the tracer's format code, map size, block bytes, random-access lookup,
-whether a byte budget may choose it, and the compile families of its kernels). The tracer's
-dispatch (``codecs.dispatch``), the budget's options (``budget_options``), ``omm --from``, the
-scheme grammar's messages and the compile-ahead families are derived from it; adding a codec is
-its own modules plus one entry. Besides the square codecs, the entries ``succinct0`` ..
+This module is the one list of codecs: each declares itself once (a ``CodecEntry``: its name,
+map size, block bytes, random-access lookup, whether a byte budget may choose it and whether it is
+one of a budget's defaults, the compile families of its kernels, a one-line description), and
+the registry gives each its format code (``ENTRIES``). The tracer's dispatch
+(``codecs.dispatch``), the budget's options (``budget_options``), ``omm --from``, the scheme
+grammar and its messages, the command line's help, the docs' codec tables and the compile-ahead
+families and their warm-up runs are derived from it: adding a codec is its own modules plus one
+entry in ``_BUILTIN``, or, outside omaps, a package whose entry point in the group
+``omaps.codecs`` returns its entries (``omaps.plugins``; docs: "Adding a codec"). Besides the square codecs, the entries ``succinct0`` ..
 ``succinct12`` are byte-budget options of variable size: a pair's two triangles' level-L
 micromaps as succinct trees (``PairMicromaps``), their bytes those of the pair's trees.
 
@@ -42,8 +45,9 @@ from ..errors import InputError
 from .options import EFFORTS, ENCODERS
 from ..checks import typed
 
-__all__ = ["Codec", "CodecEntry", "PairMicromaps", "ENTRIES", "get_codec", "codec_names", "entry", "budget_options", "format_names",
-           "COMPILE_FAMILIES", "ENCODERS", "EFFORTS", "check_choice"]
+__all__ = ["Codec", "CodecEntry", "CompileFamily", "PairMicromaps", "ENTRIES", "PLUGIN_GROUP", "get_codec",
+           "codec_names", "entry", "budget_options", "format_names", "family_codecs", "square_codec", "COMPILE_FAMILIES",
+           "ENCODERS", "EFFORTS", "check_choice"]
 
 
 def check_choice(kind: str, value, allowed) -> None:
@@ -71,22 +75,61 @@ class Codec:
     # (P, block_bytes) uint8 -> (P, N, N) maps in compiled code; None: ``_decode`` block by block
     _decode_many: Callable[[np.ndarray], np.ndarray] | None = None
     code: int = 0  # the tracer's format code of this codec's blocks (``CodecEntry.code``)
+    # the block *is* the map (the raw sqN): decoding gives the map back unchanged, so commands use
+    # the baked map as it is; every other codec's maps are encoded and decoded again
+    raw: bool = False
 
     @property
     def compressed(self) -> bool:
-        return bool(self.encoders)
+        """Its maps are encoded (and decoded again, checked) before any figure is taken: every
+        codec but the raw ``sqN`` (``raw``), whether or not it has encoders to choose from."""
+        return not self.raw
 
     def options(self, encoder: str | None = None, effort: str | None = None) -> tuple[str | None, str | None]:
-        """(encoder, effort) with defaults filled in; InputError for a name no codec knows. A raw
-        map has no choices and ignores valid ones (a command's ``--effort`` applies to its
-        codecs)."""
-        check_choice("encoder", encoder, ENCODERS)
-        check_choice("effort", effort, tuple(EFFORTS))
-        if not self.compressed:
+        """(encoder, effort) with defaults filled in; InputError for a name no codec knows, or
+        for an encoder or effort this codec does not have (a scheme's variant: ``vq4-paper``). A
+        raw map has no choices and ignores valid ones (a command's ``--effort`` applies to its
+        codecs); a codec without choices (``encoders`` or ``efforts`` empty) gets None."""
+        check_choice("encoder", encoder, tuple(dict.fromkeys(ENCODERS + self.encoders)))
+        check_choice("effort", effort, tuple(dict.fromkeys((*EFFORTS, *self.efforts))))
+        if self.raw:
             return None, None
-        if encoder is not None and encoder not in self.encoders:
-            raise InputError(f"{self.name} has no encoder {encoder!r} (choose from {', '.join(self.encoders)})")
+        for kind, value, have in (("encoder", encoder, self.encoders), ("effort", effort, self.efforts)):
+            if value is not None and value not in have:
+                raise InputError(f"{self.name} has no {kind} {value!r} "
+                                 + (f"(choose from {', '.join(have)})" if have else f"(it has no {kind}s to choose)"))
         return encoder or self.default_encoder, effort or self.default_effort
+
+    def fallback(self, encoder: str | None = None, effort: str | None = None) -> tuple[str | None, str | None, str | None]:
+        """``options`` for a choice made for many codecs at once (a command's ``--encoder`` /
+        ``--effort``, a budget's): an encoder or effort this codec does not have gives its
+        default instead. Returns (encoder, effort, note): the note, None when nothing fell back,
+        says what was used instead (commands print it with their results).
+
+        Example::
+
+            >>> get_codec("wavelet3").fallback("paper")
+            ('best', 'medium', "wavelet3 has no encoder 'paper': its default encoder 'best' was used")
+        """
+        check_choice("encoder", encoder, tuple(dict.fromkeys(ENCODERS + self.encoders)))
+        check_choice("effort", effort, tuple(dict.fromkeys((*EFFORTS, *self.efforts))))
+        if self.raw:
+            return None, None, None
+        missing = []
+        if encoder is not None and encoder not in self.encoders:
+            missing.append(("encoder", encoder))
+            encoder = None
+        if effort is not None and effort not in self.efforts:
+            missing.append(("effort", effort))
+            effort = None
+        enc, eff = self.options(encoder, effort)
+        if not missing:
+            return enc, eff, None
+        used = {"encoder": enc, "effort": eff}
+        what = " or ".join(f"{k} {v!r}" for k, v in missing)
+        instead = ", ".join(f"its default {k} {used[k]!r}" if used[k] else f"no {k} (it has none to choose)"
+                            for k, _ in missing)
+        return enc, eff, f"{self.name} has no {what}: {instead} was used"
 
     def _maps(self, maps: object, param: str, one: bool) -> np.ndarray:
         """``maps`` (N, N) when ``one``, else (P, N, N): states 0..2 as uint8 (integers, bools, or
@@ -159,6 +202,30 @@ def _block_bytes(data: object, param: str) -> np.ndarray:
                          param=param)
 
 
+def square_codec(name: str, map_size: int, block_bytes: int, encode_many: Callable, decode: Callable,
+                 lookup: Callable, *, encoders: tuple[str, ...] = (), efforts: tuple[str, ...] = (),
+                 default_encoder: str | None = None, default_effort: str | None = None,
+                 decode_many: Callable | None = None, bits: int | None = None) -> Codec:
+    """A ``Codec`` from its parts: what a codec's ``CodecEntry.make`` returns.
+
+    ``encode_many(maps, encoder, effort)``: maps (P, N, N) uint8 of states 0..2 -> blocks
+    (P, block_bytes) uint8, conservative (a cell may only turn from T or O into C: ``encode_many``
+    of the ``Codec`` checks every block); ``encoder`` / ``effort`` are one of ``encoders`` /
+    ``efforts`` (their defaults when the caller names none), or None when the codec has none to
+    choose. ``decode(data: bytes)`` -> (N, N) map; it must accept any ``block_bytes`` bytes
+    (decoders are total: a block read from a file may hold anything). ``lookup``: a numba
+    ``@njit`` ``(block: uint8[block_bytes], x, y) -> state`` reading only the bits it needs, the
+    same state as ``decode`` gives for cell (x, y) (row y, column x); the tracer inlines it.
+    ``decode_many(blocks (P, block_bytes)) -> (P, N, N)``: optional, a compiled bulk decoder.
+    ``bits``: storage bits of one map (default 8 x ``block_bytes``)."""
+    for kind, choices, default in (("encoder", encoders, default_encoder), ("effort", efforts, default_effort)):
+        if tuple(choices) and default not in choices or not tuple(choices) and default is not None:
+            raise InputError(f"{name}: default_{kind} {default!r} must be one of its {kind}s ({', '.join(choices) or 'none'})",
+                             param=f"default_{kind}")
+    return Codec(name, map_size, 8 * block_bytes if bits is None else bits, block_bytes, tuple(encoders), tuple(efforts),
+                 default_encoder, default_effort, encode_many, decode, lookup, decode_many)
+
+
 def _raw(n: int) -> Codec:
     from ..bake.square import check_square_size
     from .raw import pack_states, row_bytes, square_lookup, unpack_states
@@ -180,7 +247,8 @@ def _raw(n: int) -> Codec:
     def dec(data):
         return dec_many(np.frombuffer(data, np.uint8)[None])[0]
 
-    return Codec(f"sq{n}", n, 2 * n * n, row_bytes(n * n), (), (), None, None, enc, dec, square_lookup(n), dec_many)
+    return Codec(f"sq{n}", n, 2 * n * n, row_bytes(n * n), (), (), None, None, enc, dec, square_lookup(n), dec_many,
+                 raw=True)
 
 
 def _vq(name: str) -> Codec:
@@ -214,36 +282,80 @@ def _synth(name: str) -> Codec:
 
 
 @dataclass(frozen=True)
+class CompileFamily:
+    """A compile-ahead family a codec declares (``omaps.cli.precompile``): the modules whose numba
+    kernels encoding and decoding its maps compile, and about how many seconds one process took to
+    compile them with an empty cache on the 2-core reference machine (imports and cache writes
+    included; the compile's announced estimate). Its warm-up encodes a made-up map with every
+    encoder and effort of each entry that declares it."""
+
+    name: str
+    modules: tuple[str, ...]
+    seconds: int = 30
+
+
+# the families of omaps' own kernels an entry may name by string (``omaps.cli.precompile``'s
+# ``COMMAND_FAMILIES``): baking square maps, and the hierarchical micromaps' trees
+SHARED_FAMILIES = ("square", "hierarchical")
+
+
+@dataclass(frozen=True)
 class CodecEntry:
     """One codec's declaration: what every part of omaps derives from the registry.
 
-    ``code`` is the tracer's format code of a pair's block (0 is no map); ``lookup()`` imports the
-    codec's block module only and returns its numba ``(block, x, y) -> state``; ``make()`` builds the
-    full ``Codec`` (encoders, decoders) on first use; ``families`` are the compile-ahead families
-    (``COMPILE_FAMILIES`` and ``omaps.cli.precompile``) that baking and encoding its maps compile;
-    ``budget``: a byte budget may choose it for a pair.
+    ``lookup()`` imports the codec's block module only and returns its numba
+    ``(block, x, y) -> state``; ``make()`` builds the full ``Codec`` (``square_codec``) on first
+    use; ``families``: the compile-ahead families that baking and encoding its maps compile, a
+    ``CompileFamily`` it declares or the name of one declared elsewhere (``"square"``: the square
+    baker; another entry's family); ``budget``: a byte budget may choose it for a pair when a
+    scheme names it (``budget:BYTES:default+NAME``); ``budget_default``: it is also one of the
+    default options of every ``budget:BYTES`` (opt-in: a new codec changes no default budget);
+    ``description``: one line for the docs' and the report's codec tables.
+
+    ``code`` is the tracer's format code of a pair's block (0 is no map), assigned by the registry
+    in declaration order: omaps' own entries first (their codes are those docs/FORMAT.md records),
+    then the plug-ins' (``PLUGIN_GROUP``) in the order of their distributions' and entry points'
+    names. An entry is declared without one. ``origin``: ``"omaps"`` or the plug-in it came from.
 
     ``level``: None for a square codec (a fixed ``block_bytes`` block over the pair's ``map_size``
     square, read by cell); a micromap level L for an entry that stores the pair's two triangles'
     level-L micromaps in a representation whose bytes depend on the maps (``map_size`` and
     ``block_bytes`` 0; ``make()`` gives a ``PairMicromaps``): its ``lookup()`` is a numba
     ``(block, level, second, k) -> state`` of micro-triangle k of the pair's first or second
-    triangle."""
+    triangle.
+
+    Example (a plug-in's entry point returns entries like this one)::
+
+        >>> from omaps.codecs import CodecEntry, CompileFamily
+        >>> e = CodecEntry("sq16copy", 16, 64, lookup=lambda: None, make=lambda: None,
+        ...                families=("square", CompileFamily("sq16copy", ("mypkg.block",), 10)),
+        ...                description="a raw 16x16 map again")
+        >>> e.code, e.budget, e.budget_default
+        (0, False, False)
+    """
 
     name: str
-    code: int
     map_size: int
     block_bytes: int
     lookup: Callable[[], Callable]
     make: Callable[[], "Codec | PairMicromaps"]
-    families: tuple[str, ...]
+    families: tuple["str | CompileFamily", ...] = ()
     budget: bool = False
+    budget_default: bool = False
     level: int | None = None
+    description: str = ""
+    code: int = 0
+    origin: str = "omaps"
 
     @property
     def variable(self) -> bool:
         """Its bytes depend on the pair's maps (a budget option priced per pair)."""
         return self.level is not None
+
+    @property
+    def family_names(self) -> tuple[str, ...]:
+        """Its compile-ahead families' names, in order."""
+        return tuple(f.name if isinstance(f, CompileFamily) else f for f in self.families)
 
 
 @dataclass(frozen=True)
@@ -292,44 +404,125 @@ def _block_lookup(module: str, attr: str = "lookup"):
 
 _RAW_SIZES = tuple(1 << k for k in range(8))  # sq1 .. sq128 (``bake.square.MAX_SQUARE``)
 _RAW_BUDGET = 64  # a budget chooses raw maps up to sq64
-_FIRST_TREE_CODE = 14  # succinct0 .. succinct12: codes 14 .. 26
 
 
 def _pair_micromaps(level: int) -> PairMicromaps:
     from .succinct import pair_encode
 
-    return PairMicromaps(f"succinct{level}", level, _FIRST_TREE_CODE + level, pair_encode)
+    return PairMicromaps(f"succinct{level}", level, entry(f"succinct{level}").code, pair_encode)
 
 
-ENTRIES: tuple[CodecEntry, ...] = tuple(
-    CodecEntry(f"sq{n}", 1 + k, n, max(1, n * n // 4), _raw_lookup(n), lambda n=n: _raw(n), ("square",),
-               n <= _RAW_BUDGET) for k, n in enumerate(_RAW_SIZES)) + (
-    CodecEntry("vq2", 9, 16, 32, _block_lookup("vq2_block"), lambda: _vq("vq2"), ("square", "vq2"), True),
-    CodecEntry("vq4", 10, 32, 64, _block_lookup("vq4_block"), lambda: _vq("vq4"), ("square", "vq4"), True),
-    CodecEntry("vq4x64", 11, 64, 256, _block_lookup("vq4_block", "lookup_x64"), lambda: _vq("vq4x64"),
-               ("square", "vq4"), True),
-    CodecEntry("vq4-synth", 12, 32, 64, _block_lookup("vq4_synth_block"), lambda: _synth("vq4-synth"),
-               ("square", "vq4", "synth")),
-    CodecEntry("wavelet3", 13, 64, 64, _block_lookup("wavelet3_block"), lambda: _synth("wavelet3"),
-               ("square", "wavelet")),
+_VQ2 = CompileFamily("vq2", ("omaps.codecs.vq2_encode",), 47)
+_VQ4 = CompileFamily("vq4", ("omaps.codecs.vq4_encode",), 51)
+
+# omaps' own codecs, in the order of their format codes (docs/FORMAT.md): append a new one at the end
+_BUILTIN: tuple[CodecEntry, ...] = tuple(
+    CodecEntry(f"sq{n}", n, max(1, n * n // 4), _raw_lookup(n), lambda n=n: _raw(n), ("square",),
+               budget=n <= _RAW_BUDGET, budget_default=n <= _RAW_BUDGET,
+               description=f"the raw {n}x{n} map, 2 bits per cell") for n in _RAW_SIZES) + (
+    CodecEntry("vq2", 16, 32, _block_lookup("vq2_block"), lambda: _vq("vq2"), ("square", _VQ2), True, True,
+               description="the deck's VQ2: 16x16 cells in 256 bits, vectors of 2x2 cells"),
+    CodecEntry("vq4", 32, 64, _block_lookup("vq4_block"), lambda: _vq("vq4"), ("square", _VQ4), True, True,
+               description="the deck's VQ4: 32x32 cells in 512 bits, vectors of 4x4 cells"),
+    CodecEntry("vq4x64", 64, 256, _block_lookup("vq4_block", "lookup_x64"), lambda: _vq("vq4x64"),
+               ("square", _VQ4), True, True, description="64x64 cells as four VQ4 blocks (2048 bits)"),
+    CodecEntry("vq4-synth", 32, 64, _block_lookup("vq4_synth_block"), lambda: _synth("vq4-synth"),
+               ("square", "vq4", CompileFamily("synth", ("omaps.codecs.vq4_synth_encode",
+                                                         "omaps.codecs.vq4_synth_block"), 68)),
+               description="a VQ4 block whose codebook order carries a synthesised 14th vector (512 bits)"),
+    CodecEntry("wavelet3", 64, 64, _block_lookup("wavelet3_block"), lambda: _synth("wavelet3"),
+               ("square", CompileFamily("wavelet", ("omaps.codecs.wavelet3_encode", "omaps.codecs.wavelet3_block",
+                                                    "omaps.codecs.vec4_search", "omaps.allocate"), 36)),
+               description="64x64 cells in 512 bits: a three-level hierarchy of uniform and refined blocks"),
 ) + tuple(  # a pair's two succinct micromaps (per-triangle trees); csmL shares subtrees across the scene: no pair cost
-    CodecEntry(f"succinct{lv}", _FIRST_TREE_CODE + lv, 0, 0, _block_lookup("succinct", "pair_lookup"),
-               lambda lv=lv: _pair_micromaps(lv), ("hierarchical",), True, lv) for lv in range(MAX_LEVEL + 1))
-_BY_NAME = {e.name: e for e in ENTRIES}
-_COMPRESSED = tuple(e.name for e in ENTRIES if not e.name.startswith("sq") and not e.variable)
+    CodecEntry(f"succinct{lv}", 0, 0, _block_lookup("succinct", "pair_lookup"), lambda lv=lv: _pair_micromaps(lv),
+               ("hierarchical",), budget=True, level=lv,
+               description=f"a pair's two level-{lv} micromaps as succinct trees (bytes per pair)")
+    for lv in range(MAX_LEVEL + 1))
 
-# the compile-ahead families of the codecs' own kernels: (modules whose numba kernels they compile,
-# seconds their compile process took with an empty cache on the 2-core reference machine, as
-# ``omaps.cli.precompile``'s figures)
-COMPILE_FAMILIES = {
-    "vq2": (("omaps.codecs.vq2_encode",), 47),
-    "vq4": (("omaps.codecs.vq4_encode",), 51),
-    "synth": (("omaps.codecs.vq4_synth_encode", "omaps.codecs.vq4_synth_block"), 68),
-    "wavelet": (("omaps.codecs.wavelet3_encode", "omaps.codecs.wavelet3_block", "omaps.codecs.vec4_search",
-                 "omaps.allocate"), 36),
-    # the micromaps' lossless tree representations (``succinctL``, ``csmL``; not square codecs)
-    "hierarchical": (("omaps.codecs.succinct", "omaps.codecs.csm"), 70),
-}
+PLUGIN_GROUP = "omaps.codecs"  # the entry point group of codec plug-ins (``omaps.plugins``)
+
+_RESERVED = re.compile(r"none|texel|omm|default|sq\d+|(tri|succinct|csm)\d+|(budget|file)(:.*)?")
+_NAME = re.compile(r"[a-z][a-z0-9_]*(-[a-z0-9_]+)*")
+
+
+def _check(e: object, where: str, seen: dict[str, str], families: dict[str, CompileFamily]) -> CodecEntry:
+    """``e`` checked as a new entry (``where`` names its origin in messages); its families added."""
+    from .. import checks
+
+    MAX_SQUARE = _RAW_SIZES[-1]  # (``bake.square.MAX_SQUARE``; that module's import costs a bake's start)
+
+    def bad(problem: str):
+        return InputError(f"{where}: {problem}")
+
+    if not isinstance(e, CodecEntry):
+        raise bad(f"an entry must be a CodecEntry, got {type(e).__name__}")
+    name = e.name
+    if not isinstance(name, str) or not _NAME.fullmatch(name):
+        raise bad(f"codec name {name!r} must be lower-case letters, digits, '_' and inner '-'")
+    if name in seen:
+        raise bad(f"codec {name!r} is already declared by {seen[name]}")
+    if name.rpartition("-")[2] in ("paper", *EFFORTS) or (_RESERVED.fullmatch(name) and where != "omaps"):
+        raise bad(f"codec name {name!r} is a scheme name or ends in a variant (-paper, -fast, ...)")
+    try:
+        if e.variable:
+            checks.integer(e.level, "level", 0, MAX_LEVEL)
+        else:
+            n = checks.integer(e.map_size, "map_size", 1, MAX_SQUARE)
+            if n & (n - 1):
+                raise InputError(f"map_size must be a power of two up to {MAX_SQUARE}, got {n}")
+            checks.integer(e.block_bytes, "block_bytes", 1, 1 << 20)
+    except InputError as exc:
+        raise bad(f"codec {name!r}: {exc.problem}") from None
+    if not callable(e.lookup) or not callable(e.make):
+        raise bad(f"codec {name!r}: lookup and make must be callables (each returning what its entry states)")
+    if e.budget_default and not e.budget:
+        raise bad(f"codec {name!r}: budget_default needs budget")
+    if not isinstance(e.description, str) or not e.description.strip() or "\n" in e.description:
+        raise bad(f"codec {name!r}: description must be one line of text")
+    if not isinstance(e.families, tuple):
+        raise bad(f"codec {name!r}: families must be a tuple")
+    for f in e.families:
+        if isinstance(f, CompileFamily):
+            if families.get(f.name, f) != f:
+                raise bad(f"codec {name!r}: compile family {f.name!r} is declared otherwise by another entry")
+            if not f.modules or not all(isinstance(m, str) for m in f.modules):
+                raise bad(f"codec {name!r}: compile family {f.name!r} names no modules")
+            families[f.name] = f
+        elif not (isinstance(f, str) and (f in SHARED_FAMILIES or f in families)):
+            raise bad(f"codec {name!r}: unknown compile family {f!r} (known: "
+                      f"{', '.join([*SHARED_FAMILIES, *families])}, or a CompileFamily)")
+    seen[name] = where
+    return e
+
+
+def _declare() -> tuple[tuple[CodecEntry, ...], dict[str, CompileFamily]]:
+    """Every entry with its format code, omaps' own first, then each plug-in's (checked)."""
+    from ..plugins import codec_entries
+
+    seen: dict[str, str] = {}
+    families: dict[str, CompileFamily] = {}
+    out = [_check(e, "omaps", seen, families) for e in _BUILTIN]
+    for where, got in codec_entries():
+        out += [replace(_check(e, where, seen, families), origin=where) for e in got]
+    return tuple(replace(e, code=1 + i) for i, e in enumerate(out)), families
+
+
+ENTRIES, _FAMILIES = _declare()
+_BY_NAME = {e.name: e for e in ENTRIES}
+_COMPRESSED = tuple(e.name for e in ENTRIES if not re.fullmatch(r"sq\d+", e.name) and not e.variable)
+
+# the compile-ahead families the entries declare: name -> (modules whose numba kernels they
+# compile, seconds their compile process took with an empty cache on the 2-core reference machine)
+COMPILE_FAMILIES = {f.name: (f.modules, f.seconds) for f in _FAMILIES.values()}
+
+
+@typed
+def family_codecs(family: str) -> tuple[str, ...]:
+    """The square codecs that declare the compile family ``family`` (its warm-up encodes with
+    each of them)."""
+    return tuple(e.name for e in ENTRIES if not e.variable
+                 and any(isinstance(f, CompileFamily) and f.name == family for f in e.families))
 
 
 def entry(name: str) -> CodecEntry:
@@ -343,11 +536,13 @@ def entry(name: str) -> CodecEntry:
 
 
 @typed
-def budget_options(variable: bool = False) -> tuple[str, ...]:
-    """The codecs a byte budget may choose for a pair, in registry order: those of fixed bytes (a
-    budget's default options) and, with ``variable``, also those whose bytes depend on the
-    pair's maps (``succinctL``)."""
-    return tuple(e.name for e in ENTRIES if e.budget and (variable or not e.variable))
+def budget_options(variable: bool = False, default: bool = False) -> tuple[str, ...]:
+    """The codecs a byte budget may choose for a pair, in registry order: those of fixed bytes
+    and, with ``variable``, also those whose bytes depend on the pair's maps (``succinctL``);
+    with ``default``, only the default options of ``budget:BYTES`` (``CodecEntry.budget_default``,
+    ``omaps.budget.PAIR_OPTIONS``)."""
+    return tuple(e.name for e in ENTRIES if e.budget and (variable or not e.variable)
+                 and (e.budget_default or not default))
 
 
 @typed
@@ -369,8 +564,9 @@ def codec_names() -> list[str]:
 
 
 def get_codec(name: str) -> Codec:
-    """A codec by name: ``sqN`` (raw 2-bit map), ``vq2``, ``vq4``, ``vq4x64``, ``vq4-synth`` or
-    ``wavelet3``."""
+    """A codec by name: ``sqN`` (raw 2-bit map) or a compressed codec of the registry
+    (``codec_names()``; plug-ins' included). A plug-in whose ``make()`` gives something other than
+    its entry states is an ``InputError`` naming the plug-in."""
     from ..checks import text
 
     key = text(name, "name").strip().lower()
@@ -389,5 +585,11 @@ def get_codec(name: str) -> Codec:
             raise InputError(f"{e.name} stores a pair's micromaps as trees of variable bytes (a byte budget's "
                              "option), not a square map")
         codec = e.make()
+        if not (isinstance(codec, Codec) and (codec.name, codec.map_size, codec.block_bytes)
+                == (e.name, e.map_size, e.block_bytes)):
+            got = (f"{codec.name} ({codec.map_size}x{codec.map_size}, {codec.block_bytes} bytes)"
+                   if isinstance(codec, Codec) else type(codec).__name__)
+            raise InputError(f"{e.origin}: codec {e.name!r}: make() gave {got}, not the Codec its entry states "
+                             f"({e.map_size}x{e.map_size}, {e.block_bytes} bytes)")
         _CACHE[key] = replace(codec, code=e.code)
     return _CACHE[key]

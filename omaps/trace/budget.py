@@ -42,7 +42,8 @@ def _square_options(at, tests, scheme, options, w_a, w_b, jobs, progress, cache)
     for o in options:
         codec = get_codec(o)
         uniq, inv_u = dedupe_maps(pair_states[codec.map_size])
-        blocks, dec = encode_cached(codec, uniq, scheme.encoder, scheme.effort, jobs, progress, cache)
+        enc, eff, _ = codec.fallback(scheme.encoder, scheme.effort)  # (the scheme's notes say so)
+        blocks, dec = encode_cached(codec, uniq, enc, eff, jobs, progress, cache)
         rows = inv_u[pair_inverse]
         half = half_known(dec)[rows]
         known = (dec != states.C).reshape(len(dec), -1).mean(axis=1)[rows]

@@ -164,7 +164,10 @@ def build_scheme_maps(at: AlphaTriangles, tests: dict, schemes, jobs: int = 1,
     if squares:
         sizes = {s.codec.map_size for s in squares}
         if any(s.kind == "budget" for s in all_schemes):  # bake once at the budget's finest size too
-            sizes |= {get_codec(o).map_size for o in PAIR_OPTIONS if o != "none"}
+            from ..codecs import entry
+
+            sizes |= {get_codec(o).map_size for s in all_schemes if s.kind == "budget"
+                      for o in (s.options or PAIR_OPTIONS) if o != "none" and not entry(o).variable}
         pair_states, pair_inverse = pair_square_states(at, tests, sizes, cache)
     baked: dict[int, tuple] = {}  # level -> micromap_states: triL, succinctL and csmL of one level bake once
     for s in schemes:
