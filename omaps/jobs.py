@@ -113,8 +113,10 @@ class OmmBake:
                 "before resolving")
 
     def messages(self) -> list[str]:
-        """What ``omaps omm`` prints on stderr: the glTF writer's warnings, the primitives left out."""
-        return [f"omaps: warning: {w}" for w in self.warnings] + [
+        """What ``omaps omm`` prints on stderr: the glTF writer's warnings, the ``--from`` scheme's
+        notes (``Scheme.notes``), the primitives left out."""
+        notes = (self.result.summary.get("pair_blocks") or {}).get("notes", [])
+        return [f"omaps: warning: {w}" for w in self.warnings] + [f"omaps: note: {n}" for n in notes] + [
             f"omaps: skipped mesh {s['mesh']} primitive {s['primitive']} ({s['name']}): {s['reason']}"
             for s in self.skipped]
 

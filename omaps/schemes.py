@@ -44,7 +44,7 @@ from .codecs.registry import EFFORTS, Codec, budget_options, check_choice, codec
 from . import checks
 from .errors import InputError, InputTypeError
 
-__all__ = ["Scheme", "get_scheme", "parse_schemes", "square_scheme_choices", "DEFAULT_SCHEMES", "KINDS", "EVAL_KINDS",
+__all__ = ["Scheme", "get_scheme", "parse_schemes", "square_scheme_choices", "notes_lines", "DEFAULT_SCHEMES", "KINDS", "EVAL_KINDS",
            "TRACE_KINDS", "VARIANTS"]
 
 KINDS = ("none", "texel", "micromap", "square", "stored", "budget")
@@ -119,6 +119,13 @@ class Scheme:
             if self.codec.compressed:
                 out.update(encoder=self.encoder, effort=self.effort)
         return out
+
+
+def notes_lines(settings: dict) -> list[str]:
+    """The lines a command prints under its results for the schemes' notes (``Scheme.notes``),
+    from a run's settings (``{"schemes": {name: Scheme.settings()}}``): one per note, each naming
+    its scheme."""
+    return [f"note: {name}: {n}" for name, s in (settings.get("schemes") or {}).items() for n in s.get("notes", ())]
 
 
 def codec_variants(codec_name: str) -> tuple[str, ...]:

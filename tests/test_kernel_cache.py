@@ -126,7 +126,8 @@ def test_the_key_follows_content_not_location(tmp_path):
 
 # --- the codec registry changed under a warm cache ---------------------------------------------
 
-SWAP = ("CodecEntry(f\"sq{n}\", 1 + k,", "CodecEntry(f\"sq{n}\", {16: 6, 32: 5}.get(n, 1 + k),")
+# the registry gives format codes in declaration order: declaring sq32 before sq16 swaps their codes
+SWAP = ("_RAW_SIZES = tuple(1 << k for k in range(8))", "_RAW_SIZES = (1, 2, 4, 8, 32, 16, 64, 128)")
 
 
 def _trace(pkg_root, cache, scene, out):

@@ -46,7 +46,8 @@ from .options import EFFORTS, ENCODERS
 from ..checks import typed
 
 __all__ = ["Codec", "CodecEntry", "CompileFamily", "PairMicromaps", "ENTRIES", "PLUGIN_GROUP", "get_codec",
-           "codec_names", "entry", "budget_options", "format_names", "family_codecs", "square_codec", "COMPILE_FAMILIES",
+           "codec_names", "codec_list", "entry", "budget_options", "format_names", "family_codecs", "square_codec",
+           "COMPILE_FAMILIES",
            "ENCODERS", "EFFORTS", "check_choice"]
 
 
@@ -504,7 +505,10 @@ def _declare() -> tuple[tuple[CodecEntry, ...], dict[str, CompileFamily]]:
     families: dict[str, CompileFamily] = {}
     out = [_check(e, "omaps", seen, families) for e in _BUILTIN]
     for where, got in codec_entries():
-        out += [replace(_check(e, where, seen, families), origin=where) for e in got]
+        try:
+            out += [replace(_check(e, where, seen, families), origin=where) for e in got]
+        except InputError as exc:
+            raise InputError(f"{exc.problem} (set OMAPS_CODEC_PLUGINS=0 to start omaps without plug-ins)") from None
     return tuple(replace(e, code=1 + i) for i, e in enumerate(out)), families
 
 
@@ -561,6 +565,22 @@ _CACHE: dict[str, Codec] = {}
 def codec_names() -> list[str]:
     """The compressed codecs (raw maps are ``sqN``, N a power of two up to 128)."""
     return list(_COMPRESSED)
+
+
+@typed
+def codec_list(conjunction: str = "or", names: list[str] | tuple[str, ...] | None = None) -> str:
+    """The compressed codecs (``codec_names()``, plug-ins' included), or ``names``, as a phrase for
+    help texts and docs: the last two joined by ``conjunction`` (``""``: commas only).
+
+    Example::
+
+        >>> codec_list(names=["vq2", "vq4", "wavelet3"]), codec_list("and", ["vq2"]), codec_list("", ["a", "b"])
+        ('vq2, vq4 or wavelet3', 'vq2', 'a, b')
+    """
+    items = list(codec_names() if names is None else names)
+    if len(items) < 2 or not conjunction:
+        return ", ".join(items)
+    return f"{', '.join(items[:-1])} {conjunction} {items[-1]}"
 
 
 def get_codec(name: str) -> Codec:

@@ -104,7 +104,9 @@ class CorpusResult:
                      for r in self.results]
         rows.append([f"MEAN savings ({len(self.results)})"] + [f"{means[n]['savings']:.3f}" for n in self.names])
         rows.append(["mean bits/pair"] + [f"{means[n]['bits']:.0f}" for n in self.names])
-        return format_table(["texture"] + self.names, rows)
+        from ..schemes import notes_lines
+
+        return "\n".join([format_table(["texture"] + self.names, rows), *notes_lines(self.settings)])
 
     def heading(self) -> str:
         """The line ``omaps eval`` prints above the table."""

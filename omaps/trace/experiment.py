@@ -85,8 +85,11 @@ class TraceResult:
         return ["omaps: error: a scheme changed the visible result: " + ", ".join(f"{n} ({v})" for n, v in bad.items())]
 
     def table(self) -> str:
-        """The report as ``omaps trace`` prints it."""
-        return format_report(self.report, self.names, self.shadows)
+        """The report as ``omaps trace`` prints it (the schemes' notes under the table)."""
+        from ..schemes import notes_lines
+
+        return "\n".join([format_report(self.report, self.names, self.shadows),
+                          *notes_lines(self.report.get("settings", {}))])
 
     def write_json(self, path) -> None:
         """The report as JSON."""
