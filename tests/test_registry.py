@@ -298,3 +298,18 @@ def test_the_kernels_of_omaps_with_and_without_plugins_are_cached_apart(tmp_path
     (plug_lookups, plug_raster), (plain_lookups, plain_raster) = out
     assert "-plugins-" in plug_lookups and "-plugins-" not in plain_lookups
     assert plug_raster == plain_raster and "-plugins-" not in plain_raster
+
+
+def test_a_plugins_compile_family_warms_up(tmp_path):
+    """The compile-ahead knows a plug-in's family from its entry alone: its warm-up encodes with
+    the plug-in's codec (no hand-kept table), and a scheme naming the codec asks for it."""
+    site = tmp_path / "site"
+    _install(site)
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(site), ROOT]), NUMBA_CACHE_DIR=str(tmp_path / "cache"))
+    r = subprocess.run([sys.executable, "-m", "omaps.cli.precompile", "copy16"], capture_output=True, text=True,
+                       timeout=600, env=env)
+    assert r.returncode == 0 and r.stdout.split() == ["copy16"], r.stderr
+    code = ("from argparse import Namespace as ns; from omaps.cli.precompile import families_for, uncached; "
+            "f = families_for(ns(command='eval', schemes='copy16,sq4')); print(f, uncached(['copy16']))")
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300, env=env)
+    assert r.returncode == 0 and r.stdout.strip() == "['square', 'copy16'] []", (r.stdout, r.stderr)

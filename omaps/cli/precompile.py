@@ -416,16 +416,19 @@ def warm(families, report=None, evaluation_only: bool = False) -> None:
 
         def enc(*codecs):
             """The codecs' encoders (every encoder and effort: the deck's encoder and thorough are
-            kernels of their own in vq2) on a made-up map, through ``Codec.encode_many`` as trace,
-            omm --from and eval call them: no square baker (the square family's) and no tracer."""
+            kernels of their own in vq2; a codec with none to choose, once) on a made-up map,
+            through ``Codec.encode_many`` as trace, omm --from and eval call them, and each codec's
+            random-access lookup on the block: no square baker (the square family's) and no
+            tracer."""
             def run():
                 from ..codecs import get_codec
 
                 for name in codecs:
                     codec = get_codec(name)
-                    for e in codec.encoders:
-                        for f in codec.efforts:
-                            codec.encode_many(_states_map(codec.map_size)[None], e, f)
+                    for e in codec.encoders or (None,):
+                        for f in codec.efforts or (None,):
+                            blocks, _ = codec.encode_many(_states_map(codec.map_size)[None], e, f)
+                    codec.lookup(blocks[0], 0, 0)
 
             run.evaluation = True
             return run
