@@ -75,11 +75,11 @@ def package_folder(ep) -> tuple[str, str] | None:
     return (top, locations[0]) if locations else None
 
 
-def codec_entries() -> list[tuple[str, list]]:
+def codec_entries(prepare=None) -> list[tuple[str, list]]:
     """Each plug-in's entries: (how messages name it, what its entry point returned, as a list).
-    Its package is watched by the kernel cache before its code runs. A plug-in that cannot be
-    loaded, or whose callable fails or returns no iterable, is an ``InputError`` naming it."""
-    from . import kernel_cache
+    ``prepare(folder, name)`` is called with its package before its code runs (the registry
+    passes ``kernel_cache.watch``). A plug-in that cannot be loaded, or whose callable fails or
+    returns no iterable, is an ``InputError`` naming it."""
     from .errors import InputError
 
     out = []
@@ -90,7 +90,8 @@ def codec_entries() -> list[tuple[str, list]]:
         if pkg is None:
             raise InputError(f"{where}: its module must be part of a package (omaps keys its kernels on the "
                              f"package's files){hint}")
-        kernel_cache.watch(pkg[1], pkg[0])
+        if prepare is not None:
+            prepare(pkg[1], pkg[0])
         try:
             fn = ep.load()
             if not callable(fn):

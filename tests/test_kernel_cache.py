@@ -130,13 +130,18 @@ def test_the_key_follows_content_not_location(tmp_path):
 SWAP = ("_RAW_SIZES = tuple(1 << k for k in range(8))", "_RAW_SIZES = (1, 2, 4, 8, 32, 16, 64, 128)")
 
 
-def _trace(pkg_root, cache, scene, out):
+# a codec added to omaps' own: the raw 16x16 map again, under another name (so its figures must be sq16's)
+ADD = ("PLUGIN_GROUP = ", "_BUILTIN += (CodecEntry(\"copy16\", 16, 64, _raw_lookup(16), "
+       "lambda: replace(_raw(16), name=\"copy16\"), (\"square\",), description=\"sq16 again\"),)\n\nPLUGIN_GROUP = ")
+
+
+def _trace(pkg_root, cache, scene, out, schemes="none,sq16,sq32"):
     """``omaps trace`` from the copy of omaps in ``pkg_root`` with its own kernel cache: rc,
     stderr and each scheme's figures (timings left out)."""
     import json
 
     env = dict(os.environ, NUMBA_CACHE_DIR=str(cache), PYTHONPATH=str(pkg_root), OMAPS_PROGRESS="0")
-    r = subprocess.run([sys.executable, "-m", "omaps", "trace", scene, "--schemes", "none,sq16,sq32", "--size",
+    r = subprocess.run([sys.executable, "-m", "omaps", "trace", scene, "--schemes", schemes, "--size",
                         "48", "--json", str(out), "--quiet"], capture_output=True, text=True, env=env,
                        cwd=str(pkg_root), timeout=1800)
     if r.returncode:
@@ -152,7 +157,8 @@ def test_swapped_format_codes_under_a_warm_cache_trace_as_a_cold_run(tmp_path):
     """Swap two codecs' format codes in the registry of a copy of omaps whose kernel cache is
     warm: the next trace, in a fresh process, gives the cold run's figures and 0 differing
     pixels (with numba's own key, the tracer's kernels kept the old codes: each pair's block was
-    read by the other codec's lookup)."""
+    read by the other codec's lookup). Then add a codec (sq16's map under another name, its
+    figures known: sq16's): traced at once, under the same warm cache, as sq16."""
     import shutil
 
     import numpy as np
@@ -173,3 +179,13 @@ def test_swapped_format_codes_under_a_warm_cache_trace_as_a_cold_run(tmp_path):
     rc, err, warm = _trace(pkg, cache, scene, tmp_path / "warm.json")
     assert rc == 0, err  # the tracer exits 1 when a scheme changes a visible pixel
     assert warm == cold
+    text = registry.read_text()
+    assert ADD[0] in text, "the test's edit no longer matches the registry"
+    registry.write_text(text.replace(ADD[0], ADD[1], 1))
+    rc, err, added = _trace(pkg, cache, scene, tmp_path / "added.json", "none,sq16,sq32,copy16")
+    assert rc == 0, err
+    copy16 = added.pop("copy16")
+    assert added == cold
+    same = ("alpha_tests_per_primary_ray", "map_bytes", "differing_pixels")
+    assert {k: copy16.get(k) for k in same} == {k: cold["sq16"].get(k) for k in same}
+    assert cold["sq16"]["alpha_tests_per_primary_ray"] < cold["none"]["alpha_tests_per_primary_ray"]

@@ -499,12 +499,13 @@ def _check(e: object, where: str, seen: dict[str, str], families: dict[str, Comp
 
 def _declare() -> tuple[tuple[CodecEntry, ...], dict[str, CompileFamily]]:
     """Every entry with its format code, omaps' own first, then each plug-in's (checked)."""
+    from ..kernel_cache import watch
     from ..plugins import codec_entries
 
     seen: dict[str, str] = {}
     families: dict[str, CompileFamily] = {}
     out = [_check(e, "omaps", seen, families) for e in _BUILTIN]
-    for where, got in codec_entries():
+    for where, got in codec_entries(prepare=watch):  # (each plug-in's kernels keyed on its content)
         try:
             out += [replace(_check(e, where, seen, families), origin=where) for e in got]
         except InputError as exc:
