@@ -179,9 +179,14 @@ def footprint_grid(texel_states: np.ndarray, filter: str = "nearest", wrap: str 
     wrap_code(wrap)
     wrap_v = wrap if wrap_v is None else wrap_v
     wrap_code(wrap_v)
-    s = np.asarray(texel_states)
+    from .checks import array
+
+    s = array(texel_states, "texel_states", kinds="biuf")
     if s.ndim != 2 or s.size == 0:
-        raise InputError(f"texel states must be a non-empty 2-D array, got shape {s.shape}")
+        raise InputError(f"texel states must be a non-empty 2-D array, got shape {s.shape}", param="texel_states")
+    if not np.isin(s, (states.T, states.O, states.C)).all():
+        raise InputError("texel_states must hold the states 0 (T), 1 (O) and 2 (C) only", param="texel_states")
+    s = s.astype(np.intp)
     h, w = s.shape
     f = states.STATE_TO_FLAG[s]
     f, px = _extend(f, 1, wrap)

@@ -183,7 +183,8 @@ def get_scheme(name: str, encoder: str | None = None, effort: str | None = None)
 
         size, _, opts = key[len("budget:"):].partition(":")
         nbytes = parse_bytes(size)
-        enc, eff = encoder or "best", effort or "medium"  # our encoder's defaults; each option's codec falls back
+        enc: str | None = encoder or "best"  # our encoder's defaults; each option's codec falls back
+        eff: str | None = effort or "medium"
         options = _budget_options(name, opts) if opts else None
         suffix = ":" + "+".join(t.strip() for t in opts.split("+")) if opts else ""  # as written
         from .budget import PAIR_OPTIONS

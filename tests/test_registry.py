@@ -127,7 +127,9 @@ def test_compressed_means_encoded_not_has_encoders():
 
 def test_square_codec_checks_its_defaults():
     with pytest.raises(InputError, match="default_encoder"):
-        square_codec("x", 16, 4, None, None, None, encoders=("a",), default_encoder="b")
+        square_codec("x", 16, 4, print, print, print, encoders=("a",), default_encoder="b")
+    with pytest.raises(InputError, match="encode_many must be"):
+        square_codec("x", 16, 4, None, print, print)
 
 
 def test_make_must_give_the_codec_its_entry_states(monkeypatch):

@@ -203,6 +203,7 @@ def _block_bytes(data: object, param: str) -> np.ndarray:
                          param=param)
 
 
+@typed
 def square_codec(name: str, map_size: int, block_bytes: int, encode_many: Callable, decode: Callable,
                  lookup: Callable, *, encoders: tuple[str, ...] = (), efforts: tuple[str, ...] = (),
                  default_encoder: str | None = None, default_effort: str | None = None,
@@ -219,6 +220,10 @@ def square_codec(name: str, map_size: int, block_bytes: int, encode_many: Callab
     same state as ``decode`` gives for cell (x, y) (row y, column x); the tracer inlines it.
     ``decode_many(blocks (P, block_bytes)) -> (P, N, N)``: optional, a compiled bulk decoder.
     ``bits``: storage bits of one map (default 8 x ``block_bytes``)."""
+    from ..checks import integer
+
+    integer(map_size, "map_size", 1, _RAW_SIZES[-1])
+    integer(block_bytes, "block_bytes", 1)
     for kind, choices, default in (("encoder", encoders, default_encoder), ("effort", efforts, default_effort)):
         if tuple(choices) and default not in choices or not tuple(choices) and default is not None:
             raise InputError(f"{name}: default_{kind} {default!r} must be one of its {kind}s ({', '.join(choices) or 'none'})",
