@@ -10,13 +10,13 @@ from __future__ import annotations
 import importlib
 import inspect
 
-# page name, package, what it is
+# page name, package, what it is ({codecs}: the registry's codecs)
 PACKAGES = [
     ("omaps", "omaps", "The top-level namespace: textures, the alpha test, the bakers, codecs, schemes, "
      "the corpus evaluation and scenes. `import omaps` is cheap: each name is imported on first use."),
     ("bake", "omaps.bake", "The bakers: pair-square maps and per-triangle micromaps (bird-curve order)."),
-    ("codecs", "omaps.codecs", "Stored square maps: raw `sqN`, VQ2, VQ4, VQ4x64, VQ4-synth and wavelet3, "
-     "through one interface."),
+    ("codecs", "omaps.codecs", "Stored square maps: raw `sqN` and the registry's codecs, {codecs}, through one "
+     "interface."),
     ("corpus", "omaps.corpus", "The corpus evaluation behind `omaps eval`."),
     ("omm", "omaps.omm", "Standard opacity micromaps (VK_EXT_opacity_micromap, DXR 1.2) behind `omaps omm`."),
     ("scene", "omaps.scene", "glTF 2.0 scenes: the model, the reader, alpha-tested triangles and their pairs."),
@@ -109,9 +109,12 @@ def render(page: str, package: str, intro: str, done: dict[str, str]) -> str:
 
 
 def pages():
+    from omaps.codecs import codec_list, codec_names
+
+    codecs = codec_list("and", [f"`{n}`" for n in codec_names()])  # (plug-ins' included)
     done: dict[str, str] = {}
     for page, package, intro in PACKAGES:
-        yield f"reference/api/{page}.md", render(page, package, intro, done)
+        yield f"reference/api/{page}.md", render(page, package, intro.replace("{codecs}", codecs), done)
 
 
 try:

@@ -15,7 +15,7 @@ What makes each image (the same commands as the README's):
   every scheme of ``SAVINGS_SCHEMES``): mean savings against bits per pair.
 * ``forest_heatmap.png`` and ``forest_render.png``: one ``omaps trace ../shared/data/scenes/forest.glb
   --shadows --heatmap forest_heatmap.png --render forest_render.png`` (512x512, the default camera
-  and schemes none, tri3, sq16, vq2, vq4, vq4x64): alpha tests per pixel, a primary ray and,
+  and schemes, ``omaps.trace.experiment.DEFAULT_SCHEMES``): alpha tests per pixel, a primary ray and,
   where it hits, a shadow ray per pixel (the shadow rays test every C candidate: not deferred),
   and the alpha-tested render lit by the same light.
 
@@ -39,8 +39,19 @@ TEXTURES = DATA / "textures"
 FOREST = DATA / "scenes" / "forest.glb"
 
 LEAVES_SCHEMES = ["tri3", "sq16", "sq64", "texel"]
-SAVINGS_SCHEMES = ["sq4", "sq8", "sq16", "sq32", "sq64", "tri2", "tri3", "tri4", "tri5", "vq2", "vq2-paper", "vq4",
-                   "vq4x64", "vq4-paper", "vq4x64-paper", "vq4-synth", "wavelet3", "texel"]
+
+
+def _savings_schemes() -> list[str]:
+    """The uncompressed squares and micromaps, every codec of the registry with its default
+    encoder and, where it has it, the deck's (``-paper``), and ``texel``."""
+    from omaps.codecs import codec_names
+    from omaps.schemes import codec_variants
+
+    codecs = [s for c in codec_names() for s in [c] + ([f"{c}-paper"] if "paper" in codec_variants(c) else [])]
+    return ["sq4", "sq8", "sq16", "sq32", "sq64", "tri2", "tri3", "tri4", "tri5", *codecs, "texel"]
+
+
+SAVINGS_SCHEMES = _savings_schemes()
 IMAGES = {"leaves": ["leaves_maps.png"], "savings": ["savings_shared_corpus.png"],
           "forest": ["forest_heatmap.png", "forest_render.png"]}
 

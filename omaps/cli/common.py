@@ -12,6 +12,30 @@ from ..text import format_table, plural  # noqa: F401 - plural: the commands' on
 from ..names import BLEND_RULES, EFFORTS, ENCODERS, FILTERS, MODES, WRAP_MODES  # numba-free: parsing loads no kernel
 
 
+# Help texts name the registry's codecs through these markers, filled in when help is shown
+# (``main.Parser.format_help``): building a parser imports no codec module, and every codec of the
+# registry, plug-ins' included, is named.
+CODECS = "{codecs}"  # the compressed codecs (``codec_names()``), comma-separated
+CODECS_OR = "{codecs or}"  # the same, the last two joined by "or"
+BUDGET_DEFAULTS = "{budget defaults}"  # a budget:BYTES scheme's options: "sqN up to 64, " and its codecs
+
+
+def codec_help(text):
+    """``text`` (a help text, or None) with the codec markers replaced by the registry's names."""
+    if not isinstance(text, str) or not any(m in text for m in (CODECS, CODECS_OR, BUDGET_DEFAULTS)):
+        return text
+    import re
+
+    from ..codecs.registry import budget_options, codec_list, codec_names
+
+    default = budget_options(default=True)
+    raw = [int(n[2:]) for n in default if re.fullmatch(r"sq\d+", n)]
+    coded = [n for n in default if n in codec_names()]
+    budget = codec_list("or", ([f"sqN up to {max(raw)}"] if raw else []) + coded)
+    return (text.replace(CODECS, codec_list("")).replace(CODECS_OR, codec_list("or"))
+            .replace(BUDGET_DEFAULTS, budget))
+
+
 class _Default(float):
     """A state option's default value: the same number, but told apart from one given on the
     command line (so an option of the other mode is an error, not silently unused)."""

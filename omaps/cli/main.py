@@ -21,7 +21,8 @@ from .common import show_warning
 class Parser(argparse.ArgumentParser):
     """argparse's parser, and its errors: an unknown option is reported by the (sub)command that
     got it, with that command's usage and the closest of its options (``--sheme``: did you mean
-    --schemes?); an unknown command or choice with the closest choice. Exit 2."""
+    --schemes?); an unknown command or choice with the closest choice. Exit 2. Its help names the
+    registry's codecs when it is shown (``common.CODECS``)."""
 
     def parse_known_args(self, args=None, namespace=None):
         ns, extras = super().parse_known_args(args, namespace)
@@ -37,6 +38,13 @@ class Parser(argparse.ArgumentParser):
                 if close:
                     return f" (did you mean {close[0]}?)"
         return ""
+
+    def format_help(self):
+        from .common import codec_help
+
+        for action in self._actions:  # the registry's codecs in the help texts (``common.CODECS``)
+            action.help = codec_help(action.help)
+        return super().format_help()
 
     def _check_value(self, action, value):
         if action.choices is not None and value not in action.choices:

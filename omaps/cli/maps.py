@@ -16,7 +16,7 @@ from ..errors import InputError
 from ..omm.inputs import load_uvs
 from ..schemes import DEFAULT_SCHEMES, EVAL_KINDS, get_scheme, parse_schemes
 from ..texture import load_alpha
-from .common import add_codec_options, add_state_options, eval_config, plural, show_progress
+from .common import CODECS, CODECS_OR, add_codec_options, add_state_options, eval_config, plural, show_progress
 
 
 def add_parsers(sub) -> None:
@@ -32,9 +32,9 @@ def add_eval_parser(sub) -> None:
     e.add_argument("paths", nargs="*", metavar="PATH", help="image files or folders (searched recursively)")
     e.add_argument("--schemes", default=",".join(DEFAULT_SCHEMES),
                    help="comma-separated: sqN (N = 1..128, power of two), triL (L = 0..12; succinctL and csmL: the same "
-                        "micromaps as lossless trees, their bits per texture), texel, vq2, vq4, "
-                        "vq4x64, vq4-synth, wavelet3, each codec also with -fast, -medium or -thorough, the vq "
-                        "codecs also -paper (default: %(default)s)")
+                        f"micromaps as lossless trees, their bits per texture), texel, or a codec ({CODECS}), "
+                        "each codec also with -fast, -medium or -thorough, and -paper where it has the deck's "
+                        "encoder (default: %(default)s)")
     e.add_argument("--min-size", type=int, default=0, metavar="PX",
                    help="skip textures whose smaller side is below PX")
     e.add_argument("--json", metavar="FILE", help="write settings, per-texture and mean results, and unreadable "
@@ -70,7 +70,7 @@ def _add_map_parsers(sub) -> None:
                         description="Bake the codec's square map of a texture (corpus convention) and "
                                     "write the block.")
     en.add_argument("texture")
-    en.add_argument("--codec", required=True, help="sqN, vq2, vq4, vq4x64, vq4-synth or wavelet3")
+    en.add_argument("--codec", required=True, help=f"sqN, {CODECS_OR}")
     en.add_argument("-o", "--output", required=True, metavar="FILE",
                     help="block bytes (replaced if it exists; any name but one of another format, such as .png)")
     add_state_options(en, "levels")
@@ -79,7 +79,7 @@ def _add_map_parsers(sub) -> None:
 
     de = sub.add_parser("decode", help="decode a codec block and print or draw its map")
     de.add_argument("block", metavar="FILE")
-    de.add_argument("--codec", required=True, help="sqN, vq2, vq4, vq4x64, vq4-synth or wavelet3")
+    de.add_argument("--codec", required=True, help=f"sqN, {CODECS_OR}")
     de.add_argument("--show", metavar="OUT.png", help="draw the map in the deck's colours")
     de.add_argument("--json", action="store_true", help="print the map (and its settings) as JSON")
     de.set_defaults(func=cmd_decode)

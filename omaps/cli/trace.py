@@ -12,7 +12,7 @@ import sys
 
 from ..atomic import Outputs
 from ..names import BUDGET_WEIGHTS
-from .common import (add_asset_options, add_codec_options, add_material_options, asset_options,
+from .common import (BUDGET_DEFAULTS, CODECS, add_asset_options, add_codec_options, add_material_options, asset_options,
                      material_rules, parse_size, show_progress)
 
 from ..trace.camera import DEFAULT_LIGHT
@@ -54,9 +54,10 @@ def add_parser(sub) -> None:
                        formatter_class=argparse.RawDescriptionHelpFormatter)
     t.add_argument("scene", metavar="SCENE", help=".gltf or .glb file")
     t.add_argument("--schemes", default=DEFAULT_SCHEMES,
-                   help="comma-separated: none, triL (or succinctL, csmL: the same micromaps as lossless trees), sqN, or a codec (vq2, vq4, vq4x64, vq4-synth, wavelet3, "
-                        "also with -paper, -fast, -medium or -thorough), omm or file:CODEC (the maps the traced file stores), or "
-                        "budget:BYTES (per pair the map -- none, sqN up to 64, vq2, vq4 or vq4x64 -- that saves the "
+                   help="comma-separated: none, triL (or succinctL, csmL: the same micromaps as lossless trees), sqN, "
+                        f"or a codec ({CODECS}; also with -fast, -medium or -thorough, and -paper where it has the "
+                        "deck's encoder), omm or file:CODEC (the maps the traced file stores), or "
+                        f"budget:BYTES (per pair the map -- none, {BUDGET_DEFAULTS} -- that saves the "
                         "most alpha tests per byte, every pair together within BYTES: 1263936, 1.2MiB, 800KiB) "
                         "(default: %(default)s)")
     t.add_argument("--weights", choices=BUDGET_WEIGHTS, default=BUDGET_WEIGHTS[0],

@@ -9,8 +9,8 @@ the hierarchical micromaps (``succinct_*``: one triangle's pruned tree with rank
 from ..lazy import exports
 
 _REGISTRY = ["Codec", "CodecEntry", "CompileFamily", "PairMicromaps", "ENTRIES", "PLUGIN_GROUP", "get_codec", "codec_names",
-             "entry", "budget_options", "format_names", "family_codecs", "square_codec", "COMPILE_FAMILIES", "ENCODERS",
-             "EFFORTS"]
+             "codec_list", "entry", "budget_options", "format_names", "family_codecs", "square_codec", "COMPILE_FAMILIES",
+             "ENCODERS", "EFFORTS"]
 _RAW = ["pack_states", "unpack_states", "row_bytes", "read_state"]  # the one 2-bit layout of every raw map
 # hierarchical micromaps (schemes succinctL, csmL): one triangle's pruned tree with rank support,
 # and a set's merged subtrees

@@ -51,16 +51,36 @@ def family_of(name: str) -> str:
     return get_scheme(name).family
 
 
+# the families that are no codec of the registry; a codec's line is labelled by its entry's
+# description (``family_label``)
 FAMILY_LABELS = {"sq": "square map per pair (sqN, 2 bits/cell)",
                  "tri": "micromap per triangle (triL, 2 bits/micro-tri)",
-                 "vq2": "VQ2: 16x16 in 256 bits (our encoder)",
-                 "vq2-paper": "VQ2, the deck's naive encoder",
-                 "vq4": "VQ4: 32x32 in 512 bits, 64x64 in 4 blocks (our encoder)",
-                 "vq4-paper": "VQ4, the deck's top-down encoder",
-                 "vq4-synth": "VQ4-synth: 32x32 in 512 bits, a synthesised 14th vector",
-                 "wavelet3": "wavelet3: 64x64 in 512 bits, three levels",
                  "succinct": "succinct micromap per triangle (succinctL, its exact bits)",
                  "csm": "merged subtrees of a pair's micromaps (csmL, its exact bits)"}
+
+
+def family_label(family: str, schemes=()) -> str:
+    """A plot line's label: ``FAMILY_LABELS``, or for a codec's family (a codec, or a codec and its
+    variant: ``vq2-paper``) the codec's name and its registry description, with the variant and
+    the other codecs of the line's ``schemes`` (vq4x64 on vq4's line); the family itself when it is
+    neither."""
+    if family in FAMILY_LABELS:
+        return FAMILY_LABELS[family]
+    from ..codecs.registry import entry
+    from ..errors import InputError
+
+    for name in (family, *(family[:i] for i in range(len(family) - 1, 0, -1) if family[i] == "-")):
+        try:
+            e = entry(name)
+        except InputError:
+            continue
+        variant = family[len(name) + 1:]
+        how = {"": "", "paper": ", the deck's encoder"}.get(variant, f", effort {variant}")
+        others = [c for c in dict.fromkeys(getattr(get_scheme(n).codec, "name", None) for n in schemes)
+                  if c not in (None, e.name)]
+        with_others = f" (with {', '.join(others)})" if others else ""
+        return f"{family}{with_others}: {e.description}{how}"
+    return family
 
 
 MARKER_PX = 7.0  # a chart marker's diameter, points
@@ -89,7 +109,7 @@ def plot_savings(path, results, scheme_names, title="Shader invocation savings")
     for k, (fam, pts) in enumerate(families.items()):
         pts.sort()
         xs, ys, _ = zip(*pts)
-        line, = ax.plot(xs, ys, marker=markers[k % len(markers)], ms=MARKER_PX, label=FAMILY_LABELS.get(fam, fam))
+        line, = ax.plot(xs, ys, marker=markers[k % len(markers)], ms=MARKER_PX, label=family_label(fam, [p[2] for p in pts]))
         drawn.append((line, pts))
     if "texel" in means:
         ax.axhline(means["texel"]["savings"], color="grey", ls="--", lw=1,
