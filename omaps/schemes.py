@@ -13,7 +13,7 @@
                          them (else its defaults, and the scheme's ``notes`` say so)
     omm                  (trace) the EXT_mesh_opacity_micromap micromaps stored in the traced file
     file:CODEC           (trace) the OMAPS_pair_opacity_maps pair blocks stored in the traced file,
-                         CODEC the codec they were stored with (sqN, vq2, vq4, vq4x64)
+                         CODEC the codec they were stored with (sqN or a codec of the registry)
     budget:BYTES         (trace) per pair the default option (none, sqN up to 64 and the codecs
                          that opt in: ``budget.PAIR_OPTIONS``) that saves the most alpha tests per
                          byte, all pairs within BYTES (1263936, 1.2MiB, 800KiB)

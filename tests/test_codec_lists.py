@@ -65,8 +65,6 @@ _SEPARATOR = re.compile(r"(?:[\s\"'`*,/+]|\bor\b|\band\b)+")
 ALLOWED = {
     "docs/guide/batch.md": ("`wavelet3`, and `vq2`, `vq4`, `vq4x64`, `vq4-synth` each",),  # a benchmark's schemes, as run
     "docs/scripts/frontier.py": ("(`vq2`, `vq4`, \"\n        \"`vq4x64`)",),  # the schemes its run traces (SCHEMES)
-    "omaps/schemes.py": ("(sqN, vq2, vq4, vq4x64)",),  # file:CODEC: to be derived where schemes.py is edited
-    "omaps/trace/budget.py": ("vq2, vq4 or vq4x64 by default",),  # budget_default's codecs: to be derived likewise
 }
 
 

@@ -140,7 +140,10 @@ def _trace(pkg_root, cache, scene, out, schemes="none,sq16,sq32"):
     stderr and each scheme's figures (timings left out)."""
     import json
 
-    env = dict(os.environ, NUMBA_CACHE_DIR=str(cache), PYTHONPATH=str(pkg_root), OMAPS_PROGRESS="0")
+    env = dict(os.environ, PYTHONPATH=str(pkg_root), OMAPS_PROGRESS="0")
+    env.pop("NUMBA_CACHE_DIR", None)
+    if cache is not None:
+        env["NUMBA_CACHE_DIR"] = str(cache)
     r = subprocess.run([sys.executable, "-m", "omaps", "trace", scene, "--schemes", schemes, "--size",
                         "48", "--json", str(out), "--quiet"], capture_output=True, text=True, env=env,
                        cwd=str(pkg_root), timeout=1800)
@@ -155,9 +158,10 @@ def _trace(pkg_root, cache, scene, out, schemes="none,sq16,sq32"):
 @pytest.mark.long
 def test_swapped_format_codes_under_a_warm_cache_trace_as_a_cold_run(tmp_path):
     """Swap two codecs' format codes in the registry of a copy of omaps whose kernel cache is
-    warm: the next trace, in a fresh process, gives the cold run's figures and 0 differing
-    pixels (with numba's own key, the tracer's kernels kept the old codes: each pair's block was
-    read by the other codec's lookup). Then add a codec (sq16's map under another name, its
+    warm: the next trace, in a fresh process, gives the figures of the trace before the edit
+    (format codes change no figure: what a cold run gives) and 0 differing pixels (with numba's
+    own key, the tracer's kernels kept the old codes: each pair's block was read by the other
+    codec's lookup, and pixels changed). Then add a codec (sq16's map under another name, its
     figures known: sq16's): traced at once, under the same warm cache, as sq16."""
     import shutil
 
@@ -165,11 +169,13 @@ def test_swapped_format_codes_under_a_warm_cache_trace_as_a_cold_run(tmp_path):
     from gltf_files import grid_scene
 
     pkg = tmp_path / "pkg"
-    shutil.copytree(os.path.join(ROOT, "omaps"), pkg / "omaps", ignore=shutil.ignore_patterns("__pycache__"))
+    # the copy takes the checkout's kernel cache along (numba's __pycache__ files: the key is the
+    # content, wherever it lies), so only what the edits below change compiles
+    shutil.copytree(os.path.join(ROOT, "omaps"), pkg / "omaps")
     rng = np.random.default_rng(3)
     scene = grid_scene(tmp_path / "grid.gltf", np.kron((rng.random((16, 16)) > 0.5).astype(np.uint8) * 255,
                                                        np.ones((4, 4), np.uint8)), 12, seed=2)
-    cache = tmp_path / "cache"
+    cache = None  # the copy's own __pycache__ folders
     rc, err, cold = _trace(pkg, cache, scene, tmp_path / "cold.json")
     assert rc == 0, err
     registry = pkg / "omaps" / "codecs" / "registry.py"

@@ -1,7 +1,7 @@
 """The maps of a ``budget:BYTES`` scheme: per pair the option -- no map, a raw square up to
-64 x 64, vq2, vq4 or vq4x64 by default, or the options the scheme names, ``succinctL`` (the
-pair's two level-L micromaps as succinct trees) among them -- that saves the most expected
-alpha tests for the bytes, all prototype pairs together within the budget
+64 x 64 or a codec that opts in (``budget.PAIR_OPTIONS``) by default, or the options the scheme
+names, ``succinctL`` (the pair's two level-L micromaps as succinct trees) among them -- that saves
+the most expected alpha tests for the bytes, all prototype pairs together within the budget
 (``omaps.budget.allocate``).
 
 A pair's expected alpha tests saved by an option are its triangles' weights (expected candidate
