@@ -275,3 +275,17 @@ def test_smallpine_blend_and_vq2(tmp_path, capsys):
     rec = np.fromfile(out / "omm_pairs.bin", dtype=[("pair", "<i4"), ("corners", "u1", (3,)), ("pad", "u1")])
     assert len(rec) == 1442 and set(np.unique(rec["pair"])) == set(range(blocks))
     assert np.all(np.bincount(rec["pair"]) <= 2)
+
+
+def test_verify_an_output_without_micromaps(tmp_path, capsys):
+    """A texture opaque everywhere: every triangle is a special index and no micromap is stored;
+    --verify checks it (it raised an IndexError indexing the empty records)."""
+    rgba = np.zeros((16, 16, 4), np.uint8)
+    rgba[..., 3] = 255
+    Image.fromarray(rgba, "RGBA").save(tmp_path / "leaf.png")
+    np.save(tmp_path / "uv.npy", np.array([[[0.1, 0.1], [0.9, 0.1], [0.5, 0.9]]], np.float32))
+    out = str(tmp_path / "out")
+    assert main(["omm", str(tmp_path / "leaf.png"), str(tmp_path / "uv.npy"), "-o", out, "--level", "2"]) == 0
+    assert "0 micromaps after reuse" in capsys.readouterr().out
+    assert main(["omm", "--verify", out]) == 0
+    assert f"{out}: OK (1 triangle, 0 micromaps" in capsys.readouterr().out

@@ -87,7 +87,9 @@ def _check_known_states(res: OmmResult, geoms) -> list[str]:
         if n == 0:
             continue
         idx = res.index[first:first + n]
-        levels = np.where(idx >= 0, res.triangles["level"][np.maximum(idx, 0)], 0).astype(np.int64)
+        levels = np.zeros(n, np.int64)  # a special index (uniform triangle) has level 0
+        has = idx >= 0
+        levels[has] = res.triangles["level"][idx[has]]  # (no micromap at all: nothing to index)
         st = np.concatenate([res.triangle_states(first + t) for t in range(n)])
         frac = micro_fractions(g.test, g.tris_uv, levels)
         bad = ((st == 1) & (frac < 1.0)) | ((st == 0) & (frac > 0.0))
@@ -111,7 +113,9 @@ def _compare_known(res: OmmResult, geoms) -> list[str]:
     for g in geoms:
         n = len(g.tris_uv)
         idx = res.index[first:first + n]
-        levels = np.where(idx >= 0, res.triangles["level"][np.maximum(idx, 0)], 0).astype(np.int64)
+        levels = np.zeros(n, np.int64)  # a special index (uniform triangle) has level 0
+        has = idx >= 0
+        levels[has] = res.triangles["level"][idx[has]]  # (no micromap at all: nothing to index)
         grid = g.test.grid()
         s3, starts = bake_micromaps(grid, np.asarray(g.tris_uv, np.float64), levels, GROW_TEXEL, flag_table(grid))
         for t in range(n):
