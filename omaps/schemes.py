@@ -110,8 +110,9 @@ class Scheme:
             out["representation"] = self.representation
         if self.budget is not None:
             out.update(budget_bytes=self.budget, encoder=self.encoder, effort=self.effort)
-            if self.options is not None:
-                out["options"] = list(self.options)
+            from .budget import PAIR_OPTIONS
+
+            out["options"] = list(self.options or PAIR_OPTIONS)  # (the default options too: a run says which)
         if self.notes:
             out["notes"] = list(self.notes)
         if self.codec is not None:
@@ -190,8 +191,9 @@ def get_scheme(name: str, encoder: str | None = None, effort: str | None = None)
         from .budget import PAIR_OPTIONS
         from .codecs.registry import entry
 
+        # a note where the encoder or effort the command asked for is one an option's codec lacks
         notes = tuple(n for o in (options or PAIR_OPTIONS)[1:] if not entry(o).variable
-                      for n in [get_codec(o).fallback(enc, eff)[2]] if n)
+                      for n in [get_codec(o).fallback(encoder, effort)[2]] if n)
         return Scheme(f"budget:{nbytes}{suffix}", "budget", encoder=enc, effort=eff, budget=nbytes, options=options,
                       notes=notes)
     if key.startswith("file:"):

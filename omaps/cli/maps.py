@@ -33,8 +33,8 @@ def add_eval_parser(sub) -> None:
     e.add_argument("--schemes", default=",".join(DEFAULT_SCHEMES),
                    help="comma-separated: sqN (N = 1..128, power of two), triL (L = 0..12; succinctL and csmL: the same "
                         f"micromaps as lossless trees, their bits per texture), texel, or a codec ({CODECS}), "
-                        "each codec also with -fast, -medium or -thorough, and -paper where it has the deck's "
-                        "encoder (default: %(default)s)")
+                        "each codec also with -fast, -medium or -thorough where it has efforts, and -paper where "
+                        "it has the deck's encoder (default: %(default)s)")
     e.add_argument("--min-size", type=int, default=0, metavar="PX",
                    help="skip textures whose smaller side is below PX")
     e.add_argument("--json", metavar="FILE", help="write settings, per-texture and mean results, and unreadable "

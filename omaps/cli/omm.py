@@ -58,8 +58,8 @@ def add_parser(sub) -> None:
     r.add_argument("--no-dedup", action="store_true", help="no sharing of identical micromaps")
     r.add_argument("--from", dest="source", default="texture", metavar="SCHEME",
                    help="texture (default), or a square scheme: sqN (the pair's N x N map, expanded to level "
-                        f"log2 N) or a codec ({CODECS}; also with -fast, -medium or -thorough, and -paper where it "
-                        "has the deck's encoder): square maps "
+                        f"log2 N) or a codec ({CODECS}; also with -fast, -medium or -thorough where it has "
+                        "efforts, and -paper where it has the deck's encoder): square maps "
                         "stored, decoded, expanded. Pairs: the tracer's (shared edges) in a glTF scene, triangles "
                         "2k and 2k+1 with a UV array")
     o.add_argument("--threads", type=int, default=None, help="baking threads (default: all cores)")
