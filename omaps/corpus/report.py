@@ -61,9 +61,9 @@ FAMILY_LABELS = {"sq": "square map per pair (sqN, 2 bits/cell)",
 
 def family_label(family: str, schemes=()) -> str:
     """A plot line's label: ``FAMILY_LABELS``, or for a codec's family (a codec, or a codec and its
-    variant: ``vq2-paper``) the codec's name and its registry description, with the variant and
-    the other codecs of the line's ``schemes`` (vq4x64 on vq4's line); the family itself when it is
-    neither."""
+    variant: ``vq2-paper``) the codec's name, map and bits (the registry's), its variant and the
+    other codecs of the line's ``schemes`` (vq4x64 on vq4's line); the family itself when it is
+    neither. (Short: a legend; the docs' codec table has each codec's description.)"""
     if family in FAMILY_LABELS:
         return FAMILY_LABELS[family]
     from ..codecs.registry import entry
@@ -79,7 +79,9 @@ def family_label(family: str, schemes=()) -> str:
         others = [c for c in dict.fromkeys(getattr(get_scheme(n).codec, "name", None) for n in schemes)
                   if c not in (None, e.name)]
         with_others = f" (with {', '.join(others)})" if others else ""
-        return f"{family}{with_others}: {e.description}{how}"
+        codec = get_scheme(e.name).codec
+        size = f"{codec.map_size}x{codec.map_size} in {codec.bits} bits" if codec is not None else e.description
+        return f"{family}{with_others}: {size}{how}"
     return family
 
 

@@ -400,7 +400,18 @@ def format_memory(report: dict, names: list) -> str:
 @typed
 def format_report(report: dict, names: list, shadows: bool) -> str:
     """A trace report (``TraceResult.report``) as ``omaps trace`` prints it: a heading line, one
-    row per scheme, the opaque traversal and timings, and the 2-state errors when traced."""
+    row per scheme, the opaque traversal and timings, and the 2-state errors when traced. A dict
+    that is no such report (a field missing or of another kind) is an ``InputError`` naming
+    ``report``."""
+    try:
+        return _format_report(report, names, shadows)
+    except (KeyError, TypeError, ValueError, AttributeError, IndexError) as exc:
+        what = f"no field {exc}" if isinstance(exc, KeyError) else f"a field of another kind ({exc})"
+        raise InputError(f"report is not a trace report of these schemes (TraceResult.report): {what}",
+                         param="report") from None
+
+
+def _format_report(report: dict, names: list, shadows: bool) -> str:
     s = report["scene"]
     c = report["camera"]
     lines = [f"omaps trace: {s['file']}: {plural(s['instances'], 'instance')} of "
