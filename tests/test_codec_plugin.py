@@ -75,7 +75,7 @@ def textures(tmp_path_factory) -> tuple[Path, Path]:
     return d / "disc.png", d / "checker.png"
 
 
-@pytest.mark.long
+# (not marked long: run late, it loads what the suite compiled before it instead of compiling it again)
 def test_the_plugin_passes_the_conformance_tests(plugin):
     r = subprocess.run([sys.executable, "-m", "pytest", "tests/test_codec_conformance.py", "-k", "rle16", "-q", "-n", "0",
                         "-p", "no:cacheprovider"], env=_env(plugin), cwd=str(ROOT), capture_output=True, text=True,
@@ -109,7 +109,7 @@ def _figures(report: dict, name: str) -> dict:
     return {k: v for k, v in report["schemes"][name].items() if not any(w in k for w in TIMING)}
 
 
-@pytest.mark.long
+# (not marked long: run late, it loads what the suite compiled before it instead of compiling it again)
 def test_trace_with_the_plugin(plugin, tmp_path):
     """One trace with the plug-in (its codec, a budget that may choose it among the defaults,
     one that has only it, and a default budget), one without: the default budget's figures and

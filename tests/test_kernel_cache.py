@@ -155,7 +155,7 @@ def _trace(pkg_root, cache, scene, out, schemes="none,sq16,sq32"):
     return r.returncode, r.stderr, figures
 
 
-@pytest.mark.long
+# (not marked long: run late, it loads what the suite compiled before it instead of compiling it again)
 def test_swapped_format_codes_under_a_warm_cache_trace_as_a_cold_run(tmp_path):
     """Swap two codecs' format codes in the registry of a copy of omaps whose kernel cache is
     warm: the next trace, in a fresh process, gives the figures of the trace before the edit
