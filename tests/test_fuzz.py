@@ -44,7 +44,7 @@ from conftest import SCENES, TEXTURES, needs_scenes, needs_shared
 from gltf_files import png_bytes, write_quad_gltf
 from omaps.alpha_test import MaterialRules
 from omaps.cli.main import main
-from omaps.codecs import get_codec
+from omaps.codecs import codec_names, get_codec
 from omaps.errors import InputError
 from omaps import omm_format
 from omaps.omm.inputs import gltf_spec, load_geometries, load_uvs, texture_spec
@@ -588,7 +588,7 @@ def test_fuzzed_uv_array(data):
             assert uvs.ndim == 3 and uvs.shape[1:] == (3, 2) and uvs.dtype.kind == "f"
 
 
-CODECS = ("sq4", "sq16", "vq2", "vq4", "vq4x64")
+CODECS = ("sq4", "sq16", *codec_names())  # two raw sizes and every codec of the registry (plug-ins' too)
 
 
 @fuzz_settings(200)
