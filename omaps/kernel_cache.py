@@ -269,10 +269,10 @@ def _keyed(cls):
         def get_disambiguator(self):
             # with plug-ins installed, a kernel that depends on them is cached under a name of its own
             base = super().get_disambiguator()
+            if not _reaches_registry(dependencies(self._py_file)):
+                return base
             plugins = plugins_key()
-            if plugins and _reaches_registry(dependencies(self._py_file)):
-                return f"{base}-plugins-{plugins[:12]}"
-            return base
+            return f"{base}-plugins-{plugins[:12]}" if plugins else base
 
     Keyed.__name__ = Keyed.__qualname__ = "Imports" + cls.__name__
     return Keyed
