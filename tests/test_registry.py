@@ -270,8 +270,14 @@ def test_a_broken_plugin_is_an_error_naming_it(tmp_path, module, value, problem)
     last = r.stderr.strip().splitlines()[-1]
     assert last.startswith(f"omaps: error: codec plug-in 'copyplug' ({value}, from copyplug): "), r.stderr
     assert problem in last and "OMAPS_CODEC_PLUGINS=0" in last and "Traceback" not in r.stderr
+
+
+def test_without_plugins_omaps_starts_past_a_broken_one(tmp_path):
+    site = tmp_path / "site"
+    _install(site, module="def entries():\n    raise RuntimeError('boom')\n")
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(site), ROOT]), OMAPS_CODEC_PLUGINS="0")
     r = subprocess.run([sys.executable, "-c", "from omaps.codecs import ENTRIES; print(len(ENTRIES))"],
-                       capture_output=True, text=True, timeout=120, env={**env, "OMAPS_CODEC_PLUGINS": "0"})
+                       capture_output=True, text=True, timeout=120, env=env)
     assert r.returncode == 0 and int(r.stdout) == sum(e.origin == "omaps" for e in ENTRIES), r.stderr
 
 
