@@ -192,7 +192,8 @@ def get_scheme(name: str, encoder: str | None = None, effort: str | None = None)
         from .codecs.registry import entry
 
         # a note where the encoder or effort the command asked for is one an option's codec lacks
-        notes = tuple(n for o in (options or PAIR_OPTIONS)[1:] if not entry(o).variable
+        # (nothing asked: nothing to note, and no codec is made here)
+        notes = tuple(n for o in (options or PAIR_OPTIONS)[1:] if (encoder or effort) and not entry(o).variable
                       for n in [get_codec(o).fallback(encoder, effort)[2]] if n)
         return Scheme(f"budget:{nbytes}{suffix}", "budget", encoder=enc, effort=eff, budget=nbytes, options=options,
                       notes=notes)

@@ -91,8 +91,7 @@ class Codec:
         for an encoder or effort this codec does not have (a scheme's variant: ``vq4-paper``). A
         raw map has no choices and ignores valid ones (a command's ``--effort`` applies to its
         codecs); a codec without choices (``encoders`` or ``efforts`` empty) gets None."""
-        check_choice("encoder", encoder, tuple(dict.fromkeys(ENCODERS + self.encoders)))
-        check_choice("effort", effort, tuple(dict.fromkeys((*EFFORTS, *self.efforts))))
+        self._known(encoder, effort)
         if self.raw:
             return None, None
         for kind, value, have in (("encoder", encoder, self.encoders), ("effort", effort, self.efforts)):
@@ -100,6 +99,11 @@ class Codec:
                 raise InputError(f"{self.name} has no {kind} {value!r} "
                                  + (f"(choose from {', '.join(have)})" if have else f"(it has no {kind}s to choose)"))
         return encoder or self.default_encoder, effort or self.default_effort
+
+    def _known(self, encoder: str | None, effort: str | None) -> None:
+        """InputError for an encoder or effort name that neither omaps nor this codec knows."""
+        check_choice("encoder", encoder, tuple(dict.fromkeys(ENCODERS + self.encoders)))
+        check_choice("effort", effort, tuple(dict.fromkeys((*EFFORTS, *self.efforts))))
 
     def fallback(self, encoder: str | None = None, effort: str | None = None) -> tuple[str | None, str | None, str | None]:
         """``options`` for a choice made for many codecs at once (a command's ``--encoder`` /
@@ -112,8 +116,7 @@ class Codec:
             >>> get_codec("wavelet3").fallback("paper")
             ('best', 'medium', "wavelet3 has no encoder 'paper': its default encoder 'best' was used")
         """
-        check_choice("encoder", encoder, tuple(dict.fromkeys(ENCODERS + self.encoders)))
-        check_choice("effort", effort, tuple(dict.fromkeys((*EFFORTS, *self.efforts))))
+        self._known(encoder, effort)
         if self.raw:
             return None, None, None
         missing = []

@@ -51,8 +51,8 @@ def family_of(name: str) -> str:
     return get_scheme(name).family
 
 
-# the families that are no codec of the registry; a codec's line is labelled by its entry's
-# description (``family_label``)
+# the families that are no codec of the registry; a codec's line is labelled by its map and bits
+# (``family_label``)
 FAMILY_LABELS = {"sq": "square map per pair (sqN, 2 bits/cell)",
                  "tri": "micromap per triangle (triL, 2 bits/micro-tri)",
                  "succinct": "succinct micromap per triangle (succinctL, its exact bits)",
@@ -66,23 +66,20 @@ def family_label(family: str, schemes=()) -> str:
     neither. (Short: a legend; the docs' codec table has each codec's description.)"""
     if family in FAMILY_LABELS:
         return FAMILY_LABELS[family]
-    from ..codecs.registry import entry
     from ..errors import InputError
 
-    for name in (family, *(family[:i] for i in range(len(family) - 1, 0, -1) if family[i] == "-")):
-        try:
-            e = entry(name)
-        except InputError:
-            continue
-        variant = family[len(name) + 1:]
-        how = {"": "", "paper": ", the deck's encoder"}.get(variant, f", effort {variant}")
-        others = [c for c in dict.fromkeys(getattr(get_scheme(n).codec, "name", None) for n in schemes)
-                  if c not in (None, e.name)]
-        with_others = f" (with {', '.join(others)})" if others else ""
-        codec = get_scheme(e.name).codec
-        size = f"{codec.map_size}x{codec.map_size} in {codec.bits} bits" if codec is not None else e.description
-        return f"{family}{with_others}: {size}{how}"
-    return family
+    try:  # a codec's family is a scheme name: the codec, with its variant (the scheme grammar's)
+        codec = get_scheme(family).codec
+    except InputError:
+        codec = None
+    if codec is None or not codec.compressed:
+        return family
+    variant = family[len(codec.name) + 1:]
+    how = {"": "", "paper": ", the deck's encoder"}.get(variant, f", effort {variant}")
+    others = [c for c in dict.fromkeys(getattr(get_scheme(n).codec, "name", None) for n in schemes)
+              if c not in (None, codec.name)]
+    with_others = f" (with {', '.join(others)})" if others else ""
+    return f"{family}{with_others}: {codec.map_size}x{codec.map_size} in {codec.bits} bits{how}"
 
 
 MARKER_PX = 7.0  # a chart marker's diameter, points
