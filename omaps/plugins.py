@@ -33,6 +33,7 @@ __all__ = ["GROUP", "codec_entry_points", "codec_entries", "package_folder", "en
 
 GROUP = "omaps.codecs"
 _OFF = "OMAPS_CODEC_PLUGINS"
+HINT = f" (set {_OFF}=0 to start omaps without plug-ins)"  # the end of every plug-in's error
 
 
 def enabled() -> bool:
@@ -85,11 +86,10 @@ def codec_entries(prepare=None) -> list[tuple[str, list]]:
     out = []
     for ep in codec_entry_points():
         where = describe(ep)
-        hint = f" (set {_OFF}=0 to start omaps without plug-ins)"
         pkg = package_folder(ep)
         if pkg is None:
             raise InputError(f"{where}: its module must be part of a package (omaps keys its kernels on the "
-                             f"package's files){hint}")
+                             f"package's files){HINT}")
         if prepare is not None:
             prepare(pkg[1], pkg[0])
         try:
@@ -98,6 +98,6 @@ def codec_entries(prepare=None) -> list[tuple[str, list]]:
                 raise TypeError(f"{ep.value} is a {type(fn).__name__}, not a callable returning CodecEntry objects")
             entries = list(fn())
         except Exception as exc:  # noqa: BLE001 - a stranger's code: any failure is reported as theirs
-            raise InputError(f"{where}: loading its codecs failed: {type(exc).__name__}: {exc}{hint}") from exc
+            raise InputError(f"{where}: loading its codecs failed: {type(exc).__name__}: {exc}{HINT}") from exc
         out.append((where, entries))
     return out

@@ -508,7 +508,7 @@ def _check(e: object, where: str, seen: dict[str, str], families: dict[str, Comp
 def _declare() -> tuple[tuple[CodecEntry, ...], dict[str, CompileFamily]]:
     """Every entry with its format code, omaps' own first, then each plug-in's (checked)."""
     from ..kernel_cache import watch
-    from ..plugins import codec_entries
+    from ..plugins import HINT, codec_entries
 
     seen: dict[str, str] = {}
     families: dict[str, CompileFamily] = {}
@@ -517,7 +517,7 @@ def _declare() -> tuple[tuple[CodecEntry, ...], dict[str, CompileFamily]]:
         try:
             out += [replace(_check(e, where, seen, families), origin=where) for e in got]
         except InputError as exc:
-            raise InputError(f"{exc.problem} (set OMAPS_CODEC_PLUGINS=0 to start omaps without plug-ins)") from None
+            raise InputError(f"{exc.problem}{HINT}") from None
     return tuple(replace(e, code=1 + i) for i, e in enumerate(out)), families
 
 
