@@ -1,5 +1,5 @@
 """Ctrl-C checks for tests that interrupt an ``omaps batch`` process at a moment the test
-chooses (an event, never a time): the batch's test-only gate (``omaps.batch.TEST_GATE``), its
+chooses (an event, never a time): the batch's test-only gate (``omaps.batch.task.TEST_GATE``), its
 child processes, and what an interrupted batch must leave behind (one line, exit 130, no summary,
 no process)."""
 
@@ -7,7 +7,7 @@ import os
 import signal
 import time
 
-from omaps.batch import TEST_GATE
+from omaps.batch.task import TEST_GATE
 
 LIMIT = 900  # seconds: a hang guard only (a wait that never ends fails instead of hanging)
 

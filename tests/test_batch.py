@@ -103,7 +103,7 @@ def test_resume_skips_finished_inputs_and_redoes_changed_ones(tmp_path):
 
 def test_killed_batch_resumes_without_redoing_finished_inputs(tmp_path):
     """Killed (SIGKILL) while its third input runs, two finished: the re-run skips those two. The
-    moment is an event: the batch's test-only gate (``omaps.batch.TEST_GATE``) holds each input
+    moment is an event: the batch's test-only gate (``omaps.batch.task.TEST_GATE``) holds each input
     at its start until the test releases it, so the kill never depends on the machine's speed."""
     from interrupts import gate_env, held, release, wait_for, went_on_unreleased
 
@@ -242,7 +242,7 @@ def environment():
 
 if __name__ == "__main__":
     if sys.argv[1] == "omaps":  # omaps's local cluster
-        from omaps.batch import dask_client
+        from omaps.batch.engine import dask_client
         cluster = dask_client("local")
     else:  # Dask's own, with whatever configuration Dask reads
         import contextlib

@@ -19,6 +19,9 @@ import pytest
 from gltf_files import write_quad_gltf
 from interrupts import LIMIT, check_interrupted, children, gate_env, wait_for
 from omaps import batch as engine
+from omaps.batch import engine as batch_engine
+from omaps.batch.engine import CONNECT_SECONDS, check_scheduler
+from omaps.text import plural as count
 from omaps.cli.main import main
 from omaps.errors import InputError
 from test_batch import _summary, _textures
@@ -141,7 +144,7 @@ def test_batch_help_lists_only_what_batch_accepts(command, single):
 # How the address check failed shows in its message (a refused connection, or the check's own
 # CONNECT_SECONDS deadline); the time taken is only bounded against a hang (the kernel's own
 # connection attempt gives up after about 2 minutes, a silent server never), never to decide a result
-HANG_GUARD = engine.CONNECT_SECONDS + 60
+HANG_GUARD = CONNECT_SECONDS + 60
 
 
 def _free_port():
@@ -225,7 +228,7 @@ def test_a_dask_scheduler_passes_the_check():
                     break
             assert p.poll() is None, "the scheduler did not start"
             time.sleep(0.2)
-        engine.check_scheduler(f"tcp://127.0.0.1:{port}")  # no error
+        check_scheduler(f"tcp://127.0.0.1:{port}")  # no error
     finally:
         p.terminate()
         p.wait(30)
@@ -246,7 +249,7 @@ def test_a_scheduler_address_that_is_not_a_dask_scheduler_fails_quickly_naming_i
     else:
         server = _Server(b"HTTP/1.1 400 Bad Request\r\n\r\n" if kind == "http" else None)
     if kind == "http":  # its reply is read whenever the server's thread sends it (never a race with the deadline)
-        monkeypatch.setattr(engine, "CONNECT_SECONDS", HANG_GUARD)
+        monkeypatch.setattr(batch_engine, "CONNECT_SECONDS", HANG_GUARD)
     address = server.address
     try:
         t0 = time.monotonic()
@@ -258,8 +261,8 @@ def test_a_scheduler_address_that_is_not_a_dask_scheduler_fails_quickly_naming_i
     assert rc == 2, err
     assert address in err and "scheduler" in err and len(err.strip().splitlines()) == 1, err
     assert "Traceback" not in err
-    said = {"silent": f"sent no Dask handshake in {engine.CONNECT_SECONDS} s", "http": "not a Dask scheduler",
-            "unanswered": f"no answer in {engine.CONNECT_SECONDS} s"}[kind]
+    said = {"silent": f"sent no Dask handshake in {CONNECT_SECONDS} s", "http": "not a Dask scheduler",
+            "unanswered": f"no answer in {CONNECT_SECONDS} s"}[kind]
     assert said in err, err
     assert dt < HANG_GUARD, dt
     assert not (tmp_path / "out").exists()
@@ -272,7 +275,7 @@ def test_ctrl_c_during_cluster_start_up(tmp_path, group, kids):
     """SIGINT once the batch has ``kids`` child processes (its resource tracker first, then the
     LocalCluster's first worker or a compile started before it): to the whole process group as a
     terminal's Ctrl-C, or to omaps alone. One line, exit 130, no output. The batch's inputs are
-    held at the test-only gate (``omaps.batch.TEST_GATE``): however fast the machine, the batch
+    held at the test-only gate (``omaps.batch.task.TEST_GATE``): however fast the machine, the batch
     cannot finish before the signal."""
     src = tmp_path / "tex"
     _textures(src, n=4)
@@ -330,8 +333,8 @@ def test_counts_are_singular_for_one(tmp_path, capsys):
     _, rows = _summary(out)
     assert "1 error" in rows[-1]["status"] and "1 errors" not in rows[-1]["status"]
     assert "0 problems" in rows[-1]["status"] or "problem" not in rows[-1]["status"]
-    assert engine.count(1, "error") == "1 error" and engine.count(2, "error") == "2 errors"
-    assert engine.count(0, "input") == "0 inputs"
+    assert count(1, "error") == "1 error" and count(2, "error") == "2 errors"
+    assert count(0, "input") == "0 inputs"
 
 
 # --- what the first line counts, and warnings on the terminal -------------------------------------

@@ -135,7 +135,7 @@ def test_a_cluster_interrupted_in_its_constructor_is_dropped_quietly():
     from distributed import LocalCluster
     from distributed.deploy.spec import SpecCluster
 
-    from omaps.batch import _children, _stop_quietly
+    from omaps.batch.engine import _children, _stop_quietly
 
     c = object.__new__(LocalCluster)  # as the interrupt leaves it: registered, never named
     SpecCluster._instances.add(c)
@@ -166,7 +166,7 @@ def test_ctrl_c_while_a_local_cluster_batch_runs(tmp_path, phase):
     ``pieces``, while a split scene's pieces run on the workers and this process waits for them
     (``omaps batch omm --split``). One line, exit 130, no summary, no process left.
 
-    The moment is an event, not a time: the batch's test-only gate (``omaps.batch.TEST_GATE``)
+    The moment is an event, not a time: the batch's test-only gate (``omaps.batch.task.TEST_GATE``)
     holds every task at its start until the test releases it, so the batch cannot finish (or
     not yet start its work) before the signal, however fast the machine."""
     from interrupts import check_interrupted, gate_env, held, release, wait_for

@@ -7,6 +7,7 @@ import argparse
 import sys
 
 from .. import batch as engine
+from ..batch.engine import CONNECT_SECONDS
 from ..errors import InputError
 from .common import show_progress
 
@@ -77,7 +78,7 @@ def add_parser(sub) -> None:
         g.add_argument("--scheduler", default="local", metavar="local|none|tcp://HOST:PORT",
                        help="local: a Dask LocalCluster sized to this machine (default); none: serial, in this "
                             "process; tcp://HOST:PORT: an existing Dask scheduler (an address that does not answer as "
-                            f"one within {engine.CONNECT_SECONDS} s is an error)")
+                            f"one within {CONNECT_SECONDS} s is an error)")
         g.add_argument("--window", type=int, default=None, metavar="N",
                        help="at most N inputs (or pieces of a split scene) in flight (default: twice the "
                             "workers' threads)")
