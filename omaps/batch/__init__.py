@@ -38,29 +38,45 @@ import os
 import time
 
 from .. import atomic
-from .engine import check_scheduler, dask_client, run_all
-from .inputs import COMMANDS, MARKERS, SUMMARY, find_inputs, library_call, output_names
-from .markers import plain
+from .engine import BatchStopped, Progress, check_scheduler, dask_client, run_all
+from .inputs import COMMANDS, MARKERS, SUMMARY, find_inputs, library_call, output_names, output_path
+from .markers import finished, marker_path, plain
 from .plan import BatchPlan, plan_batch
 from .summary import BatchResult, BatchWarning, summary_csv, totals, warn_input
 from .task import run_one
 
 __all__ = ["run_batch", "plan_batch", "run_plan", "BatchPlan", "BatchResult", "BatchWarning", "COMMANDS",
-           "library_call", "run_one", "find_inputs", "output_names", "check_scheduler", "dask_client"]
+           "library_call", "run_one", "find_inputs", "output_names", "check_scheduler", "dask_client", "BatchStopped"]
 
 
 def run_plan(plan: BatchPlan, progress: bool = False) -> BatchResult:
-    """Run a ``plan_batch`` plan and write OUTDIR/summary.json and summary.csv."""
+    """Run a ``plan_batch`` plan and write OUTDIR/summary.json and summary.csv. A batch that
+    stops before its end (``BatchResult.stopped``: the scheduler lost, the output disk full, no
+    workers left) records its unstarted and unfinished inputs as ``unfinished``; a summary that
+    cannot be written is ``BatchResult.summary_error`` (the markers of finished inputs stay)."""
     t0 = time.perf_counter()
     records = dict(plan.records)
     by_input = {j[2]: j[3] for j in plan.jobs}
-    for rec in run_all(plan.command, plan.jobs, plan.scheduler, plan.window, progress, plan.split):
-        records[by_input.get(rec["input"], rec["input"])] = rec
-        warn_input(rec)
+    bar = Progress(plan.command, len(plan.jobs), progress)
+    stopped = None
+    try:
+        for rec in run_all(plan.command, plan.jobs, plan.scheduler, plan.window, bar, plan.split):
+            records[by_input.get(rec["input"], rec["input"])] = rec
+            warn_input(rec)
+    except BatchStopped as exc:
+        stopped = exc.reason
+    finally:
+        bar.close()
+    for command, _, path, name, outdir, fp in plan.jobs:
+        if name not in records:  # (finished on a worker, its record lost with the scheduler: its marker's)
+            done = finished(command, output_path(command, outdir, name, plan.options), marker_path(outdir, name), fp)
+            records[name] = done or {"input": path, "output": None, "status": "unfinished",
+                                     "reason": "not run to its end: the batch stopped"}
     dt = time.perf_counter() - t0
     ordered = [records[n] for n in plan.names if n in records]
     ordered += [r for n, r in records.items() if n not in plan.names]
     tot = totals(plan.command, ordered)
+    tot["retried"] = bar.retried
     tot["seconds"] = round(dt, 3)
     tot["inputs_per_second"] = round(len(plan.jobs) / dt, 4) if plan.jobs and dt > 0 else None
     settings = {"command": plan.command, "scheduler": plan.scheduler, "split": plan.split,
@@ -68,9 +84,19 @@ def run_plan(plan: BatchPlan, progress: bool = False) -> BatchResult:
     with contextlib.suppress(OSError):
         os.rmdir(os.path.join(plan.outdir, MARKERS))  # only if empty (nothing done)
     js, cs = os.path.join(plan.outdir, SUMMARY + ".json"), os.path.join(plan.outdir, SUMMARY + ".csv")
-    atomic.write_text(js, json.dumps({"settings": settings, "inputs": ordered, "totals": tot}, indent=1) + "\n")
-    atomic.write_text(cs, summary_csv(ordered, tot))
-    return BatchResult(plan.command, ordered, tot, js, cs, dt)
+    summary = {"settings": settings, "inputs": ordered, "totals": tot, **({"stopped": stopped} if stopped else {})}
+    try:
+        out = atomic.Outputs()
+        for path in (js, cs):
+            out.file(path, "-o")
+        with out.writing():  # both or neither
+            for path, text in ((js, json.dumps(summary, indent=1) + "\n"), (cs, summary_csv(ordered, tot))):
+                with open(out.path(path), "w", encoding="utf-8", newline="") as f:
+                    f.write(text)
+    except OSError as exc:  # (the output disk full): said, never a traceback
+        return BatchResult(plan.command, ordered, tot, None, None, dt, stopped,
+                           f"{exc.filename or js}: {exc.strerror or exc}")
+    return BatchResult(plan.command, ordered, tot, js, cs, dt, stopped)
 
 
 def run_batch(command: str, inputs, outdir, options: dict | None = None, *, scheduler: str = "local",

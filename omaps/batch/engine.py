@@ -146,6 +146,25 @@ LOCAL_CONFIG = {"distributed.worker.daemon": False, "distributed.worker.profile.
 
 
 @contextlib.contextmanager
+def _dask_logs_quiet():
+    """Dask's client logs nothing while the batch runs (a lost scheduler would print its
+    reconnection's tracebacks): the batch says what happened itself, in one line."""
+    import logging
+
+    names = ["distributed"] + [n for n in logging.root.manager.loggerDict if n.startswith("distributed.")]
+    levels = {n: logging.getLogger(n).level for n in names}
+    for n in names:
+        logging.getLogger(n).setLevel(logging.CRITICAL + 1)
+    try:
+        yield
+    finally:
+        for n, level in levels.items():
+            log = logging.getLogger(n)
+            if log.level <= logging.CRITICAL + 1:  # (unless turned off for good meanwhile: _stop_quietly)
+                log.setLevel(level)
+
+
+@contextlib.contextmanager
 def dask_client(scheduler: str):
     """A distributed Client: ``local`` starts a LocalCluster (one single-threaded worker process
     per core, its numba kernels on one thread: ``WORKER_ENV``; workers may start the command's own
@@ -166,6 +185,7 @@ def dask_client(scheduler: str):
     start_resource_tracker()  # (before the list of processes that are not the batch's own)
     before, known = _children(), set(SpecCluster._instances)
     stack = contextlib.ExitStack()
+    stack.enter_context(_dask_logs_quiet())
     try:
         with sigint_blocked():
             runner = LoopRunner()
@@ -233,55 +253,242 @@ def dask_pieces(client, window: int):
 PIECES_PER_THREAD = 4  # a split scene: its bake in this many pieces per worker thread (they differ in cost)
 
 
-def run_all(command, jobs, scheduler: str, window: int | None, progress: bool, split: bool = False):
+# errors that mean the output disk is full: every input after it would fail alike, so the batch
+# stops taking new ones (those in flight finish or fail on their own)
+DISK_FULL = ("ENOSPC", "EDQUOT")
+POLL_SECONDS = 0.5  # the loop's wait for a finished input between its checks of the cluster
+RPC_SECONDS = 5  # a question to the scheduler (its workers, what they run): no answer in this = not now
+NO_WORKERS_SECONDS = 120  # inputs waiting and no worker in the cluster this long: the batch stops
+
+
+class BatchStopped(Exception):
+    """The batch stopped before its end (the scheduler lost, the output disk full, no workers
+    left): ``reason`` says why, in a sentence; the inputs finished before it are kept."""
+
+    def __init__(self, reason: str):
+        super().__init__(reason)
+        self.reason = reason
+
+
+class Progress:
+    """The progress bar: inputs done, and how many of them failed; inputs run again because
+    their worker was lost; one warning line per lost worker."""
+
+    def __init__(self, command: str, total: int, show: bool):
+        from tqdm import tqdm
+
+        self.bar = tqdm(total=total, desc=f"batch {command}", unit="input", disable=not show, leave=False)
+        self.failed = self.retried = 0
+
+    def done(self, rec: dict) -> None:
+        self.failed += rec["status"] == "error"
+        self._postfix()
+        self.bar.update()
+
+    def again(self, n: int) -> None:
+        self.retried += n
+        self._postfix()
+
+    def _postfix(self) -> None:
+        self.bar.set_postfix_str(f"{self.failed} failed, {self.retried} retried", refresh=False)
+
+    def warn(self, text: str) -> None:
+        import warnings
+
+        from tqdm import tqdm
+
+        from .summary import BatchWarning
+
+        with tqdm.external_write_mode(file=sys.stderr):
+            warnings.warn(text, BatchWarning, stacklevel=3)
+
+    def close(self) -> None:
+        self.bar.close()
+
+
+def disk_full(rec: dict) -> bool:
+    """An input's record whose error is a full output disk (``DISK_FULL``)."""
+    return rec.get("errno") in DISK_FULL
+
+
+def _stop_for_disk(rec: dict) -> str:
+    return (f"the output disk is full ({rec['error']}); free space and run the same command again "
+            "to finish the rest")
+
+
+class ClusterWatch:
+    """What the batch's loop checks on a Dask cluster between finished inputs: the scheduler
+    still there (else ``BatchStopped``, never a wait without end), each worker that leaves
+    (reported once, with the inputs it was running: Dask runs them again), and a cluster left
+    with no workers for ``NO_WORKERS_SECONDS``."""
+
+    def __init__(self, client, scheduler: str, progress: Progress):
+        self.client, self.scheduler, self.progress = client, scheduler, progress
+        self.workers: dict[str, set] = {}  # worker address -> the batch's keys it ran at the last look
+        self.empty_since: float | None = None
+        self.last = 0.0
+        self.look()
+
+    def _ask(self, handler, **kw):
+        return self.client.sync(handler, callback_timeout=RPC_SECONDS, **kw)
+
+    def check(self) -> None:
+        """``BatchStopped`` if the client has lost its scheduler (Dask closes it when it cannot
+        reconnect in the client's timeout)."""
+        if self.client.status in ("closing", "closed"):
+            raise BatchStopped(self.cancelled(None))
+
+    def cancelled(self, exc) -> str:
+        """Why the batch stops when Dask cancelled its tasks (``exc``; None: the client closed):
+        the scheduler lost, or Dask's reason."""
+        from concurrent.futures import CancelledError
+
+        if exc is None or not isinstance(exc, CancelledError) or "connection" in str(exc) or \
+                self.client.status != "running":
+            return (f"lost the Dask scheduler {self.scheduler}; start the cluster again and run the same "
+                    "command to finish the rest")
+        return f"the Dask scheduler {self.scheduler} cancelled the batch's tasks ({str(exc).splitlines()[0]})"
+
+    def look(self, keys=(), every: float = 0) -> None:
+        """Compare the cluster's workers with the last look (``every``: not again within that
+        many seconds): a worker gone is reported, and the batch's inputs it was running
+        (``keys``: those in flight) counted as run again."""
+        self.check()
+        if time.monotonic() - self.last < every:
+            return
+        self.last = time.monotonic()
+        try:
+            now = self._ask(self.client.scheduler.processing)
+        except Exception:  # (no answer now: the scheduler lost, or busy; the next look tells)
+            return
+        keys = set(keys)
+        now = {w: set(ks) & keys for w, ks in now.items()}
+        for w in sorted(set(self.workers) - set(now)):
+            n = len(self.workers[w])
+            self.progress.again(n)
+            again = ("it was running no input" if not n else
+                     f"its {'input' if n == 1 else f'{n} inputs'} in flight run again on the others")
+            self.progress.warn(f"Dask worker {w} left the cluster ({again})")
+        self.workers = now
+        if now:
+            self.empty_since = None
+        elif keys:
+            t = time.monotonic()
+            self.empty_since = self.empty_since or t
+            if t - self.empty_since > NO_WORKERS_SECONDS:
+                raise BatchStopped(f"the Dask cluster {self.scheduler} has had no workers for "
+                                   f"{NO_WORKERS_SECONDS} s; start workers and run the same command to "
+                                   "finish the rest")
+
+
+def _killed(exc: BaseException) -> bool:
+    from distributed.scheduler import KilledWorker
+
+    return isinstance(exc, KilledWorker)
+
+
+def _serial(jobs, progress: Progress, split: bool):
+    for j in jobs:
+        rec = run_one(*j, split=(None, PIECES_PER_THREAD) if split else None)
+        progress.done(rec)
+        yield rec
+        if disk_full(rec):
+            raise BatchStopped(_stop_for_disk(rec))
+
+
+def run_all(command, jobs, scheduler: str, window: int | None, bar: Progress, split: bool = False):
     """Run ``jobs`` (lists of ``run_one``'s arguments) and yield their records as they finish.
     ``split``: one input after the other, each omm bake in pieces (``PIECES_PER_THREAD`` per
-    worker thread) run on the scheduler's workers, packed and written here (``bake_split``)."""
-    from tqdm import tqdm
+    worker thread) run on the scheduler's workers, packed and written here (``bake_split``).
+    ``bar``: the progress (``Progress``), counting inputs done, failed and run again.
 
-    bar = tqdm(total=len(jobs), desc=f"batch {command}", unit="input", disable=not progress, leave=False)
-    try:
-        if scheduler == "none":
-            for j in jobs:
-                rec = run_one(*j, split=(None, PIECES_PER_THREAD) if split else None)
-                bar.update()
-                yield rec
-            return
-        from distributed import as_completed
+    Faults: a worker lost mid-task is reported once, and Dask runs its tasks again; an input
+    whose workers die each time it runs (Dask's ``allowed-failures``, then once more alone, so
+    that no other input is blamed) is recorded as an error; a full output disk, a lost scheduler
+    or a cluster left without workers raise ``BatchStopped`` after the records finished so far
+    (no new input is started; those in flight on a full disk finish first)."""
+    if scheduler == "none":
+        yield from _serial(jobs, bar, split)
+        return
+    with dask_client(scheduler) as client:
+        threads = sum(client.nthreads().values()) or 1
+        limit = window or 2 * threads
+        if split:  # one input at a time, its pieces on every worker
+            yield from _split(client, jobs, bar, limit, threads)
+        else:
+            yield from _on_cluster(client, command, jobs, bar, limit, scheduler)
 
-        with dask_client(scheduler) as client:
-            threads = sum(client.nthreads().values()) or 1
-            limit = window or 2 * threads
-            if split:  # one input at a time, its pieces on every worker
-                for j in jobs:
-                    rec = run_one(*j, split=(dask_pieces(client, limit), PIECES_PER_THREAD * threads))
-                    bar.update()
-                    yield rec
-                return
-            todo = list(jobs)
-            todo.reverse()
-            pending = as_completed()
-            inputs = {}
 
-            def submit():
-                j = todo.pop()
-                fut = client.submit(run_one, *j, pure=False, key=f"omaps-batch-{command}-{os.urandom(8).hex()}")
-                inputs[fut.key] = j[2]
-                pending.add(fut)
+def _split(client, jobs, bar: Progress, limit: int, threads: int):
+    for j in jobs:
+        rec = run_one(*j, split=(dask_pieces(client, limit), PIECES_PER_THREAD * threads))
+        bar.done(rec)
+        yield rec
+        if disk_full(rec):
+            raise BatchStopped(_stop_for_disk(rec))
 
-            while todo and pending.count() < limit:
-                submit()
-            for fut in pending:
-                try:
-                    rec = fut.result()
-                except Exception as exc:  # a worker that died (killed, out of memory): recorded, the rest go on
-                    rec = {"input": inputs[fut.key], "status": "error",
-                           "error": f"{inputs[fut.key]}: worker failed: {type(exc).__name__}: {exc}"}
-                inputs.pop(fut.key, None)
-                fut.release()
-                bar.update()
-                yield rec
-                if todo:
-                    submit()
-    finally:
-        bar.close()
+
+def _on_cluster(client, command, jobs, bar: Progress, limit: int, scheduler: str):
+    """One task per input, at most ``limit`` in flight, checked between finished inputs
+    (``ClusterWatch``); inputs whose workers were killed each time run again alone at the end."""
+    from concurrent.futures import CancelledError
+
+    from distributed import wait
+    from distributed.comm import CommClosedError
+
+    watch = ClusterWatch(client, scheduler, bar)
+    todo = list(jobs)
+    todo.reverse()
+    alone: list = []  # inputs to run again alone (KilledWorker while others ran beside them)
+    flight: dict = {}  # future -> (job, run alone?)
+    stop = None
+
+    def submit(j, solo=False):
+        fut = client.submit(run_one, *j, pure=False, key=f"omaps-batch-{command}-{os.urandom(8).hex()}")
+        flight[fut] = (j, solo)
+
+    while todo or flight or (alone and stop is None):
+        if stop is None:
+            while todo and len(flight) < limit:
+                submit(todo.pop())
+            if not todo and not flight and alone:
+                submit(alone.pop(0), solo=True)
+        try:
+            done, _ = wait(list(flight), timeout=POLL_SECONDS, return_when="FIRST_COMPLETED")
+        except TimeoutError:
+            done = ()
+        except CancelledError as exc:  # Dask cancels every future when the client loses its scheduler
+            raise BatchStopped(watch.cancelled(exc)) from None
+        watch.check()
+        watch.look([f.key for f in flight], every=POLL_SECONDS)
+        for fut in done:
+            j, solo = flight.pop(fut)
+            try:
+                rec = fut.result()
+            except (CancelledError, CommClosedError, OSError) as exc:  # (its result lost with the scheduler)
+                raise BatchStopped(watch.cancelled(exc)) from None
+            except Exception as exc:  # the worker died under it, or the task could not run there (``run_one``
+                # itself returns every failure of its input as a record)
+                if _killed(exc) and not solo:
+                    alone.append(j)
+                    bar.again(1)
+                    fut.release()
+                    continue
+                watch.check()  # (a future cancelled because the client lost its scheduler)
+                path = j[2]
+                why = (f"its worker died each time it ran it: on {exc.allowed_failures + 1} workers (the "
+                       f"scheduler's allowed-failures, {exc.allowed_failures}), and again when run alone "
+                       "(out of memory, or a crash in native code)" if _killed(exc)
+                       else f"{type(exc).__name__}: {exc}")
+                rec = {"input": path, "status": "error", "error": f"{path}: worker failed: {why}"}
+            fut.release()
+            bar.done(rec)
+            yield rec
+            if disk_full(rec) and stop is None:
+                stop = _stop_for_disk(rec)
+                todo.clear()
+                alone.clear()
+    watch.look(())  # (a worker lost since the last look, with the batch's last inputs)
+    if stop is not None:
+        raise BatchStopped(stop)
+

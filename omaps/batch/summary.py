@@ -17,7 +17,7 @@ from ..text import plural as count  # "1 input", "2 inputs"
 
 def totals(command: str, records: list[dict]) -> dict:
     t = {"inputs": len(records)}
-    for s in ("ok", "problems", "skipped", "error"):
+    for s in ("ok", "problems", "skipped", "error", "unfinished"):
         t[s] = sum(r["status"] == s for r in records)
     t["resumed"] = sum(bool(r.get("resumed")) for r in records)
     done = [r["figures"] for r in records if r.get("figures")]
@@ -46,7 +46,8 @@ def summary_csv(records: list[dict], tot: dict) -> str:
     rows = [{"input": r["input"], "output": r.get("output") or "", "status": r["status"],
              "error": r.get("error") or r.get("reason") or "", **_flat(r.get("figures"))} for r in records]
     total = {"input": "(total)", "output": "", "status": f"{tot['ok']} ok, {count(tot['problems'], 'problem')}, "
-             f"{tot['skipped']} skipped, {count(tot['error'], 'error')}", "error": ""}
+             f"{tot['skipped']} skipped, {count(tot['error'], 'error')}"
+             + (f", {tot['unfinished']} unfinished" if tot.get("unfinished") else ""), "error": ""}
     kept = {("savings" if k == "mean_savings" else k): v for k, v in tot.items()
             if k in ("mean_savings", "triangles", "micro_triangles", "micromaps", "data_bytes", "passed")}
     total.update(_flat(kept))  # the eval row's savings columns hold the means
@@ -68,14 +69,22 @@ class BatchResult:
     command: str
     records: list
     totals: dict
-    summary_json: str
-    summary_csv: str
+    summary_json: str | None
+    summary_csv: str | None
     seconds: float
+    stopped: str | None = None  # why the batch stopped before its end (its unfinished inputs: "unfinished")
+    summary_error: str | None = None  # why the summary could not be written (then no summary file)
 
     @property
     def ok(self) -> bool:
-        """No input had an error or problems."""
-        return not (self.totals["error"] or self.totals["problems"])
+        """Every input ran to its end, and none had an error or problems."""
+        return not (self.totals["error"] or self.totals["problems"] or self.stopped or self.summary_error)
+
+    @property
+    def complete(self) -> bool:
+        """The batch ran to its end and wrote its summary (else ``omaps batch`` exits 3: run the
+        same command again to finish)."""
+        return not (self.stopped or self.summary_error)
 
     def messages(self) -> list[str]:
         """Each input's error or problems, one line each, as ``omaps batch`` prints them."""
@@ -90,9 +99,12 @@ class BatchResult:
     def line(self) -> str:
         """The closing line ``omaps batch`` prints (and the mean savings of an eval batch)."""
         t = self.totals
+        where = (f"summary in {self.summary_json} and .csv" if self.summary_json else
+                 f"no summary written ({self.summary_error})")
         text = (f"omaps batch {self.command}: {t['ok']} ok, {t['problems']} with problems, {t['skipped']} skipped, "
-                f"{count(t['error'], 'error')} ({t['resumed']} done before); {self.seconds:.2f} s; summary in "
-                f"{self.summary_json} and .csv")
+                f"{count(t['error'], 'error')}" + (f", {t['unfinished']} unfinished" if t.get("unfinished") else "")
+                + f" ({t['resumed']} done before" + (f"; {t['retried']} run again" if t.get("retried") else "")
+                + f"); {self.seconds:.2f} s; {where}")
         if self.command == "eval" and "mean_savings" in t:
             text += "\nmean savings: " + ", ".join(f"{s} {v:.3f}" for s, v in t["mean_savings"].items())
         return text

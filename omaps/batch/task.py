@@ -23,19 +23,26 @@ TEST_GATE = "OMAPS_TEST_GATE"
 
 
 def _test_gate(what: str) -> None:
-    """Test-only (``TEST_GATE``): with the variable unset, nothing. Set to a folder: wait until
-    a file ``release`` or ``release-WHAT`` appears there, or the folder is removed (or the process
-    is interrupted or killed), writing ``held-WHAT`` there once waiting (the test acts on it);
-    then write ``passed-WHAT`` (a test checks that no task it held went on)."""
+    """Test-only (``TEST_GATE``): with the variable unset, nothing. Set to a folder: if a file
+    ``kill-WHAT`` is there, kill this process at once (SIGKILL: a task that kills every worker it
+    runs on). Else wait until a file ``release`` or ``release-WHAT`` appears there, or the folder
+    is removed (or the process is interrupted or killed), writing ``held-WHAT`` there once waiting
+    (this process's id in it: the test acts on it); then write ``passed-WHAT`` (a test checks that
+    no task it held went on)."""
     folder = os.environ.get(TEST_GATE)
     if not folder:
         return
     what = "".join(c if c.isalnum() or c in "-_." else "_" for c in what)
+    if os.path.exists(os.path.join(folder, f"kill-{what}")):
+        import signal
+
+        os.kill(os.getpid(), signal.SIGKILL)
     go = (os.path.join(folder, "release"), os.path.join(folder, f"release-{what}"))
     held = False
     while os.path.isdir(folder) and not any(os.path.exists(g) for g in go):
         if not held:  # written from inside the wait: a gate that does not wait never says it holds
-            with open(os.path.join(folder, f"held-{what}"), "w"):
+            with open(os.path.join(folder, f"held-{what}"), "w") as f:
+                f.write(str(os.getpid()))
                 held = True
         time.sleep(0.01)
     with contextlib.suppress(OSError), open(os.path.join(folder, f"passed-{what}"), "w"):
@@ -112,7 +119,7 @@ def run_one(command: str, options: dict, path: str, name: str, outdir: str, fp: 
         else:
             rec["status"], rec["error"] = "error", str(exc) if exc.path else f"{path}: {exc.problem}"
     except OSError as exc:
-        rec["status"], rec["error"] = "error", f"{exc.filename or path}: {exc.strerror or exc}"
+        _os_error(rec, exc, path)
     except Exception as exc:  # a bug on one input must not stop the others: recorded with where it came from
         tb = traceback.extract_tb(exc.__traceback__)[-1]
         rec["status"] = "error"
@@ -123,8 +130,26 @@ def run_one(command: str, options: dict, path: str, name: str, outdir: str, fp: 
     if rec["status"] in ("error", "skipped"):  # no output
         rec["output"] = None
     if rec["status"] != "error":  # last, atomically: the input is done (an error is tried again next time)
-        atomic.write_text(marker_path(outdir, name), json.dumps({"fingerprint": fp, "record": rec}, indent=1) + "\n")
+        try:
+            atomic.write_text(marker_path(outdir, name), json.dumps({"fingerprint": fp, "record": rec}, indent=1)
+                              + "\n")
+        except OSError as exc:  # (a full disk): not done after all; its output goes too (error: no output)
+            if rec["output"] is not None:
+                atomic._remove(out)
+            _os_error(rec, exc, marker_path(outdir, name))
+            rec["output"] = None
+            rec.pop("figures", None)
     return rec
+
+
+def _os_error(rec: dict, exc: OSError, path: str) -> None:
+    """An input's record of an ``OSError``: the file and the system's words, and its errno's
+    name (``ENOSPC``: the engine stops on a full disk)."""
+    import errno
+
+    rec["status"], rec["error"] = "error", f"{exc.filename or path}: {exc.strerror or exc}"
+    if exc.errno in errno.errorcode:
+        rec["errno"] = errno.errorcode[exc.errno]
 
 
 def bake_piece_task(test, piece, *rest):

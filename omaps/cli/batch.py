@@ -11,6 +11,8 @@ from ..batch.engine import CONNECT_SECONDS
 from ..errors import InputError
 from .common import show_progress
 
+STOPPED = 3  # the exit code of a batch that stopped before its end (run the same command again)
+
 # the single command's positional input (namespace attribute), and its options a batch refuses (it
 # writes one output per input itself); hidden from the batch's help, as is eval's and trace's --json
 INPUT_DEST = {"omm": "inputs", "eval": "paths", "trace": "scene"}
@@ -88,7 +90,8 @@ def add_parser(sub) -> None:
 def cmd_batch(a: argparse.Namespace) -> int:
     """``omaps batch``: the single command's options as its library call's keyword arguments,
     then ``omaps.batch.plan_batch`` and ``run_plan``. Exit 0 when every input is ok or skipped, 1
-    when one has an error or problems (all listed in the summary), 2 bad batch options."""
+    when one has an error or problems (all listed in the summary), 2 bad batch options, 3
+    (``STOPPED``) when the batch stopped before its end or could not write its summary."""
     from . import maps, omm, trace
 
     command, outdir = a.batch_command, a.batch_output
@@ -109,5 +112,7 @@ def cmd_batch(a: argparse.Namespace) -> int:
     res = engine.run_plan(plan, show_progress(a.quiet))
     for m in res.messages():
         print(m, file=sys.stderr)
+    if res.stopped:
+        print(f"omaps: error: the batch stopped: {res.stopped}", file=sys.stderr)
     print(res.line())
-    return 0 if res.ok else 1
+    return 0 if res.ok else 1 if res.complete else STOPPED

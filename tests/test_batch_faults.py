@@ -1,0 +1,168 @@
+"""Faults a library-sized batch meets on a real cluster, injected when the test decides (never by
+timing): a worker killed mid-job, the scheduler killed mid-job, an input that kills every worker
+it runs on, the output disk full mid-job. Each on a real loopback cluster (``dask scheduler`` and
+``dask worker`` processes, ``tests/cluster.py``) and, where it applies, on the local cluster;
+each checks what a fault must never do: lose an input, run one twice to a different result, leave
+a partial file, or hang. The moments are events: the batch's test-only gate
+(``omaps.batch.task.TEST_GATE``) holds each input at its start, says which process holds it, and
+kills the process that runs an input the test names."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+import time
+
+import pytest
+
+from cluster import LoopbackCluster, kill_pid
+from interrupts import gate_env, held, release, wait_for
+from omaps.cli.main import main
+from test_batch import _summary, _textures
+
+SCHEMES = "sq16,tri2"
+LIMIT = 300  # seconds: a hang guard only (a batch that never ends fails instead of hanging)
+UNTIMED = ("seconds", "inputs_per_second", "retried")  # the totals that differ from run to run
+
+
+def _library(tmp_path, n=6):
+    src = tmp_path / "tex"
+    _textures(src, n=n, seed=11)
+    return src
+
+
+def _serial(src, tmp_path):
+    """The reference: the same batch serially, in this process."""
+    ref = tmp_path / "ref"
+    assert main(["batch", "eval", str(src), "-o", str(ref), "--scheduler", "none", "--schemes", SCHEMES,
+                 "--quiet"]) == 0
+    return ref
+
+
+def _outputs(out):
+    """Every output file of a batch (its markers and summary aside), name -> bytes."""
+    return {f: (out / f).read_bytes() for f in sorted(os.listdir(out))
+            if f.endswith(".json") and not f.startswith("summary")}
+
+
+def _untimed(rec):
+    return {k: v for k, v in rec.items() if k not in ("seconds", "resumed")}
+
+
+def _same_summary(out, ref, resumed=0):
+    """The summary of ``out`` is the serial run's: each input once, the same statuses and
+    figures, the same totals (times aside)."""
+    s, rows = _summary(out)
+    r, ref_rows = _summary(ref)
+    assert [_untimed(x) for x in s["inputs"]] == [_untimed(x) for x in r["inputs"]]
+    want = {k: v for k, v in r["totals"].items() if k not in UNTIMED}
+    assert {k: v for k, v in s["totals"].items() if k not in UNTIMED} == {**want, "resumed": resumed}
+    assert [x["input"] for x in rows] == [x["input"] for x in ref_rows]
+    return s
+
+
+def _batch(src, out, scheduler, env=None, *more):
+    """``omaps batch eval`` as a user runs it, in a process of its own; its stderr in a file."""
+    err = open(out.parent / f"{out.name}.stderr", "w+")
+    cmd = [sys.executable, "-m", "omaps", "batch", "eval", str(src), "-o", str(out), "--scheduler", scheduler,
+           "--schemes", SCHEMES, *more]
+    p = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=err, env=env or os.environ,
+                         start_new_session=True)
+    p.err = err
+    return p
+
+
+def _finish(p, limit=LIMIT):
+    """Wait for the batch (hang guard ``limit``): its exit code and stderr."""
+    try:
+        p.wait(timeout=limit)
+    except subprocess.TimeoutExpired:
+        p.kill()
+        p.wait()
+        raise AssertionError(f"the batch did not end in {limit} s (hang guard)") from None
+    p.err.seek(0)
+    text = p.err.read()
+    p.err.close()
+    return p.returncode, text
+
+
+def _markers(out):
+    m = out / ".batch"
+    return sorted(f[:-5] for f in os.listdir(m) if f.endswith(".json") and not f.startswith(".")) if m.is_dir() \
+        else []
+
+
+def _holder(gate, what):
+    """The id of the process the gate holds ``what`` in."""
+    return int((gate / f"held-{what}").read_text())
+
+
+@pytest.mark.parametrize("nanny", [False, True], ids=["no-nanny", "nanny"])
+def test_a_worker_killed_mid_job_loses_no_input(tmp_path, nanny):
+    """One of two workers SIGKILLed while it runs an input, another input finished: the batch
+    completes, every output byte-identical to a serial run, each input once in an exact summary,
+    the lost worker reported in one line (no traceback) and its input counted as run again.
+    Without a nanny the worker stays dead (a pre-empted node); with one, Dask starts it again (a
+    worker killed by the kernel's OOM killer)."""
+    src = _library(tmp_path)
+    ref = _serial(src, tmp_path)
+    gate, out = tmp_path / "gate", tmp_path / "out"
+    with LoopbackCluster(tmp_path / "cluster", nanny=nanny, env=gate_env({}, gate)) as cluster:
+        p = _batch(src, out, cluster.address)
+        try:
+            wait_for(lambda: len(held(gate, "input-")) == 2, "two inputs held", p)
+            first, second = held(gate, "input-")
+            release(gate, first)
+            wait_for(lambda: first[len("input-"):] in _markers(out), f"{first} finished", p)
+            kill_pid(_holder(gate, second))  # the worker running the second input
+            release(gate)
+            rc, err = _finish(p)
+        finally:
+            if p.poll() is None:
+                p.kill()
+    assert rc == 0, err
+    assert _outputs(out) == _outputs(ref)
+    s = _same_summary(out, ref)
+    assert s["totals"]["retried"] >= 1
+    lost = [line for line in err.splitlines() if "left the cluster" in line]
+    assert len(lost) == 1 and "run again" in lost[0], err
+    assert "Traceback" not in err, err
+    assert not [f for f in os.listdir(out) if f.startswith(".omaps-")]
+
+
+def test_the_scheduler_killed_mid_job_stops_the_batch_and_a_rerun_finishes_it(tmp_path):
+    """The scheduler SIGKILLed while an input runs, another finished: omaps ends (no hang) with
+    exit 3 and one error line naming the scheduler, the finished input keeps its marker and
+    output, the others none; the same command on a fresh cluster then completes with outputs
+    identical to a serial run and runs only the unfinished inputs again."""
+    src = _library(tmp_path)
+    ref = _serial(src, tmp_path)
+    gate, out = tmp_path / "gate", tmp_path / "out"
+    with LoopbackCluster(tmp_path / "cluster", env=gate_env({}, gate)) as cluster:
+        p = _batch(src, out, cluster.address)
+        try:
+            wait_for(lambda: len(held(gate, "input-")) == 2, "two inputs held", p)
+            first = held(gate, "input-")[0]
+            release(gate, first)
+            wait_for(lambda: first[len("input-"):] in _markers(out), f"{first} finished", p)
+            cluster.kill("scheduler")
+            rc, err = _finish(p)
+        finally:
+            if p.poll() is None:
+                p.kill()
+        done = _markers(out)  # (before the workers go: a held input is never let go)
+    assert rc == 3, err
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("omaps: error: the batch stopped: lost the Dask scheduler "
+                                                   + cluster.address), err
+    assert done == [first[len("input-"):]], done
+    assert sorted(f[:-5] for f in _outputs(out)) == done  # an output for each marker, none other
+    s, _ = _summary(out)
+    assert s["totals"]["unfinished"] == 6 - len(done) and s["stopped"].startswith("lost the Dask scheduler")
+    with LoopbackCluster(tmp_path / "cluster2") as cluster:
+        rc, err = _finish(_batch(src, out, cluster.address))
+    assert rc == 0, err
+    assert _outputs(out) == _outputs(ref)
+    _same_summary(out, ref, resumed=len(done))
