@@ -42,6 +42,8 @@ class LoopbackCluster:
         log.close()
 
     def __enter__(self):
+        if os.path.exists(self.file):  # (a cluster started before in the same folder)
+            os.remove(self.file)
         try:
             self._start("scheduler", ["scheduler", "--host", "127.0.0.1", "--port", "0", "--no-dashboard",
                                       "--scheduler-file", self.file], self.scheduler_env)

@@ -9,7 +9,7 @@ kills the process that runs an input the test names."""
 
 from __future__ import annotations
 
-import json
+import contextlib
 import os
 import subprocess
 import sys
@@ -64,8 +64,9 @@ def _same_summary(out, ref, resumed=0):
 
 
 def _batch(src, out, scheduler, env=None, *more):
-    """``omaps batch eval`` as a user runs it, in a process of its own; its stderr in a file."""
-    err = open(out.parent / f"{out.name}.stderr", "w+")
+    """``omaps batch eval`` as a user runs it, in a process of its own; its stderr in a file
+    (beside the inputs: OUTDIR's disk may be full)."""
+    err = open(src.parent / f"{out.name}.stderr", "w+")
     cmd = [sys.executable, "-m", "omaps", "batch", "eval", str(src), "-o", str(out), "--scheduler", scheduler,
            "--schemes", SCHEMES, *more]
     p = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=err, env=env or os.environ,
@@ -99,18 +100,23 @@ def _holder(gate, what):
     return int((gate / f"held-{what}").read_text())
 
 
-@pytest.mark.parametrize("nanny", [False, True], ids=["no-nanny", "nanny"])
-def test_a_worker_killed_mid_job_loses_no_input(tmp_path, nanny):
+@pytest.mark.parametrize("where", ["loopback", "loopback-nanny", "local"])
+def test_a_worker_killed_mid_job_loses_no_input(tmp_path, where):
     """One of two workers SIGKILLed while it runs an input, another input finished: the batch
     completes, every output byte-identical to a serial run, each input once in an exact summary,
     the lost worker reported in one line (no traceback) and its input counted as run again.
-    Without a nanny the worker stays dead (a pre-empted node); with one, Dask starts it again (a
-    worker killed by the kernel's OOM killer)."""
+    Without a nanny the worker stays dead (a pre-empted node); with one (and on the local
+    cluster), Dask starts it again (a worker killed by the kernel's OOM killer)."""
     src = _library(tmp_path)
     ref = _serial(src, tmp_path)
     gate, out = tmp_path / "gate", tmp_path / "out"
-    with LoopbackCluster(tmp_path / "cluster", nanny=nanny, env=gate_env({}, gate)) as cluster:
-        p = _batch(src, out, cluster.address)
+    with contextlib.ExitStack() as stack:
+        if where == "local":
+            p = _batch(src, out, "local", gate_env(os.environ, gate))
+        else:
+            cluster = stack.enter_context(LoopbackCluster(tmp_path / "cluster", nanny=where.endswith("nanny"),
+                                                          env=gate_env({}, gate)))
+            p = _batch(src, out, cluster.address)
         try:
             wait_for(lambda: len(held(gate, "input-")) == 2, "two inputs held", p)
             first, second = held(gate, "input-")
@@ -166,3 +172,107 @@ def test_the_scheduler_killed_mid_job_stops_the_batch_and_a_rerun_finishes_it(tm
     assert rc == 0, err
     assert _outputs(out) == _outputs(ref)
     _same_summary(out, ref, resumed=len(done))
+
+
+POISON = "t03"  # the input whose task kills the worker process it runs in (the gate's kill-input-t03)
+ALLOWED = 1  # the test scheduler's allowed-failures (Dask's default is 3): fewer restarts to wait for
+
+
+def _poisoned(gate):
+    os.makedirs(gate, exist_ok=True)
+    (gate / f"kill-input-{POISON}").write_text("")
+    release(gate)  # (no input is held: the other inputs run at once)
+
+
+@pytest.mark.parametrize("where", ["loopback", "local"])
+def test_an_input_that_kills_every_worker_is_one_recorded_error(tmp_path, where):
+    """An input whose task kills (SIGKILL) every worker process it runs in, as one that needs more
+    memory than a worker has: Dask gives up on it after the scheduler's allowed-failures, omaps
+    runs it once more alone (so that no input that only ran beside it is blamed), then records it
+    as failed with the reason; every other input completes, identical to a serial run. The
+    workers have nannies (Dask starts a killed worker process again)."""
+    src = _library(tmp_path)
+    ref = _serial(src, tmp_path)
+    gate, out = tmp_path / "gate", tmp_path / "out"
+    _poisoned(gate)
+    allowed = {"DASK_DISTRIBUTED__SCHEDULER__ALLOWED_FAILURES": str(ALLOWED)}
+    if where == "local":
+        rc, err = _finish(_batch(src, out, "local", gate_env({**os.environ, **allowed}, gate)))
+    else:
+        with LoopbackCluster(tmp_path / "cluster", nanny=True, env=gate_env({}, gate),
+                             scheduler_env=allowed) as cluster:
+            rc, err = _finish(_batch(src, out, cluster.address))
+    assert rc == 1, err
+    s, _ = _summary(out)
+    r, _ = _summary(ref)
+    poison = [x for x in s["inputs"] if x["input"].endswith(f"{POISON}.png")]
+    assert len(poison) == 1 and poison[0]["status"] == "error", s["inputs"]
+    why = poison[0]["error"]
+    assert "worker died each time it ran it" in why and f"allowed-failures, {ALLOWED}" in why and "alone" in why, why
+    others = [_untimed(x) for x in s["inputs"] if x is not poison[0]]
+    assert others == [_untimed(x) for x in r["inputs"] if not x["input"].endswith(f"{POISON}.png")]
+    assert s["totals"]["ok"] == 5 and s["totals"]["error"] == 1 and s["totals"]["retried"] >= 1
+    want = _outputs(ref)
+    want.pop(f"{POISON}.json")
+    assert _outputs(out) == want
+    assert sum(f"omaps: error: {poison[0]['input']}" in line for line in err.splitlines()) == 1, err
+    assert "Traceback" not in err, err
+
+
+# --- a full output disk ------------------------------------------------------------------------
+
+def _mount_small_disk(folder, size):
+    """A tmpfs of ``size`` bytes at ``folder``, else skip (mounting needs root)."""
+    os.makedirs(folder, exist_ok=True)
+    r = subprocess.run(["mount", "-t", "tmpfs", "-o", f"size={size}", "tmpfs", str(folder)], capture_output=True,
+                       text=True)
+    if r.returncode != 0:
+        pytest.skip(f"a small disk for the test needs mounting a tmpfs, which failed here: {r.stderr.strip()}")
+
+
+def _unmount(folder):
+    subprocess.run(["umount", "-l", str(folder)], capture_output=True)
+
+
+@pytest.mark.parametrize("where", ["loopback", "local", "none"])
+def test_a_full_output_disk_stops_the_batch_and_leaves_no_partial_file(tmp_path, where):
+    """OUTDIR on a disk (a tmpfs) that fills up after a few inputs: the input being written is
+    recorded as failed with the system's words, no partial or temporary file is left (an output
+    is there with its marker or not at all), no new input starts and omaps says why (exit 3);
+    after space is freed, the same command completes with outputs identical to a serial run and
+    runs only the inputs not finished before."""
+    src = _library(tmp_path, n=8)
+    ref = _serial(src, tmp_path)
+    disk = tmp_path / "disk"
+    out = disk / "out"
+    _mount_small_disk(disk, 24 * 1024)
+    try:
+        def run():
+            if where != "loopback":
+                return _finish(_batch(src, out, where, None, "--window", "2"))
+            with LoopbackCluster(tmp_path / "cluster") as cluster:
+                return _finish(_batch(src, out, cluster.address))
+
+        rc, err = run()
+        assert rc == 3, err
+        assert "No space left on device" in err and "the batch stopped: the output disk is full" in err, err
+        assert "Traceback" not in err, err
+        left = [os.path.join(r, f) for r, ds, fs in os.walk(out) for f in fs + ds if f.startswith(".omaps-")]
+        assert not left, left
+        done = _markers(out)
+        assert 0 < len(done) < 8, done
+        outs = _outputs(out)
+        assert sorted(f[:-5] for f in outs) == done  # an output with its marker, or neither
+        assert outs == {f: b for f, b in _outputs(ref).items() if f in outs}
+        if (out / "summary.json").exists():  # (written if the disk had room for it again)
+            s, _ = _summary(out)
+            assert s["stopped"].startswith("the output disk is full") and s["totals"]["error"] >= 1
+        else:
+            assert "omaps: error: the summary could not be written: " in err, err
+        subprocess.run(["mount", "-o", "remount,size=4m", str(disk)], check=True)
+        rc, err = run()
+        assert rc == 0, err
+        assert _outputs(out) == _outputs(ref)
+        _same_summary(out, ref, resumed=len(done))
+    finally:
+        _unmount(disk)

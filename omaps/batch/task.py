@@ -119,7 +119,7 @@ def run_one(command: str, options: dict, path: str, name: str, outdir: str, fp: 
         else:
             rec["status"], rec["error"] = "error", str(exc) if exc.path else f"{path}: {exc.problem}"
     except OSError as exc:
-        _os_error(rec, exc, path)
+        _os_error(rec, exc, path, out)
     except Exception as exc:  # a bug on one input must not stop the others: recorded with where it came from
         tb = traceback.extract_tb(exc.__traceback__)[-1]
         rec["status"] = "error"
@@ -136,18 +136,20 @@ def run_one(command: str, options: dict, path: str, name: str, outdir: str, fp: 
         except OSError as exc:  # (a full disk): not done after all; its output goes too (error: no output)
             if rec["output"] is not None:
                 atomic._remove(out)
-            _os_error(rec, exc, marker_path(outdir, name))
+            _os_error(rec, exc, path, marker_path(outdir, name))
             rec["output"] = None
             rec.pop("figures", None)
     return rec
 
 
-def _os_error(rec: dict, exc: OSError, path: str) -> None:
-    """An input's record of an ``OSError``: the file and the system's words, and its errno's
+def _os_error(rec: dict, exc: OSError, path: str, writing: str) -> None:
+    """An input's record of an ``OSError``: the file and the system's words (an error that names
+    no file, as a full disk's, names the input and the output being written), and its errno's
     name (``ENOSPC``: the engine stops on a full disk)."""
     import errno
 
-    rec["status"], rec["error"] = "error", f"{exc.filename or path}: {exc.strerror or exc}"
+    where = exc.filename or f"{path} (writing {writing})"
+    rec["status"], rec["error"] = "error", f"{where}: {exc.strerror or exc}"
     if exc.errno in errno.errorcode:
         rec["errno"] = errno.errorcode[exc.errno]
 

@@ -114,5 +114,7 @@ def cmd_batch(a: argparse.Namespace) -> int:
         print(m, file=sys.stderr)
     if res.stopped:
         print(f"omaps: error: the batch stopped: {res.stopped}", file=sys.stderr)
+    if res.summary_error:
+        print(f"omaps: error: the summary could not be written: {res.summary_error}", file=sys.stderr)
     print(res.line())
     return 0 if res.ok else 1 if res.complete else STOPPED
