@@ -133,7 +133,7 @@ def test_a_worker_killed_mid_job_loses_no_input(tmp_path, where):
     s = _same_summary(out, ref)
     assert s["totals"]["retried"] >= 1
     lost = [line for line in err.splitlines() if "left the cluster" in line]
-    assert len(lost) == 1 and "run again" in lost[0], err
+    assert len(lost) == 1 and "in flight to run again" in lost[0], err
     assert "Traceback" not in err, err
     assert not [f for f in os.listdir(out) if f.startswith(".omaps-")]
 
@@ -276,3 +276,41 @@ def test_a_full_output_disk_stops_the_batch_and_leaves_no_partial_file(tmp_path,
         _same_summary(out, ref, resumed=len(done))
     finally:
         _unmount(disk)
+
+
+def test_a_cluster_left_without_workers_stops_the_batch(tmp_path, monkeypatch):
+    """Both workers (no nanny) killed by an input that kills every worker it runs on, before
+    Dask's allowed-failures (3) gives up on it: the cluster has no worker left, and the batch
+    stops after ``NO_WORKERS_SECONDS`` (here 1 s) with the reason and its unfinished inputs
+    recorded, instead of waiting for ever (through the library call, as a Python user runs it)."""
+    import omaps
+    from omaps.batch import engine
+
+    monkeypatch.setattr(engine, "NO_WORKERS_SECONDS", 1)
+    src = _library(tmp_path)
+    gate = tmp_path / "gate"
+    _poisoned(gate)
+    with LoopbackCluster(tmp_path / "cluster", env=gate_env({}, gate)) as cluster:
+        with pytest.warns(omaps.batch.BatchWarning, match="left the cluster"):
+            res = omaps.run_batch("eval", [src], tmp_path / "out", {"schemes": SCHEMES}, scheduler=cluster.address)
+        assert cluster.workers() == 0
+    assert res.stopped is not None and "has had no workers for 1 s" in res.stopped, res.stopped
+    assert not res.complete and not res.ok
+    t = res.totals
+    poison = [r for r in res.records if r["input"].endswith(f"{POISON}.png")]
+    assert poison[0]["status"] == "unfinished" and t["unfinished"] >= 1 and t["ok"] + t["unfinished"] == 6, \
+        [(r["input"][-7:], r["status"], r.get("error")) for r in res.records]
+    assert [r["status"] for r in res.records if r["status"] == "ok"] == ["ok"] * len(_markers(tmp_path / "out"))
+
+
+def test_the_progress_bar_counts_failed_and_retried_inputs():
+    from omaps.batch.engine import Progress
+
+    bar = Progress("eval", 4, show=False)
+    bar.done({"status": "ok"})
+    bar.done({"status": "error"})
+    bar.again(2)
+    bar.done({"status": "skipped"})
+    assert (bar.bar.n, bar.failed, bar.retried) == (3, 1, 2)
+    assert bar.bar.postfix == "1 failed, 2 retried"
+    bar.close()

@@ -21,6 +21,10 @@ for byte (a ``trace`` JSON differs only in its timings). Around it:
 * scheduling: ``none`` (serial, in this process), ``local`` (a ``LocalCluster``: one worker
   process per core, one thread each) or ``tcp://HOST:PORT`` (an existing Dask cluster); at most
   ``window`` inputs are in flight (default: twice the workers' threads), so memory stays bounded;
+* faults: a worker lost mid-task is reported once and its inputs run again (by Dask); an input
+  whose workers die each time it runs is run once more alone, then recorded as an error; a lost
+  scheduler, a full output disk or a cluster left without workers stop the batch
+  (``BatchResult.stopped``; its inputs not finished: ``unfinished``), never a wait without end;
 * the summary: ``OUTDIR/summary.json`` and ``OUTDIR/summary.csv`` (per input its status and
   figures or its error; totals).
 
@@ -135,6 +139,8 @@ def run_batch(command: str, inputs, outdir, options: dict | None = None, *, sche
     -------
     BatchResult
         A bad input is a recorded error, never a failed batch; a re-run skips finished inputs.
+        A lost scheduler, a full output disk or a cluster without workers end the batch early
+        (``stopped`` says why; its other inputs are ``unfinished``), never a wait without end.
 
     Examples
     --------

@@ -349,6 +349,15 @@ class ClusterWatch:
                     "command to finish the rest")
         return f"the Dask scheduler {self.scheduler} cancelled the batch's tasks ({str(exc).splitlines()[0]})"
 
+    def result(self, fut, keys):
+        """A finished future's result, looking at the cluster while it comes (its data lives on
+        a worker: one lost meanwhile makes Dask compute it again, which needs a worker)."""
+        while True:
+            try:
+                return fut.result(timeout=POLL_SECONDS)
+            except TimeoutError:
+                self.look([*keys, fut.key], every=POLL_SECONDS)
+
     def look(self, keys=(), every: float = 0) -> None:
         """Compare the cluster's workers with the last look (``every``: not again within that
         many seconds): a worker gone is reported, and the batch's inputs it was running
@@ -367,7 +376,7 @@ class ClusterWatch:
             n = len(self.workers[w])
             self.progress.again(n)
             again = ("it was running no input" if not n else
-                     f"its {'input' if n == 1 else f'{n} inputs'} in flight run again on the others")
+                     f"its {'input' if n == 1 else f'{n} inputs'} in flight to run again")
             self.progress.warn(f"Dask worker {w} left the cluster ({again})")
         self.workers = now
         if now:
@@ -387,10 +396,12 @@ def _killed(exc: BaseException) -> bool:
     return isinstance(exc, KilledWorker)
 
 
-def _serial(jobs, progress: Progress, split: bool):
+def _one_after_another(jobs, bar: Progress, split=None):
+    """The inputs one after the other in this process (``split``: ``run_one``'s, each omm bake
+    in pieces run by ``split[0]``); a full output disk stops them."""
     for j in jobs:
-        rec = run_one(*j, split=(None, PIECES_PER_THREAD) if split else None)
-        progress.done(rec)
+        rec = run_one(*j, split=split)
+        bar.done(rec)
         yield rec
         if disk_full(rec):
             raise BatchStopped(_stop_for_disk(rec))
@@ -408,24 +419,15 @@ def run_all(command, jobs, scheduler: str, window: int | None, bar: Progress, sp
     or a cluster left without workers raise ``BatchStopped`` after the records finished so far
     (no new input is started; those in flight on a full disk finish first)."""
     if scheduler == "none":
-        yield from _serial(jobs, bar, split)
+        yield from _one_after_another(jobs, bar, (None, PIECES_PER_THREAD) if split else None)
         return
     with dask_client(scheduler) as client:
         threads = sum(client.nthreads().values()) or 1
         limit = window or 2 * threads
         if split:  # one input at a time, its pieces on every worker
-            yield from _split(client, jobs, bar, limit, threads)
+            yield from _one_after_another(jobs, bar, (dask_pieces(client, limit), PIECES_PER_THREAD * threads))
         else:
             yield from _on_cluster(client, command, jobs, bar, limit, scheduler)
-
-
-def _split(client, jobs, bar: Progress, limit: int, threads: int):
-    for j in jobs:
-        rec = run_one(*j, split=(dask_pieces(client, limit), PIECES_PER_THREAD * threads))
-        bar.done(rec)
-        yield rec
-        if disk_full(rec):
-            raise BatchStopped(_stop_for_disk(rec))
 
 
 def _on_cluster(client, command, jobs, bar: Progress, limit: int, scheduler: str):
@@ -464,7 +466,9 @@ def _on_cluster(client, command, jobs, bar: Progress, limit: int, scheduler: str
         for fut in done:
             j, solo = flight.pop(fut)
             try:
-                rec = fut.result()
+                rec = watch.result(fut, [f.key for f in flight])
+            except BatchStopped:
+                raise
             except (CancelledError, CommClosedError, OSError) as exc:  # (its result lost with the scheduler)
                 raise BatchStopped(watch.cancelled(exc)) from None
             except Exception as exc:  # the worker died under it, or the task could not run there (``run_one``

@@ -63,8 +63,9 @@ def summary_csv(records: list[dict], tot: dict) -> str:
 
 @dataclasses.dataclass
 class BatchResult:
-    """What ``run_batch`` did: per input its record (status ok / problems / skipped / error, its
-    figures or error, seconds), the totals, and where the summary was written."""
+    """What ``run_batch`` did: per input its record (status ok / problems / skipped / error /
+    unfinished, its figures or error, seconds), the totals, where the summary was written, and
+    why the batch stopped before its end (``stopped``) or could not write its summary."""
 
     command: str
     records: list
