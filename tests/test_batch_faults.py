@@ -306,7 +306,7 @@ def test_a_cluster_left_without_workers_stops_the_batch(tmp_path, monkeypatch):
 def test_the_progress_bar_counts_failed_and_retried_inputs():
     from omaps.batch.engine import Progress
 
-    bar = Progress("eval", 4, show=False)
+    bar = Progress("eval", 4, show=True)
     bar.done({"status": "ok"})
     bar.done({"status": "error"})
     bar.again(2)
@@ -314,3 +314,38 @@ def test_the_progress_bar_counts_failed_and_retried_inputs():
     assert (bar.bar.n, bar.failed, bar.retried) == (3, 1, 2)
     assert bar.bar.postfix == "1 failed, 2 retried"
     bar.close()
+
+
+def test_the_scheduler_killed_while_a_split_scene_bakes_stops_the_batch(tmp_path):
+    """``omaps batch omm --split``: the scheduler SIGKILLed while a piece of the first of two
+    scenes runs: omaps ends with exit 3 and one line (the lost pieces stop the batch, not the
+    scene as an error), no output and no marker; a rerun on a fresh cluster writes the serial
+    bake's files byte for byte."""
+    from test_batch_split import _files, _grid_scene
+
+    scenes = [_grid_scene(tmp_path / "a.gltf"), _grid_scene(tmp_path / "b.gltf", k=12, seed=4)]
+    opts = ["--quiet", "--level", "5"]
+    assert main(["batch", "omm", *scenes, "-o", str(tmp_path / "whole"), "--scheduler", "none", *opts]) == 0
+    gate, out = tmp_path / "gate", tmp_path / "out"
+    err = open(tmp_path / "split.stderr", "w+")
+    cmd = [sys.executable, "-m", "omaps", "batch", "omm", *scenes, "-o", str(out), "--split", *opts]
+    with LoopbackCluster(tmp_path / "cluster", env=gate_env({}, gate)) as cluster:
+        p = subprocess.Popen([*cmd, "--scheduler", cluster.address], stdout=subprocess.DEVNULL, stderr=err,
+                             start_new_session=True)
+        p.err = err
+        try:
+            wait_for(lambda: held(gate, "piece-"), "a piece held", p)
+            cluster.kill("scheduler")
+            rc, text = _finish(p)
+        finally:
+            if p.poll() is None:
+                p.kill()
+    assert rc == 3, text
+    lines = text.strip().splitlines()
+    assert len(lines) == 1 and "the batch stopped: lost the Dask scheduler" in lines[0], text
+    assert _markers(out) == [] and not (out / "a").exists()
+    with LoopbackCluster(tmp_path / "cluster2") as cluster:
+        r = subprocess.run([*cmd, "--scheduler", cluster.address], capture_output=True, text=True, timeout=LIMIT)
+    assert r.returncode == 0, r.stderr
+    for name in ("a", "b"):
+        assert _files(out / name) == _files(tmp_path / "whole" / name)

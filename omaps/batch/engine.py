@@ -9,7 +9,7 @@ import sys
 import time
 
 from ..errors import InputError
-from .task import bake_piece_task, run_one
+from .task import BatchStopped, bake_piece_task, run_one
 
 # ---------------------------------------------------------------------------------------------
 # scheduling
@@ -222,9 +222,10 @@ def dask_client(scheduler: str):
         stack.close()
 
 
-def dask_pieces(client, window: int):
+def dask_pieces(client, window: int, watch=None):
     """A ``build_split`` runner on a Dask client: the pieces submitted (at most ``window`` in
-    flight), each distinct alpha test sent to the cluster once, the results yielded in order."""
+    flight), each distinct alpha test sent to the cluster once, the results yielded in order
+    (``watch``: a ``ClusterWatch`` that awaits them, stopping the batch if the cluster is lost)."""
     import collections
 
     def run(jobs):
@@ -240,7 +241,7 @@ def dask_pieces(client, window: int):
                     flight.append(client.submit(bake_piece_task, sent[id(test)], *rest, pure=False,
                                                 key=f"omaps-piece-{os.urandom(8).hex()}"))
                 fut = flight.popleft()
-                res = fut.result()
+                res = fut.result() if watch is None else watch.result(fut, [f.key for f in flight])
                 fut.release()
                 yield res
         finally:
@@ -259,15 +260,6 @@ DISK_FULL = ("ENOSPC", "EDQUOT")
 POLL_SECONDS = 0.5  # the loop's wait for a finished input between its checks of the cluster
 RPC_SECONDS = 5  # a question to the scheduler (its workers, what they run): no answer in this = not now
 NO_WORKERS_SECONDS = 120  # inputs waiting and no worker in the cluster this long: the batch stops
-
-
-class BatchStopped(Exception):
-    """The batch stopped before its end (the scheduler lost, the output disk full, no workers
-    left): ``reason`` says why, in a sentence; the inputs finished before it are kept."""
-
-    def __init__(self, reason: str):
-        super().__init__(reason)
-        self.reason = reason
 
 
 class Progress:
@@ -334,7 +326,10 @@ class ClusterWatch:
 
     def check(self) -> None:
         """``BatchStopped`` if the client has lost its scheduler (Dask closes it when it cannot
-        reconnect in the client's timeout)."""
+        reconnect in the client's timeout); ``KeyboardInterrupt`` again if a Ctrl-C came
+        (``_ctrl_c_remembered``) and was lost on its way."""
+        if _CTRL_C:
+            raise KeyboardInterrupt
         if self.client.status in ("closing", "closed"):
             raise BatchStopped(self.cancelled(None))
 
@@ -349,14 +344,21 @@ class ClusterWatch:
                     "command to finish the rest")
         return f"the Dask scheduler {self.scheduler} cancelled the batch's tasks ({str(exc).splitlines()[0]})"
 
-    def result(self, fut, keys):
-        """A finished future's result, looking at the cluster while it comes (its data lives on
-        a worker: one lost meanwhile makes Dask compute it again, which needs a worker)."""
+    def result(self, fut, keys=()):
+        """A future's result, looking at the cluster while it comes (``keys``: the batch's other
+        tasks in flight). Its data lives on a worker: one lost meanwhile makes Dask compute it
+        again, which needs a worker. Its result lost with the scheduler: ``BatchStopped``."""
+        from concurrent.futures import CancelledError
+
+        from distributed.comm import CommClosedError
+
         while True:
             try:
                 return fut.result(timeout=POLL_SECONDS)
             except TimeoutError:
                 self.look([*keys, fut.key], every=POLL_SECONDS)
+            except (CancelledError, CommClosedError, OSError) as exc:
+                raise BatchStopped(self.cancelled(exc)) from None
 
     def look(self, keys=(), every: float = 0) -> None:
         """Compare the cluster's workers with the last look (``every``: not again within that
@@ -390,6 +392,36 @@ class ClusterWatch:
                                    "finish the rest")
 
 
+_CTRL_C: list = []  # a Ctrl-C came while the batch ran on a cluster (``_ctrl_c_remembered``)
+
+
+@contextlib.contextmanager
+def _ctrl_c_remembered():
+    """While the batch waits on a cluster, a Ctrl-C is remembered as well as raised: a
+    KeyboardInterrupt that Python raises inside a finaliser (a Dask future released while the
+    loop polls) is printed and dropped there, and the batch would go on; ``ClusterWatch.check``
+    raises it again within ``POLL_SECONDS``. (The main thread only; elsewhere nothing.)"""
+    import signal
+    import threading
+
+    previous = signal.getsignal(signal.SIGINT)
+    if threading.current_thread() is not threading.main_thread() or not callable(previous):
+        yield  # (SIGINT ignored, or the system's default: as it is)
+        return
+
+    def handler(signum, frame):
+        _CTRL_C.append(signum)
+        previous(signum, frame)
+
+    _CTRL_C.clear()
+    signal.signal(signal.SIGINT, handler)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
+        _CTRL_C.clear()
+
+
 def _killed(exc: BaseException) -> bool:
     from distributed.scheduler import KilledWorker
 
@@ -421,11 +453,12 @@ def run_all(command, jobs, scheduler: str, window: int | None, bar: Progress, sp
     if scheduler == "none":
         yield from _one_after_another(jobs, bar, (None, PIECES_PER_THREAD) if split else None)
         return
-    with dask_client(scheduler) as client:
+    with _ctrl_c_remembered(), dask_client(scheduler) as client:
         threads = sum(client.nthreads().values()) or 1
         limit = window or 2 * threads
         if split:  # one input at a time, its pieces on every worker
-            yield from _one_after_another(jobs, bar, (dask_pieces(client, limit), PIECES_PER_THREAD * threads))
+            run = dask_pieces(client, limit, ClusterWatch(client, scheduler, bar))
+            yield from _one_after_another(jobs, bar, (run, PIECES_PER_THREAD * threads))
         else:
             yield from _on_cluster(client, command, jobs, bar, limit, scheduler)
 
@@ -436,7 +469,6 @@ def _on_cluster(client, command, jobs, bar: Progress, limit: int, scheduler: str
     from concurrent.futures import CancelledError
 
     from distributed import wait
-    from distributed.comm import CommClosedError
 
     watch = ClusterWatch(client, scheduler, bar)
     todo = list(jobs)
@@ -469,8 +501,6 @@ def _on_cluster(client, command, jobs, bar: Progress, limit: int, scheduler: str
                 rec = watch.result(fut, [f.key for f in flight])
             except BatchStopped:
                 raise
-            except (CancelledError, CommClosedError, OSError) as exc:  # (its result lost with the scheduler)
-                raise BatchStopped(watch.cancelled(exc)) from None
             except Exception as exc:  # the worker died under it, or the task could not run there (``run_one``
                 # itself returns every failure of its input as a record)
                 if _killed(exc) and not solo:

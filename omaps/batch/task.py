@@ -15,6 +15,15 @@ from ..errors import InputError
 from .inputs import library_call, output_path
 from .markers import marker_path
 
+class BatchStopped(Exception):
+    """The batch stopped before its end (the scheduler lost, the output disk full, no workers
+    left): ``reason`` says why, in a sentence; the inputs finished before it are kept."""
+
+    def __init__(self, reason: str):
+        super().__init__(reason)
+        self.reason = reason
+
+
 # Test-only: when this environment variable names a folder, each input's task (``run_one``, not
 # split) and each piece's task (``bake_piece_task``) stops at ``_test_gate`` until the test lets it
 # go, so that a test interrupts or kills a batch at a moment it chooses, whatever the machine's
@@ -113,6 +122,8 @@ def run_one(command: str, options: dict, path: str, name: str, outdir: str, fp: 
                 rec["status"], rec["figures"], messages = _run_call(command, options, path, out, split)
             finally:
                 messages = [f"omaps: warning: {w.message}" for w in caught] + messages
+    except BatchStopped:  # (a split bake's pieces: the cluster lost) the batch's, not the input's
+        raise
     except InputError as exc:
         if command == "eval" and exc.problem.startswith("no texture is at least"):
             rec["status"], rec["reason"] = "skipped", f"smaller than min_size {options.get('min_size')} px"
