@@ -17,6 +17,8 @@ PACKAGES = [
     ("bake", "omaps.bake", "The bakers: pair-square maps and per-triangle micromaps (bird-curve order)."),
     ("codecs", "omaps.codecs", "Stored square maps: raw `sqN` and the registry's codecs, {codecs}, through one "
      "interface."),
+    ("batch", "omaps.batch", "One command's library call over many inputs on Dask, resumable and fault-tolerant, "
+     "behind `omaps batch`."),
     ("corpus", "omaps.corpus", "The corpus evaluation behind `omaps eval`."),
     ("omm", "omaps.omm", "Standard opacity micromaps (VK_EXT_opacity_micromap, DXR 1.2) behind `omaps omm`."),
     ("scene", "omaps.scene", "glTF 2.0 scenes: the model, the reader, alpha-tested triangles and their pairs."),
