@@ -11,9 +11,6 @@ import time
 from ..errors import InputError
 from .task import BatchStopped, bake_piece_task, run_one
 
-# ---------------------------------------------------------------------------------------------
-# scheduling
-
 DEFAULT_PORT = 8786  # a Dask scheduler's port when the address names none
 CONNECT_SECONDS = 2  # an unreachable scheduler: the error within this (a refused connection: at once)
 HANDSHAKE_BYTES = 16  # a Dask scheduler speaks first: its handshake's length and frame count (8 bytes each)

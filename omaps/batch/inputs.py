@@ -9,8 +9,6 @@ import os
 from ..errors import InputError
 
 COMMANDS = ("omm", "eval", "trace")
-
-
 MARKERS = ".batch"  # OUTDIR/.batch/NAME.json: the completion markers
 SUMMARY = "summary"  # OUTDIR/summary.json and .csv
 GLTF_EXTENSIONS = (".gltf", ".glb")

@@ -10,16 +10,8 @@ from .. import atomic
 from ..errors import InputError, check_count
 from ..text import plural as count
 from .engine import check_scheduler
-from .inputs import (
-    COMMANDS,
-    SUMMARY,
-    find_inputs,
-    found_without_alpha,
-    library_call,
-    output_names,
-    output_path,
-    with_root,
-)
+from .inputs import (COMMANDS, SUMMARY, find_inputs, found_without_alpha, library_call, output_names, output_path,
+                     with_root)
 from .markers import fingerprint, finished, marker_path, remove_stale_temporaries
 from .task import SETTINGS
 

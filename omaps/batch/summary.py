@@ -12,8 +12,6 @@ import warnings
 
 from ..text import plural as count  # "1 input", "2 inputs"
 
-# ---------------------------------------------------------------------------------------------
-# the summary
 
 def totals(command: str, records: list[dict]) -> dict:
     t = {"inputs": len(records)}

@@ -15,6 +15,7 @@ from ..errors import InputError
 from .inputs import library_call, output_path
 from .markers import marker_path
 
+
 class BatchStopped(Exception):
     """The batch stopped before its end (the scheduler lost, the output disk full, no workers
     left): ``reason`` says why, in a sentence; the inputs finished before it are kept."""
