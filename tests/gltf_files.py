@@ -113,3 +113,59 @@ def grid_scene(path, alpha, k=24, seed=0):
     a, b, c, d = v[:-1, :-1].ravel(), v[:-1, 1:].ravel(), v[1:, :-1].ravel(), v[1:, 1:].ravel()
     idx = np.stack([np.stack([a, b, c], 1), np.stack([b, d, c], 1)], 1).reshape(-1)
     return write_quad_gltf(str(path), alpha, positions=pos, uvs=uv, indices=idx)
+
+
+def instanced_field(src, instanced_path, nodes_path, translations, rotations, scales, parent=None,
+                    required=True):
+    """From a .glb whose default scene is one node holding a mesh (the palm), two files of the same
+    field under one parent node (``parent``: its translation, rotation, scale): ``instanced_path``,
+    that node with ``EXT_mesh_gpu_instancing`` (float accessors in a buffer view appended to the
+    binary chunk; listed in ``extensionsRequired`` when ``required``), and ``nodes_path``, the same
+    placements as separate child nodes (their translation, rotation and scale: the accessors'
+    float32 values exactly; None: not written)."""
+    import pygltflib
+
+    t = np.asarray(translations, np.float32)
+    r = np.asarray(rotations, np.float32)
+    s = np.asarray(scales, np.float32)
+    parent = parent or {}
+
+    def load():
+        g = pygltflib.GLTF2().load(str(src))
+        (root,) = g.scenes[g.scene or 0].nodes
+        assert g.nodes[root].mesh is not None and not g.nodes[root].children
+        return g, root
+
+    def parent_node(g, children):
+        g.nodes.append(pygltflib.Node(children=children, **{k: [float(x) for x in v] for k, v in parent.items()}))
+        g.scenes[g.scene or 0].nodes = [len(g.nodes) - 1]
+
+    g, root = load()
+    blob = bytearray(g.binary_blob())
+    attrs = {}
+    for name, arr, kind in (("TRANSLATION", t, "VEC3"), ("ROTATION", r, "VEC4"), ("SCALE", s, "VEC3")):
+        blob += b"\0" * (-len(blob) % 4)
+        g.bufferViews.append(pygltflib.BufferView(buffer=0, byteOffset=len(blob), byteLength=arr.nbytes))
+        blob += arr.tobytes()
+        g.accessors.append(pygltflib.Accessor(bufferView=len(g.bufferViews) - 1, componentType=5126,
+                                              count=len(arr), type=kind))
+        attrs[name] = len(g.accessors) - 1
+    g.buffers[0].byteLength = len(blob)
+    g.set_binary_blob(bytes(blob))
+    g.nodes[root].extensions = {"EXT_mesh_gpu_instancing": {"attributes": attrs}}
+    g.extensionsUsed = sorted(set(g.extensionsUsed or []) | {"EXT_mesh_gpu_instancing"})
+    if required:
+        g.extensionsRequired = sorted(set(g.extensionsRequired or []) | {"EXT_mesh_gpu_instancing"})
+    parent_node(g, [root])
+    g.save(str(instanced_path))
+    if nodes_path is None:
+        return
+    g, root = load()
+    mesh = g.nodes[root].mesh
+    kids = []
+    for k in range(len(t)):
+        g.nodes.append(pygltflib.Node(mesh=mesh, translation=[float(x) for x in t[k]],
+                                      rotation=[float(x) for x in r[k]], scale=[float(x) for x in s[k]]))
+        kids.append(len(g.nodes) - 1)
+    parent_node(g, kids)
+    g.save(str(nodes_path))

@@ -6,7 +6,10 @@ One reader, one policy per case, for ``omaps trace``, ``omaps omm`` and all late
 * a file not named .gltf or .glb (``files.SCENE_RULE``), a file that is not glTF, an accessor,
   buffer view or index out of range, a node cycle: an ``InputError`` naming the file (exit 2);
 * ``extensionsRequired`` naming an extension omaps cannot honour (Draco or meshopt compression,
-  KTX2 textures, GPU instancing, ...): an ``InputError`` naming the extension;
+  KTX2 textures, ...): an ``InputError`` naming the extension;
+* ``EXT_mesh_gpu_instancing``: a node's mesh is an instance per element of its ``TRANSLATION``,
+  ``ROTATION`` and ``SCALE`` accessors (composed with the node's transform), whether the extension
+  is required or only used: every command sees every instance (the mesh baked once);
 * every URI (buffers, images) is resolved under one policy (``scene.container``: relative paths
   and data URIs only, under the asset's folder or ``root``, no network, size caps): a URI it
   refuses is an ``InputError`` naming the file, the URI, where it leads and the parameter that would
@@ -50,6 +53,7 @@ from .model import ALPHA_MODES, Material, Mesh, Primitive, Scene, SceneCamera, S
 
 __all__ = ["load_scene", "SUPPORTED_EXTENSIONS", "node_matrix", "texture_transform_matrix"]
 
+INSTANCING = "EXT_mesh_gpu_instancing"  # a node's mesh drawn at many transforms
 # extensions whose data we read, or that cannot change geometry, texture coordinates or alpha
 SUPPORTED_EXTENSIONS = frozenset({
     "KHR_texture_transform", "KHR_mesh_quantization", "EXT_texture_webp", "KHR_materials_emissive_strength",
@@ -58,6 +62,7 @@ SUPPORTED_EXTENSIONS = frozenset({
     "KHR_materials_dispersion", "KHR_materials_unlit", "KHR_materials_variants", "KHR_materials_pbrSpecularGlossiness",
     "KHR_lights_punctual", "KHR_xmp_json_ld", "KHR_animation_pointer",
     "EXT_mesh_opacity_micromap", "OMAPS_pair_opacity_maps",  # read by scene.micromaps
+    "EXT_mesh_gpu_instancing",  # its nodes' instances (``GltfReader.gpu_instances``)
 })
 _GL_NEAREST = (9728, 9984, 9986)  # magFilter NEAREST, or min NEAREST_MIPMAP_*
 _WRAP = {33071: "clamp", 33648: "mirror", 10497: "wrap"}
@@ -552,7 +557,12 @@ class _Reader:
             n = nodes[ni]
             world = parent @ self.node_matrix(ni)
             if n.mesh is not None:
-                out.append((self._ref(n.mesh, g.meshes, f"node {ni}: mesh"), world))
+                mi = self._ref(n.mesh, g.meshes, f"node {ni}: mesh")
+                many = (n.extensions or {}).get(INSTANCING) if isinstance(n.extensions, dict) else None
+                if many is None:
+                    out.append((mi, world))
+                else:  # the instances' transforms in the node's space, in accessor order (composed as a
+                    out += [(mi, world @ m) for m in self.gpu_instances(ni, many)]  # child node's would be)
             if n.camera is not None:
                 if not isinstance(n.camera, int) or not 0 <= n.camera < len(g.cameras or []):
                     raise InputError(f"node {ni}: camera {n.camera} does not exist", self.path)
@@ -560,6 +570,36 @@ class _Reader:
             for c in reversed(n.children or []):
                 stack.append((c, world, path + (ni,)))
         return out
+
+    def gpu_instances(self, ni: int, ext) -> np.ndarray:
+        """Node ``ni``'s ``EXT_mesh_gpu_instancing`` instances as (n, 4, 4) transforms T * R * S
+        in the node's space: ``TRANSLATION`` and ``SCALE`` VEC3 and ``ROTATION`` VEC4 accessors
+        (floats, or integers as KHR_mesh_quantization allows: a rotation's normalised), one element
+        per instance each, the missing ones the identity's; other (custom) attributes are not read."""
+        what = f"node {ni}: {INSTANCING}"
+        ext = self._dict(ext, what)
+        attrs = self._dict(ext.get("attributes"), f"{what}: attributes")
+        got = {}
+        for key, kind in (("TRANSLATION", "VEC3"), ("ROTATION", "VEC4"), ("SCALE", "VEC3")):
+            if key in attrs:
+                ai = self._ref(attrs[key], self.g.accessors, f"{what}: {key}")
+                if key == "ROTATION" and self.g.accessors[ai].componentType != 5126 \
+                        and not self.g.accessors[ai].normalized:
+                    raise InputError(f"{what}: ROTATION (accessor {ai}) must be floats or normalised integers",
+                                     self.path)
+                v = self.accessor(ai, (kind,)).astype(np.float64)
+                if not np.all(np.isfinite(v)):
+                    raise InputError(f"{what}: {key} (accessor {ai}) holds a NaN or an infinity", self.path)
+                got[key] = v
+        if not got:
+            raise InputError(f"{what} has no TRANSLATION, ROTATION or SCALE attribute", self.path)
+        counts = {k: len(v) for k, v in got.items()}
+        if len(set(counts.values())) > 1:
+            raise InputError(f"{what}: its attributes' counts differ ({counts})", self.path)
+        n = next(iter(counts.values()))
+        return trs_matrices(got.get("TRANSLATION", np.zeros((n, 3))),
+                            got.get("ROTATION", np.tile([0.0, 0.0, 0.0, 1.0], (n, 1))),
+                            got.get("SCALE", np.ones((n, 3))))
 
     def node_matrix(self, ni: int) -> np.ndarray:
         """Node ``ni``'s local transform (``node_matrix``), its fields checked: finite numbers,
@@ -690,21 +730,22 @@ def node_matrix(n) -> np.ndarray:
     """A node's local 4x4 transform: ``matrix`` (column-major) or T * R * S."""
     if n.matrix is not None:
         return np.array(n.matrix, dtype=np.float64).reshape(4, 4).T
-    m = np.eye(4)
-    if n.scale is not None:
-        m = np.diag([*n.scale, 1.0]) @ m
-    if n.rotation is not None:
-        x, y, z, w = n.rotation
-        r = np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
-                      [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
-                      [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)]])
-        rm = np.eye(4)
-        rm[:3, :3] = r
-        m = rm @ m
-    if n.translation is not None:
-        t = np.eye(4)
-        t[:3, 3] = n.translation
-        m = t @ m
+    return trs_matrices(np.array([n.translation if n.translation is not None else (0.0, 0.0, 0.0)], np.float64),
+                        np.array([n.rotation if n.rotation is not None else (0.0, 0.0, 0.0, 1.0)], np.float64),
+                        np.array([n.scale if n.scale is not None else (1.0, 1.0, 1.0)], np.float64))[0]
+
+
+def trs_matrices(t: np.ndarray, r: np.ndarray, s: np.ndarray) -> np.ndarray:
+    """(n, 4, 4) transforms T * R * S from translations (n, 3), unit quaternions (n, 4: x, y,
+    z, w, as glTF stores them) and scales (n, 3): a node's, or each of a node's GPU instances."""
+    x, y, z, w = (r[:, k] for k in range(4))
+    m = np.zeros((len(t), 4, 4))
+    m[:, 0, 0], m[:, 0, 1], m[:, 0, 2] = 1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)
+    m[:, 1, 0], m[:, 1, 1], m[:, 1, 2] = 2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)
+    m[:, 2, 0], m[:, 2, 1], m[:, 2, 2] = 2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)
+    m[:, :3, :3] *= s[:, None, :]  # R * S: column j scaled by s_j
+    m[:, :3, 3] = t
+    m[:, 3, 3] = 1.0
     return m
 
 
