@@ -348,7 +348,8 @@ FILES_MANIFEST = "omaps-files.json"
 ALIGN = 8  # every buffer and image placed in a GLB's binary chunk starts at a multiple of 8 bytes
 _UNSAFE = re.compile(r"[^A-Za-z0-9._-]+")
 _MAGIC = ((b"\x89PNG\r\n\x1a\n", "image/png"), (b"\xff\xd8\xff", "image/jpeg"),
-          (b"\xabKTX 20\xbb\r\n\x1a\n", "image/ktx2"), (b"GIF8", "image/gif"), (b"BM", "image/bmp"))
+          (b"\xabKTX 20\xbb\r\n\x1a\n", "image/ktx2"), (b"GIF8", "image/gif"), (b"BM", "image/bmp"),
+          (b"DDS ", "image/vnd-ms.dds"))
 
 
 def files_folder(out_path) -> str:

@@ -24,7 +24,8 @@ One reader, one policy per case, for ``omaps trace``, ``omaps omm`` and all late
 * an image with no alpha channel used by an alpha-tested material: a warning (alpha is 1);
 * sparse accessors, normalized and quantized (KHR_mesh_quantization) attributes, strides,
   triangle strips and fans, ``KHR_texture_transform`` (and its ``texCoord``), ``EXT_texture_webp``
-  are read; points and lines are left out and listed in ``Scene.skipped``;
+  and ``MSFT_texture_dds`` (its DDS image preferred to the texture's own source, as a renderer
+  that reads the extension samples it; BC1 to BC7 decoded by Pillow) are read; points and lines are left out and listed in ``Scene.skipped``;
 * ``COLOR_0`` alpha multiplies the base colour alpha (glTF's rule): where it is not 1 everywhere,
   the primitive's triangles are *unknown* (all C) and the tracer's shader multiplies by it;
 * texture coordinates that are NaN, infinite or huge (beyond ``MAX_TEXEL_COORDINATE`` texels from
@@ -54,6 +55,7 @@ from .model import ALPHA_MODES, Material, Mesh, Primitive, Scene, SceneCamera, S
 __all__ = ["load_scene", "SUPPORTED_EXTENSIONS", "node_matrix", "texture_transform_matrix"]
 
 INSTANCING = "EXT_mesh_gpu_instancing"  # a node's mesh drawn at many transforms
+IMAGE_SOURCES = ("MSFT_texture_dds", "EXT_texture_webp")  # texture extensions that name an image (``_source_of``)
 # extensions whose data we read, or that cannot change geometry, texture coordinates or alpha
 SUPPORTED_EXTENSIONS = frozenset({
     "KHR_texture_transform", "KHR_mesh_quantization", "EXT_texture_webp", "KHR_materials_emissive_strength",
@@ -63,6 +65,7 @@ SUPPORTED_EXTENSIONS = frozenset({
     "KHR_lights_punctual", "KHR_xmp_json_ld", "KHR_animation_pointer",
     "EXT_mesh_opacity_micromap", "OMAPS_pair_opacity_maps",  # read by scene.micromaps
     "EXT_mesh_gpu_instancing",  # its nodes' instances (``GltfReader.gpu_instances``)
+    "MSFT_texture_dds",  # a texture's DDS image (``_source_of``)
 })
 _GL_NEAREST = (9728, 9984, 9986)  # magFilter NEAREST, or min NEAREST_MIPMAP_*
 _WRAP = {33071: "clamp", 33648: "mirror", 10497: "wrap"}
@@ -381,11 +384,10 @@ class _Reader:
             if info is not None and info.index is not None:
                 ti = self._ref(info.index, self.g.textures, f"{what}: texture")
                 t = self.g.textures[ti]
-                source = t.source
-                if source is None:
-                    webp = self._dict(self._dict(t.extensions, f"texture {ti}: extensions").get("EXT_texture_webp"),
-                                      f"texture {ti}: EXT_texture_webp")
-                    source = webp.get("source")
+                exts = self._dict(t.extensions, f"texture {ti}: extensions")
+                for name in IMAGE_SOURCES:
+                    self._dict(exts.get(name), f"texture {ti}: {name}")
+                source = _source_of(t)
                 if source is None:
                     key = ("none", ti)
                     if key not in by_image:
@@ -694,8 +696,21 @@ def _base_image(g, m):
     info = pbr.baseColorTexture if pbr else None
     if info is None or info.index is None or not 0 <= info.index < len(g.textures or []):
         return None
-    t = g.textures[info.index]
-    return t.source if t.source is not None else ((t.extensions or {}).get("EXT_texture_webp") or {}).get("source")
+    return _source_of(g.textures[info.index])
+
+
+def _source_of(t):
+    """The image a texture samples (its fields checked by the caller): ``MSFT_texture_dds``'s
+    source (what a renderer that reads the extension samples: a DDS image, decoded by Pillow),
+    else the texture's own ``source``, else ``EXT_texture_webp``'s."""
+    ext = t.extensions if isinstance(t.extensions, dict) else {}
+    dds = ext.get("MSFT_texture_dds")
+    if isinstance(dds, dict) and dds.get("source") is not None:
+        return dds["source"]
+    if t.source is not None:
+        return t.source
+    webp = ext.get("EXT_texture_webp")
+    return webp.get("source") if isinstance(webp, dict) else None
 
 
 def _triangles(idx: np.ndarray, mode: int) -> np.ndarray:
