@@ -169,3 +169,82 @@ def instanced_field(src, instanced_path, nodes_path, translations, rotations, sc
         kids.append(len(g.nodes) - 1)
     parent_node(g, kids)
     g.save(str(nodes_path))
+
+
+DRACO = "KHR_draco_mesh_compression"
+
+
+def draco_bytes(positions, uvs, indices, bits=14, uv_bits=12):
+    """Draco data of a triangle mesh (Google's encoder, DracoPy): (bytes, POSITION's and
+    TEXCOORD_0's unique ids in it)."""
+    import DracoPy
+
+    data = DracoPy.encode(np.asarray(positions, np.float32), np.asarray(indices, np.uint32).reshape(-1, 3),
+                          quantization_bits=bits, tex_coord=np.asarray(uvs, np.float64),
+                          tex_coord_quantization_bits=uv_bits, preserve_order=True)
+    mesh = DracoPy.decode(data)
+    ids = {a["attribute_type"]: a["unique_id"] for a in mesh.attributes}
+    return data, {"POSITION": ids[0], "TEXCOORD_0": ids[3]}  # (Draco's types: 0 position, 3 texture coordinate)
+
+
+def write_draco_gltf(path, alpha, positions, uvs, indices, required=True, **draco):
+    """``write_quad_gltf``'s scene with its primitive's geometry in ``KHR_draco_mesh_compression``
+    (a buffer of its own); its accessors keep their types and counts but no data, as the
+    extension's fallback-less files have them."""
+    data, ids = draco_bytes(positions, uvs, indices, **draco)
+    write_quad_gltf(path, alpha, positions=positions, uvs=uvs, indices=indices)
+
+    def fn(doc):
+        doc["buffers"].append({"byteLength": len(data),
+                               "uri": "data:application/octet-stream;base64," + base64.b64encode(data).decode()})
+        doc["bufferViews"].append({"buffer": len(doc["buffers"]) - 1, "byteOffset": 0, "byteLength": len(data)})
+        for a in doc["accessors"]:
+            a.pop("bufferView", None)
+        prim = doc["meshes"][0]["primitives"][0]
+        prim["extensions"] = {DRACO: {"bufferView": len(doc["bufferViews"]) - 1, "attributes": ids}}
+        doc["extensionsUsed"] = [DRACO]
+        if required:
+            doc["extensionsRequired"] = [DRACO]
+    return edit_json(path, fn)
+
+
+def dracoify_glb(src, out, bits=14, uv_bits=12):
+    """A .glb with every triangle primitive's POSITION, TEXCOORD_0 and indices moved into
+    ``KHR_draco_mesh_compression`` data (its other attributes dropped), read with pygltflib and
+    numpy (plain float / unsigned accessors, as the palm has)."""
+    import pygltflib
+
+    g = pygltflib.GLTF2().load(str(src))
+    blob = bytearray(g.binary_blob())
+
+    def read(ai):
+        a = g.accessors[ai]
+        v = g.bufferViews[a.bufferView]
+        dt = np.dtype({5126: np.float32, 5125: np.uint32, 5123: np.uint16, 5121: np.uint8}[a.componentType])
+        k = {"SCALAR": 1, "VEC2": 2, "VEC3": 3}[a.type]
+        stride = v.byteStride or dt.itemsize * k
+        start = (v.byteOffset or 0) + (a.byteOffset or 0)
+        rows = [np.frombuffer(bytes(blob[start + i * stride:start + i * stride + dt.itemsize * k]), dt)
+                for i in range(a.count)]
+        return np.array(rows).reshape(a.count, k)
+
+    for mesh in g.meshes:
+        for p in mesh.primitives:
+            assert p.mode in (None, 4) and p.indices is not None
+            data, ids = draco_bytes(read(p.attributes.POSITION), read(p.attributes.TEXCOORD_0),
+                                    read(p.indices).ravel(), bits, uv_bits)
+            blob += b"\0" * (-len(blob) % 4)
+            g.bufferViews.append(pygltflib.BufferView(buffer=0, byteOffset=len(blob), byteLength=len(data)))
+            blob += data
+            p.extensions = {DRACO: {"bufferView": len(g.bufferViews) - 1, "attributes": ids}}
+            for name in ("NORMAL", "TANGENT", "COLOR_0", "TEXCOORD_1"):
+                setattr(p.attributes, name, None)
+            for ai in (p.attributes.POSITION, p.attributes.TEXCOORD_0, p.indices):
+                g.accessors[ai].bufferView = None
+                g.accessors[ai].byteOffset = None
+                g.accessors[ai].sparse = None
+    g.buffers[0].byteLength = len(blob)
+    g.set_binary_blob(bytes(blob))
+    g.extensionsUsed = sorted(set(g.extensionsUsed or []) | {DRACO})
+    g.extensionsRequired = sorted(set(g.extensionsRequired or []) | {DRACO})
+    g.save(str(out))

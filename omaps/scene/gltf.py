@@ -5,8 +5,11 @@ One reader, one policy per case, for ``omaps trace``, ``omaps omm`` and all late
 
 * a file not named .gltf or .glb (``files.SCENE_RULE``), a file that is not glTF, an accessor,
   buffer view or index out of range, a node cycle: an ``InputError`` naming the file (exit 2);
-* ``extensionsRequired`` naming an extension omaps cannot honour (Draco or meshopt compression,
-  KTX2 textures, ...): an ``InputError`` naming the extension;
+* ``extensionsRequired`` naming an extension omaps cannot honour (meshopt compression, KTX2
+  textures, ...): an ``InputError`` naming the extension;
+* ``KHR_draco_mesh_compression``: a primitive's attributes and indices are its Draco data's, as
+  Google's decoder (DracoPy) gives them (dequantised), its uncompressed accessors ignored but for
+  their types; an attribute the extension does not name is read from its accessor;
 * ``EXT_mesh_gpu_instancing``: a node's mesh is an instance per element of its ``TRANSLATION``,
   ``ROTATION`` and ``SCALE`` accessors (composed with the node's transform), whether the extension
   is required or only used: every command sees every instance (the mesh baked once);
@@ -55,6 +58,7 @@ from .model import ALPHA_MODES, Material, Mesh, Primitive, Scene, SceneCamera, S
 __all__ = ["load_scene", "SUPPORTED_EXTENSIONS", "node_matrix", "texture_transform_matrix"]
 
 INSTANCING = "EXT_mesh_gpu_instancing"  # a node's mesh drawn at many transforms
+DRACO = "KHR_draco_mesh_compression"
 IMAGE_SOURCES = ("MSFT_texture_dds", "EXT_texture_webp")  # texture extensions that name an image (``_source_of``)
 # extensions whose data we read, or that cannot change geometry, texture coordinates or alpha
 SUPPORTED_EXTENSIONS = frozenset({
@@ -66,6 +70,7 @@ SUPPORTED_EXTENSIONS = frozenset({
     "EXT_mesh_opacity_micromap", "OMAPS_pair_opacity_maps",  # read by scene.micromaps
     "EXT_mesh_gpu_instancing",  # its nodes' instances (``GltfReader.gpu_instances``)
     "MSFT_texture_dds",  # a texture's DDS image (``_source_of``)
+    "KHR_draco_mesh_compression",  # a primitive's Draco data (``GltfReader.draco``)
 })
 _GL_NEAREST = (9728, 9984, 9986)  # magFilter NEAREST, or min NEAREST_MIPMAP_*
 _WRAP = {33071: "clamp", 33648: "mirror", 10497: "wrap"}
@@ -470,9 +475,14 @@ class _Reader:
             material = default_material if p.material is None else self._ref(p.material, self.g.materials,
                                                                             f"{label}: material")
             mat = mats[material]
-            positions = self.accessor(p.attributes.POSITION, ("VEC3",))
+            draco = self.draco(p, label)
+            if draco is not None and mode == _FAN:
+                raise InputError(f"{label}: a Draco-compressed primitive must be of triangles or a strip", self.path)
+            positions = self._read(draco, "POSITION", p.attributes.POSITION, ("VEC3",), None, label)
             n = len(positions)
-            if p.indices is None:
+            if draco is not None:
+                idx, mode = draco[1], _TRIANGLES  # (Draco decodes a triangle list)
+            elif p.indices is None:
                 idx = np.arange(n, dtype=np.int64)
             else:
                 ia = self._ref(p.indices, self.g.accessors, f"{label}: indices accessor")
@@ -492,7 +502,7 @@ class _Reader:
                               f"the primitive lacks: its {len(tris)} triangles are unknown")
                     unknown[:] = True
             else:
-                uvs = self._attribute(uv_acc, ("VEC2",), n, f"{label}: TEXCOORD_{mat.texcoord}")
+                uvs = self._read(draco, f"TEXCOORD_{mat.texcoord}", uv_acc, ("VEC2",), n, label)
                 uvs = uvs @ transforms[material][:, :2].T + transforms[material][:, 2]
                 tex = self._textures[mat.texture] if mat.texture >= 0 else None
                 size = max(tex.alpha.shape) if tex is not None and tex.alpha is not None else 1
@@ -510,7 +520,7 @@ class _Reader:
             vertex_alpha = None
             colour = getattr(p.attributes, "COLOR_0", None)
             if colour is not None:
-                col = self._attribute(colour, ("VEC3", "VEC4"), n, f"{label}: COLOR_0")
+                col = self._read(draco, "COLOR_0", colour, ("VEC3", "VEC4"), n, label)
                 if col.shape[1] == 4 and not np.all(col[:, 3] == 1.0):
                     vertex_alpha = np.clip(np.nan_to_num(col[:, 3], nan=0.0), 0.0, 1.0)
                     if mat.alpha_mode != "OPAQUE":
@@ -521,6 +531,63 @@ class _Reader:
                 positions, uvs, tris, vertex_alpha = _own_vertices(positions, uvs, tris, vertex_alpha, own)
             prims.append(Primitive(mi, pi, positions, uvs, tris, material, vertex_alpha, unknown))
         return Mesh(mi, name, prims)
+
+    def draco(self, p, label: str):
+        """A primitive's ``KHR_draco_mesh_compression`` data decoded (DracoPy, Google's decoder):
+        (its attributes by glTF name, as float64 arrays (count, components), its triangle list's
+        vertex indices), or None without the extension. Integer attributes are scaled as their
+        accessors' ``normalized`` says, as an accessor's would be."""
+        ext = (p.extensions or {}).get(DRACO) if isinstance(p.extensions, dict) else None
+        if ext is None:
+            return None
+        import DracoPy
+
+        what = f"{label}: {DRACO}"
+        ext = self._dict(ext, what)
+        raw, _ = self.view_bytes(self._ref(ext.get("bufferView"), self.g.bufferViews, f"{what}: bufferView"))
+        try:
+            mesh = DracoPy.decode(bytes(raw))
+        except Exception as exc:  # (the decoder's own error types and messages)
+            raise InputError(f"{what}: its Draco data cannot be decoded ({type(exc).__name__}: {exc})",
+                             self.path) from None
+        if not isinstance(mesh, DracoPy.DracoMesh):
+            raise InputError(f"{what}: its Draco data is a point cloud, not a mesh", self.path)
+        faces = np.asarray(mesh.faces, dtype=np.int64).reshape(-1)
+        attrs = {}
+        for name, uid in self._dict(ext.get("attributes"), f"{what}: attributes").items():
+            uid = self._int(uid, f"{what}: attributes: {name}")
+            found = mesh.get_attribute_by_unique_id(uid)
+            if found is None:
+                raise InputError(f"{what}: attribute {name}'s Draco id {uid} is not in its Draco data", self.path)
+            data = np.asarray(found.get("data") if isinstance(found, dict) else None)
+            if data.ndim == 0 or data.dtype.kind not in "fiu":
+                raise InputError(f"{what}: attribute {name} has no data in its Draco data", self.path)
+            data = data.reshape(len(data), -1)
+            acc = getattr(p.attributes, name, None) if p.attributes is not None else None
+            a = self.g.accessors[self._ref(acc, self.g.accessors, f"{what}: {name}'s accessor")] \
+                if acc is not None else None
+            if data.dtype.kind in "iu" and a is not None and a.normalized:
+                data = np.maximum(data.astype(np.float64) / np.iinfo(data.dtype).max, -1.0)
+            attrs[name] = data.astype(np.float64)
+        if "POSITION" not in attrs:
+            raise InputError(f"{what} names no POSITION attribute", self.path)
+        n = len(attrs["POSITION"])
+        if faces.size and (faces.min() < 0 or faces.max() >= n):
+            raise InputError(f"{what}: a Draco face names vertex {int(faces.max())} of {n}", self.path)
+        return attrs, faces
+
+    def _read(self, draco, name: str, ai, types, n, label: str) -> np.ndarray:
+        """A vertex attribute: from the primitive's Draco data where it names it, else its
+        accessor; ``n``: the count it must have (POSITION's), None for POSITION itself."""
+        if draco is not None and name in draco[0]:
+            out = draco[0][name]
+            if out.shape[1] not in [_COMPONENTS[t] for t in types]:
+                raise InputError(f"{label}: {DRACO}: {name} has {out.shape[1]} components, {' or '.join(types)} "
+                                 "expected", self.path)
+            if n is not None and len(out) != n:
+                raise InputError(f"{label}: {DRACO}: {name} has {len(out)} elements, POSITION has {n}", self.path)
+            return out
+        return self.accessor(ai, types) if n is None else self._attribute(ai, types, n, f"{label}: {name}")
 
     def _attribute(self, ai, types, n: int, what: str) -> np.ndarray:
         """A vertex attribute: one element per vertex, as POSITION has."""
