@@ -390,8 +390,8 @@ class _Reader:
                 ti = self._ref(info.index, self.g.textures, f"{what}: texture")
                 t = self.g.textures[ti]
                 exts = self._dict(t.extensions, f"texture {ti}: extensions")
-                for name in IMAGE_SOURCES:
-                    self._dict(exts.get(name), f"texture {ti}: {name}")
+                for ext in IMAGE_SOURCES:
+                    self._dict(exts.get(ext), f"texture {ti}: {ext}")
                 source = _source_of(t)
                 if source is None:
                     key = ("none", ti)
