@@ -219,10 +219,10 @@ def dask_client(scheduler: str):
         stack.close()
 
 
-def dask_pieces(client, window: int, watch=None):
+def dask_pieces(client, window: int, watch):
     """A ``build_split`` runner on a Dask client: the pieces submitted (at most ``window`` in
     flight), each distinct alpha test sent to the cluster once, the results yielded in order
-    (``watch``: a ``ClusterWatch`` that awaits them, stopping the batch if the cluster is lost)."""
+    (awaited by ``watch``, a ``ClusterWatch``: the batch stops if the cluster is lost)."""
     import collections
 
     def run(jobs):
@@ -238,7 +238,7 @@ def dask_pieces(client, window: int, watch=None):
                     flight.append(client.submit(bake_piece_task, sent[id(test)], *rest, pure=False,
                                                 key=f"omaps-piece-{os.urandom(8).hex()}"))
                 fut = flight.popleft()
-                res = fut.result() if watch is None else watch.result(fut, [f.key for f in flight])
+                res = watch.result(fut, [f.key for f in flight])
                 fut.release()
                 yield res
         finally:
@@ -318,9 +318,6 @@ class ClusterWatch:
         self.last = 0.0
         self.look()
 
-    def _ask(self, handler, **kw):
-        return self.client.sync(handler, callback_timeout=RPC_SECONDS, **kw)
-
     def check(self) -> None:
         """``BatchStopped`` if the client has lost its scheduler (Dask closes it when it cannot
         reconnect in the client's timeout); ``KeyboardInterrupt`` again if a Ctrl-C came
@@ -366,7 +363,7 @@ class ClusterWatch:
             return
         self.last = time.monotonic()
         try:
-            now = self._ask(self.client.scheduler.processing)
+            now = self.client.sync(self.client.scheduler.processing, callback_timeout=RPC_SECONDS)
         except Exception:  # (no answer now: the scheduler lost, or busy; the next look tells)
             return
         keys = set(keys)
@@ -490,8 +487,7 @@ def _on_cluster(client, command, jobs, bar: Progress, limit: int, scheduler: str
             done = ()
         except CancelledError as exc:  # Dask cancels every future when the client loses its scheduler
             raise BatchStopped(watch.cancelled(exc)) from None
-        watch.check()
-        watch.look([f.key for f in flight], every=POLL_SECONDS)
+        watch.look([f.key for f in flight], every=POLL_SECONDS)  # (the scheduler checked first)
         for fut in done:
             j, solo = flight.pop(fut)
             try:

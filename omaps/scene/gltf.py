@@ -28,7 +28,8 @@ One reader, one policy per case, for ``omaps trace``, ``omaps omm`` and all late
 * sparse accessors, normalized and quantized (KHR_mesh_quantization) attributes, strides,
   triangle strips and fans, ``KHR_texture_transform`` (and its ``texCoord``), ``EXT_texture_webp``
   and ``MSFT_texture_dds`` (its DDS image preferred to the texture's own source, as a renderer
-  that reads the extension samples it; BC1 to BC7 decoded by Pillow) are read; points and lines are left out and listed in ``Scene.skipped``;
+  that reads the extension samples it; BC1 to BC7 decoded by Pillow) are read; points and lines
+  are left out and listed in ``Scene.skipped``;
 * ``COLOR_0`` alpha multiplies the base colour alpha (glTF's rule): where it is not 1 everywhere,
   the primitive's triangles are *unknown* (all C) and the tracer's shader multiplies by it;
 * texture coordinates that are NaN, infinite or huge (beyond ``MAX_TEXEL_COORDINATE`` texels from
