@@ -248,3 +248,122 @@ def dracoify_glb(src, out, bits=14, uv_bits=12):
     g.extensionsUsed = sorted(set(g.extensionsUsed or []) | {DRACO})
     g.extensionsRequired = sorted(set(g.extensionsRequired or []) | {DRACO})
     g.save(str(out))
+
+
+MESHOPT = "EXT_meshopt_compression"
+
+
+def glb_parts(path):
+    """A .glb's JSON document and binary chunk (plain struct reading)."""
+    import struct
+
+    raw = open(path, "rb").read()
+    n = struct.unpack_from("<I", raw, 12)[0]
+    doc = json.loads(raw[20:20 + n])
+    rest = raw[20 + n:]
+    return doc, (bytes(rest[8:8 + struct.unpack_from("<I", rest, 0)[0]]) if rest else b"")
+
+
+def write_glb_parts(path, doc, blob):
+    """A .glb from a JSON document and a binary chunk."""
+    import struct
+
+    js = json.dumps(doc).encode()
+    js += b" " * (-len(js) % 4)
+    blob = bytes(blob) + b"\0" * (-len(blob) % 4)
+    with open(path, "wb") as f:
+        f.write(struct.pack("<III", 0x46546C67, 2, 12 + 8 + len(js) + 8 + len(blob)))
+        f.write(struct.pack("<II", len(js), 0x4E4F534A) + js + struct.pack("<II", len(blob), 0x004E4942) + blob)
+
+
+def meshoptify_glb(src, out, fallback=None, index_mode="TRIANGLES", filters=None):
+    """A .glb whose mesh bufferViews (vertex attributes and triangle indices) are
+    ``EXT_meshopt_compression`` streams made by meshoptimizer's own encoder (zeux's C library,
+    the ``meshoptimizer`` package), version 0 attributes and version 1 triangles; the other views
+    (images) copied as they are. ``fallback``: None, the placeholder fallback buffer the extension
+    describes (no data: the extension required); ``b"..."`` a fallback buffer of the
+    views' uncompressed length holding that byte repeated (a data URI: the extension only used,
+    and a reader that reads the fallback reads garbage). ``index_mode``: TRIANGLES or INDICES.
+    ``filters``: {bufferView index: (filter name, encoded element bytes)} replacing a view's
+    bytes before encoding with bytes encoded for that filter. Returns the triangle lists as
+    the decoder gives them back: TRIANGLES may rotate a triangle's corners (its winding kept),
+    so {accessor index: uint32 indices} for a plain twin (``with_indices``)."""
+    import meshoptimizer as mo
+
+    mo.encode_vertex_version(0)
+    mo.encode_index_version(1)
+    doc, blob = glb_parts(src)
+    views, accessors = doc["bufferViews"], doc["accessors"]
+    index_views = {}
+    for mesh in doc["meshes"]:
+        for p in mesh["primitives"]:
+            if "indices" in p:
+                a = accessors[p["indices"]]
+                index_views[a["bufferView"]] = (p["indices"], p.get("mode", 4))
+    attribute_views = {accessors[ai]["bufferView"] for mesh in doc["meshes"] for p in mesh["primitives"]
+                       for ai in p["attributes"].values()}
+    body = bytearray()
+    decoded = {}
+    for vi, v in enumerate(views):
+        off, length = v.get("byteOffset", 0), v["byteLength"]
+        data = blob[off:off + length]
+        body += b"\0" * (-len(body) % 4)
+        if vi in index_views:
+            ai, mode = index_views[vi]
+            a = accessors[ai]
+            size = {5123: 2, 5125: 4}[a["componentType"]]
+            assert a.get("byteOffset", 0) == 0 and length == size * a["count"]
+            idx = np.frombuffer(data, "<u2" if size == 2 else "<u4").astype(np.uint32)
+            if index_mode == "TRIANGLES" and mode == 4:
+                enc = mo.encode_index_buffer(idx, len(idx), int(idx.max()) + 1)
+                decoded[ai] = np.asarray(mo.decode_index_buffer(len(idx), 4, enc), np.uint32).ravel()
+                ext = {"mode": "TRIANGLES"}
+            else:
+                enc = mo.encode_index_sequence(idx, len(idx), int(idx.max()) + 1)
+                decoded[ai] = idx
+                ext = {"mode": "INDICES"}
+            ext.update(byteStride=size, count=len(idx))
+        elif vi in attribute_views:
+            stride = v.get("byteStride") or next(
+                np.dtype({5126: "f4", 5125: "u4", 5123: "u2", 5121: "u1"}[a["componentType"]]).itemsize
+                * {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4}[a["type"]]
+                for a in accessors if a.get("bufferView") == vi)
+            assert stride % 4 == 0 and length % stride == 0
+            name, data = (filters or {}).get(vi, ("NONE", data))
+            enc = mo.encode_vertex_buffer(np.frombuffer(data, np.uint8).reshape(-1, stride), length // stride, stride)
+            ext = {"mode": "ATTRIBUTES", "byteStride": stride, "count": length // stride}
+            if name != "NONE":
+                ext["filter"] = name
+        else:
+            v["byteOffset"] = len(body)
+            v["buffer"] = 0
+            body += data
+            continue
+        ext.update(buffer=0, byteOffset=len(body), byteLength=len(enc))
+        body += enc
+        v["buffer"] = 1
+        v.setdefault("extensions", {})[MESHOPT] = ext
+    placeholder = {"byteLength": len(blob), "extensions": {MESHOPT: {"fallback": True}}}
+    if fallback is not None:
+        placeholder["uri"] = ("data:application/octet-stream;base64,"
+                              + base64.b64encode(fallback * len(blob)).decode())
+    doc["buffers"] = [{"byteLength": len(body)}, placeholder]
+    doc["extensionsUsed"] = sorted(set(doc.get("extensionsUsed", [])) | {MESHOPT})
+    if fallback is None:
+        doc["extensionsRequired"] = sorted(set(doc.get("extensionsRequired", [])) | {MESHOPT})
+    write_glb_parts(out, doc, body)
+    return decoded
+
+
+def with_indices(src, out, indices):
+    """A plain copy of a .glb with the index accessors ``indices`` ({accessor: uint32 array})
+    rewritten (as 32-bit indices appended to its binary chunk)."""
+    doc, blob = glb_parts(src)
+    blob = bytearray(blob)
+    for ai, idx in indices.items():
+        blob += b"\0" * (-len(blob) % 4)
+        doc["bufferViews"].append({"buffer": 0, "byteOffset": len(blob), "byteLength": 4 * len(idx)})
+        blob += np.asarray(idx, "<u4").tobytes()
+        doc["accessors"][ai].update(bufferView=len(doc["bufferViews"]) - 1, byteOffset=0, componentType=5125)
+    doc["buffers"] = [{"byteLength": len(blob)}]
+    write_glb_parts(out, doc, blob)

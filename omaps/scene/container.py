@@ -9,7 +9,9 @@ the output (the one rule of every glTF file omaps writes; docs/guide/io.md "glTF
 
 * a **.glb** output holds every buffer and image in its binary chunk: the buffers one after the
   other (each at a multiple of 8 bytes, their buffer views re-based), image files and data URIs
-  as buffer views with a ``mimeType``; no buffer or image keeps a ``uri``;
+  as buffer views with a ``mimeType``; no buffer or image keeps a ``uri``; a buffer without data
+  (``EXT_meshopt_compression``'s fallback placeholder: no URI, not the binary chunk) stays one,
+  after buffer 0, and the compressed ranges that extension names are re-based too;
 * a **.gltf** output keeps data URIs and buffer views as they are; every file it names (buffers,
   images) is copied, byte for byte, into the folder ``OUT_files`` beside it (names made safe and
   unique, a file named twice copied once) and named by ``OUT_files/NAME``; that folder is
@@ -63,6 +65,7 @@ __all__ = ["DEFAULT_MAX_BYTES", "MAX_BYTES_ENV", "AssetPolicy", "Container", "Lo
 
 DEFAULT_MAX_BYTES = 2 << 30  # 2 GiB: any one asset file, buffer, image file or data URI
 MAX_BYTES_ENV = "OMAPS_MAX_ASSET_BYTES"
+MESHOPT = "EXT_meshopt_compression"  # bufferViews whose bytes are compressed in another buffer's range
 GLB_MAGIC, JSON_CHUNK, BIN_CHUNK = 0x46546C67, 0x4E4F534A, 0x004E4942
 _SCHEME = re.compile(r"^([A-Za-z][A-Za-z0-9+.\-]*):")
 _DRIVE = re.compile(r"^[A-Za-z]:([\\/]|$)")
@@ -448,6 +451,12 @@ def _buffer_bytes(c: Container, i: int, b) -> bytes:
     return bytes(c.buffer_data(i, uri, length)[:length])
 
 
+def _placeholder(c: Container, i: int, b) -> bool:
+    """Whether buffer ``i`` holds no data: no URI, and not the binary chunk (only buffer 0 of a
+    .glb may name it), as ``EXT_meshopt_compression``'s fallback buffers are."""
+    return isinstance(b, dict) and b.get("uri") is None and (i != 0 or c.bin is None)
+
+
 def _image_bytes(c: Container, i: int, uri: str):
     """An image's bytes, or (None, why) when omaps cannot read it (left out)."""
     what = f"image {i}"
@@ -518,17 +527,30 @@ def _self_contained(c: Container, out_path) -> SelfContained:
     if glb:
         body = bytearray()
         shift = {}
+        placeholders = {}  # buffers without data (EXT_meshopt_compression's fallbacks): kept, after buffer 0
         for i, b in enumerate(buffers):
+            if _placeholder(c, i, b):
+                placeholders[i] = 1 + len(placeholders)
+                continue
             raw = _buffer_bytes(c, i, b)
             body += b"\0" * ((-len(body)) % ALIGN)
             shift[i] = len(body)
             body += raw
         for v in views:
-            if isinstance(v, dict) and isinstance(v.get("buffer"), int) and v["buffer"] in shift:
-                k = v["buffer"]
-                v["buffer"] = 0
-                if shift[k] and isinstance(v.get("byteOffset", 0), int):
-                    v["byteOffset"] = v.get("byteOffset", 0) + shift[k]
+            holders = [v] if isinstance(v, dict) else []
+            ext = (v.get("extensions") or {}).get(MESHOPT) if holders and isinstance(v.get("extensions"), dict) \
+                else None
+            holders += [ext] if isinstance(ext, dict) else []
+            for h in holders:  # the view's own range, and the compressed range its extension names
+                k = h.get("buffer")
+                if isinstance(k, bool) or not isinstance(k, int):
+                    continue
+                if k in shift:
+                    h["buffer"] = 0
+                    if shift[k] and isinstance(h.get("byteOffset", 0), int):
+                        h["byteOffset"] = h.get("byteOffset", 0) + shift[k]
+                elif k in placeholders:
+                    h["buffer"] = placeholders[k]
         for i, im in enumerate(images):
             uri = im.get("uri")
             if uri is None:
@@ -544,7 +566,7 @@ def _self_contained(c: Container, out_path) -> SelfContained:
             im["bufferView"] = len(views) - 1
             im["mimeType"] = _mime(raw, im.get("mimeType") or declared, unquote(uri))
             del im["uri"]
-        buffers[:] = [{"byteLength": len(body)}]
+        buffers[:] = [{"byteLength": len(body)}] + [buffers[i] for i in placeholders]
         doc["buffers"] = buffers
         out.body = bytes(body)
     else:

@@ -5,8 +5,12 @@ One reader, one policy per case, for ``omaps trace``, ``omaps omm`` and all late
 
 * a file not named .gltf or .glb (``files.SCENE_RULE``), a file that is not glTF, an accessor,
   buffer view or index out of range, a node cycle: an ``InputError`` naming the file (exit 2);
-* ``extensionsRequired`` naming an extension omaps cannot honour (meshopt compression, KTX2
-  textures, ...): an ``InputError`` naming the extension;
+* ``extensionsRequired`` naming an extension omaps cannot honour (KTX2 textures,
+  ``KHR_meshopt_compression``, ...): an ``InputError`` naming the extension;
+* ``EXT_meshopt_compression``: a bufferView's bytes are decoded from the range its extension names
+  (``scene.meshopt``: the attribute, triangle and index codecs and the filters of its
+  specification), whether the extension is required or only used; its own buffer (a fallback) is
+  never read; a stream that does not decode exactly is an ``InputError`` naming the bufferView;
 * ``KHR_draco_mesh_compression``: a primitive's attributes and indices are its Draco data's, as
   Google's decoder (DracoPy) gives them (dequantised), its uncompressed accessors ignored but for
   their types; an attribute the extension does not name is read from its accessor;
@@ -52,7 +56,7 @@ import warnings
 import numpy as np
 
 from ..errors import InputError
-from .container import AssetPolicy, Container, Location, read_container
+from .container import MESHOPT, AssetPolicy, Container, Location, read_container
 from .files import check_scene_file
 from .model import ALPHA_MODES, Material, Mesh, Primitive, Scene, SceneCamera, SceneWarning, Texture
 
@@ -72,6 +76,7 @@ SUPPORTED_EXTENSIONS = frozenset({
     "EXT_mesh_gpu_instancing",  # its nodes' instances (``GltfReader.gpu_instances``)
     "MSFT_texture_dds",  # a texture's DDS image (``_source_of``)
     "KHR_draco_mesh_compression",  # a primitive's Draco data (``GltfReader.draco``)
+    "EXT_meshopt_compression",  # a bufferView's compressed bytes (``GltfReader.view_bytes``)
 })
 _GL_NEAREST = (9728, 9984, 9986)  # magFilter NEAREST, or min NEAREST_MIPMAP_*
 _WRAP = {33071: "clamp", 33648: "mirror", 10497: "wrap"}
@@ -163,6 +168,7 @@ class _Reader:
         self.path = container.path
         self.warnings: list[str] = []
         self._buffers: dict[int, bytes] = {}
+        self._decoded: dict[int, tuple[bytes, int]] = {}  # EXT_meshopt_compression views, decoded once
 
     def warn(self, message: str) -> None:
         if message in self.warnings:  # one warning per problem, however many images or materials share it
@@ -240,21 +246,46 @@ class _Reader:
             b = self.g.buffers[i]
             uri = self._uri(b.uri, f"buffer {i}")
             length = self._int(b.byteLength, f"buffer {i}: byteLength")
+            if uri is None and i != 0:
+                raise InputError(f"buffer {i} has no URI, and only buffer 0 may hold a .glb's binary chunk (a "
+                                 f"buffer without data is a placeholder, read only through {MESHOPT})", self.path)
             self._buffers[i] = bytes(self.container.buffer_data(i, uri, length))
         return self._buffers[i]
 
     def view_bytes(self, vi: int) -> tuple[bytes, int | None]:
-        """The bytes of bufferView ``vi`` and its byteStride (None: tightly packed)."""
+        """The bytes of bufferView ``vi`` and its byteStride (None: tightly packed); a view with
+        ``EXT_meshopt_compression`` decoded from the range its extension names (``scene.meshopt``),
+        its own buffer (a fallback) never read."""
         vi = self._ref(vi, self.g.bufferViews, "bufferView")
+        if vi in self._decoded:
+            return self._decoded[vi]
         v = self.g.bufferViews[vi]
-        data = self.buffer(self._ref(v.buffer, self.g.buffers, f"bufferView {vi}: buffer"))
-        off = 0 if v.byteOffset is None else self._int(v.byteOffset, f"bufferView {vi}: byteOffset")
         length = self._int(v.byteLength, f"bufferView {vi}: byteLength")
         stride = None if v.byteStride is None else self._int(v.byteStride, f"bufferView {vi}: byteStride", 1)
+        ext = v.extensions.get(MESHOPT) if isinstance(v.extensions, dict) else None
+        if ext is not None:
+            from . import meshopt
+
+            what = f"bufferView {vi}: {MESHOPT}"
+            ext = self._dict(ext, what)
+            raw = self._range(ext.get("buffer"), ext.get("byteOffset"), ext.get("byteLength"), what)
+            try:
+                out, stride = meshopt.decode_view(raw, ext, length, stride)
+            except meshopt.MeshoptError as exc:
+                raise InputError(f"{what}: {exc}", self.path) from None
+            self._decoded[vi] = (out.tobytes(), stride)
+            return self._decoded[vi]
+        return self._range(v.buffer, v.byteOffset, length, f"bufferView {vi}"), stride
+
+    def _range(self, buffer, offset, length, what: str) -> bytes:
+        """``length`` bytes from ``offset`` (None: 0) of buffer ``buffer``, checked."""
+        data = self.buffer(self._ref(buffer, self.g.buffers, f"{what}: buffer"))
+        off = 0 if offset is None else self._int(offset, f"{what}: byteOffset")
+        length = self._int(length, f"{what}: byteLength")
         if off + length > len(data):
-            raise InputError(f"bufferView {vi} (bytes {off}..{off + length}) runs past the end of buffer {v.buffer} "
+            raise InputError(f"{what} (bytes {off}..{off + length}) runs past the end of buffer {buffer} "
                              f"({len(data)} bytes)", self.path)
-        return data[off:off + length], stride
+        return data[off:off + length]
 
     def accessor(self, ai: int, types=None) -> np.ndarray:
         """Accessor ``ai`` as an array (count, components): floats as float64, normalised
