@@ -203,13 +203,14 @@ def omm_input_spec(inputs: str | os.PathLike[str] | Sequence[str | os.PathLike[s
     rules = MaterialRules() if rules is None else rules
     if len(inputs) == 1 and is_scene_file(inputs[0]):
         if channel is not None:
-            raise InputError("channel applies to a texture input, not to glTF", param="channel")
+            raise InputError("channel applies to a texture input, not to a scene", param="channel")
         return omm_inputs.gltf_spec(inputs[0], rules)
     if len(inputs) == 2:
         return omm_inputs.texture_spec(inputs[0], inputs[1], rules.cutoff, rules.filter, rules.wrap, channel)
     if len(inputs) == 1:
         raise InputError(f"a texture needs a .npy array of UV triangles (T, 3, 2) after it; {SCENE_RULE}", inputs[0])
-    raise InputError(f"inputs must be [scene.gltf|.glb] or [texture, uvs.npy], got {len(inputs)} paths",
+    raise InputError(f"inputs must be [scene (.gltf, .glb, .usd, .usda, .usdc, .usdz)] or [texture, uvs.npy], got "
+                     f"{len(inputs)} paths",
                      param="inputs")
 
 
@@ -227,11 +228,11 @@ def bake_omms(inputs: str | os.PathLike[str] | Sequence[str | os.PathLike[str]],
     Parameters
     ----------
     inputs : str or os.PathLike, or a list of them
-        ``SCENE.gltf|.glb`` (every alpha-tested primitive), or ``[TEXTURE, UVS.npy]`` (UV
+        ``SCENE.gltf|.glb|.usd|.usda|.usdc|.usdz`` (every alpha-tested primitive), or ``[TEXTURE, UVS.npy]`` (UV
         triangles, shape (T, 3, 2)).
     output : str or os.PathLike, optional
         A folder (omm_data.bin, omm_triangles.bin, omm_index.bin, omm_usage.json, omm.json;
-        replaced whole if empty or an earlier omm folder), or for a scene a .glb / .gltf file with
+        replaced whole if empty or an earlier omm folder), or for a glTF scene a .glb / .gltf file with
         the EXT_mesh_opacity_micromap extension. Checked before any work, written all or nothing.
         None: nothing is written.
     level, dynamic, budget : optional
@@ -319,6 +320,11 @@ def bake_omms(inputs: str | os.PathLike[str] | Sequence[str | os.PathLike[str]],
     if to_gltf:
         if spec["kind"] != "gltf":
             raise InputError("a .glb / .gltf output needs a glTF input (a texture and UVs have no scene)", output)
+        from .scene.files import is_usd_file
+
+        if is_usd_file(spec["path"]):
+            raise InputError("a .glb / .gltf output needs a glTF input: the micromaps of a USD stage are written as "
+                             "an OMM folder (give output a folder)", param="output")
         outputs.file(output, "-o")
     else:
         outputs.folder(output, "-o", omm_format.SUMMARY_FILE, (".glb", ".gltf"))  # before the work, not after

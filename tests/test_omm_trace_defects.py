@@ -18,7 +18,7 @@ from omaps.errors import InputError
 
 # ---- a scene must be .gltf or .glb: one rule, in the scene loader ---------------------------
 
-SCENE_RULE = "a scene must end in .gltf or .glb"
+SCENE_RULE = "a scene must end in .gltf, .glb, .usd, .usda, .usdc or .usdz"
 
 
 def test_scene_loader_names_the_file_and_the_suffix_rule(tmp_path):

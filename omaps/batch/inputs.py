@@ -11,7 +11,7 @@ from ..errors import InputError
 COMMANDS = ("omm", "eval", "trace")
 MARKERS = ".batch"  # OUTDIR/.batch/NAME.json: the completion markers
 SUMMARY = "summary"  # OUTDIR/summary.json and .csv
-GLTF_EXTENSIONS = (".gltf", ".glb")
+from ..scene.files import SCENE_SUFFIXES as GLTF_EXTENSIONS  # every scene file: glTF and OpenUSD
 
 
 def library_call(command: str):
@@ -78,7 +78,7 @@ def find_inputs(command: str, given, outdir: str) -> list[tuple[str, str]]:
         else:
             add(g, os.path.basename(g))
     if not found:
-        raise InputError("no input found (" + ("images" if command == "eval" else ".gltf / .glb scenes") + ")",
+        raise InputError("no input found (" + ("images" if command == "eval" else ".gltf / .glb / .usd / .usda / .usdc / .usdz scenes") + ")",
                          ", ".join(map(os.fspath, given)))
     return found
 

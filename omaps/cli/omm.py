@@ -18,7 +18,7 @@ def add_parser(sub) -> None:
                     "alpha-tested primitive) or from a texture and a .npy array of UV triangles (T, 3, 2). "
                     "Writes omm_data.bin, omm_triangles.bin, omm_index.bin, omm_usage.json and omm.json "
                     "into DIR (all or nothing). With --verify DIR: check a written folder.")
-    o.add_argument("inputs", nargs="*", metavar="INPUT", help="SCENE.gltf|.glb, or TEXTURE UVS.npy")
+    o.add_argument("inputs", nargs="*", metavar="INPUT", help="SCENE (.gltf, .glb, .usd, .usda, .usdc, .usdz), or TEXTURE UVS.npy")
     o.add_argument("-o", "--output", metavar="DIR|OUT.glb|OUT.gltf",
                    help="output folder (replaced whole if it is empty or holds an earlier omm.json; any other "
                         "folder is left alone: error), or, for a glTF input, a .glb / .gltf file: the scene with "
@@ -84,14 +84,14 @@ def cmd_omm(a) -> int:
     if a.expand:
         return _cmd_expand(a)
     if len(a.inputs) > 2:
-        raise InputError(f"give SCENE.gltf|.glb, or TEXTURE UVS.npy, not {len(a.inputs)} inputs")
+        raise InputError(f"give a SCENE (.gltf, .glb, .usd, .usda, .usdc, .usdz), or TEXTURE UVS.npy, not {len(a.inputs)} inputs")
     if a.inputs and not a.output:
         from ..jobs import omm_input_spec
 
         omm_input_spec(a.inputs, material_rules(a), a.channel)  # the inputs' own error first
     if not a.output:
         raise InputError("give the output folder with -o DIR" if a.inputs else
-                         "give SCENE.gltf|.glb, or TEXTURE UVS.npy (and -o DIR), or --verify DIR")
+                         "give a SCENE, or TEXTURE UVS.npy (and -o DIR), or --verify DIR")
     bake = bake_omms(a.inputs, a.output, **bake_options(a), progress=show_progress(a.quiet))
     print(bake.line())
     for m in bake.messages():

@@ -138,7 +138,9 @@ def families_for(args) -> list[str]:
             if getattr(args, "weights", None) == "view":  # the view's hits are traced
                 out.append("trace")
     elif cmd == "report":  # a scene is traced, a folder of textures evaluated
-        scene = str(getattr(args, "input", "")).lower().endswith((".gltf", ".glb"))
+        from ..scene.files import is_scene_file
+
+        scene = is_scene_file(str(getattr(args, "input", "")))
         if scene:
             from ..trace.experiment import DEFAULT_SCHEMES as TRACE_DEFAULT
 

@@ -24,8 +24,8 @@ def add_parser(sub) -> None:
                                    "textures, omaps eval's savings chart and a sortable table of every texture "
                                    "with its maps.",
                        formatter_class=argparse.RawDescriptionHelpFormatter)
-    r.add_argument("input", metavar="INPUT", help="a .gltf / .glb scene (baked or not: omm and file:CODEC "
-                   "show what it stores) or a folder of textures")
+    r.add_argument("input", metavar="INPUT", help="a scene: .gltf / .glb (baked or not: omm and file:CODEC "
+                   "show what it stores) or .usd / .usda / .usdc / .usdz; or a folder of textures")
     r.add_argument("-o", "--output", required=True, metavar="REPORT.html", help="the HTML file to write")
     r.add_argument("--schemes", default=None,
                    help="comma-separated schemes: those of omaps trace for a scene (default: its default), "

@@ -52,7 +52,7 @@ def add_parser(sub) -> None:
                                    "visible result is checked against 'none' (every candidate alpha-tested).",
                        epilog=TABLE_HELP.format(rounds=TIMING_ROUNDS),
                        formatter_class=argparse.RawDescriptionHelpFormatter)
-    t.add_argument("scene", metavar="SCENE", help=".gltf or .glb file")
+    t.add_argument("scene", metavar="SCENE", help=".gltf, .glb, .usd, .usda, .usdc or .usdz file")
     t.add_argument("--schemes", default=DEFAULT_SCHEMES,
                    help="comma-separated: none, triL (or succinctL, csmL: the same micromaps as lossless trees), sqN, "
                         f"or a codec ({CODECS}; also with -fast, -medium or -thorough where it has efforts, "

@@ -17,13 +17,13 @@ import warnings
 import numpy as np
 
 from ..errors import InputError
-from ..scene.files import SCENE_SUFFIXES
+from ..scene.files import GLTF_SUFFIXES as SCENE_GLTF_SUFFIXES
 from .. import omm_format
 from .pipeline import OmmResult
 
 __all__ = ["GLTF_SUFFIXES", "is_gltf", "write_gltf_result", "read_gltf", "OMAPS_KEY"]
 
-GLTF_SUFFIXES = SCENE_SUFFIXES
+GLTF_SUFFIXES = SCENE_GLTF_SUFFIXES  # (a USD stage is a scene input, never a glTF output)
 OMAPS_KEY = "omaps"
 
 

@@ -1,9 +1,11 @@
-"""What ``omaps omm`` reads: a texture plus a UV array, or a glTF scene, as ``Geometry`` lists.
+"""What ``omaps omm`` reads: a texture plus a UV array, or a scene (glTF or OpenUSD), as ``Geometry``
+lists.
 
 An input is described by a small JSON-able ``spec`` (kept in omm.json), so ``--verify`` can
-load the same geometry again and re-bake it. glTF scenes go through the one scene reader
-(``omaps.scene``) and the one material rule (``alpha_test.MaterialRules``), with the tracer's
-pairs: every alpha-tested primitive is one geometry.
+load the same geometry again and re-bake it; its kind ``gltf`` stands for any scene file (the
+loader reads it by its suffix). Scenes go through the one scene loader (``omaps.scene``) and
+the one material rule (``alpha_test.MaterialRules``), with the tracer's pairs: every
+alpha-tested primitive is one geometry (a USD one records its prim and each triangle's face).
 """
 
 from __future__ import annotations
@@ -131,6 +133,10 @@ def _gltf_geometries(spec, view=None, assets=None):
             _, pair_of = np.unique(pair_rows, return_inverse=True)
             info = {**where, "material": mat.name, "alpha_mode": mat.alpha_mode, "alpha_factor": mat.base_colour[3],
                     "unknown_triangles": int(at.unknown[rows].sum())}
+            if p.source is not None:  # a USD prim: its path, and per triangle the face it comes from
+                info["prim"] = p.source
+            if p.faces is not None:
+                info["faces"] = p.faces[at.local[rows]].tolist()
             tex = scene.textures[mat.texture] if mat.texture >= 0 else None
             if tex is not None and tex.problem is not None:
                 info["problem"] = tex.problem

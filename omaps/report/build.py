@@ -13,7 +13,7 @@ from . import page as pg
 
 __all__ = ["build_report", "ReportResult", "SCENE_SUFFIXES"]
 
-SCENE_SUFFIXES = (".gltf", ".glb")
+from ..scene.files import SCENE_SUFFIXES  # (glTF and OpenUSD)
 
 
 @dataclass
@@ -121,7 +121,7 @@ def build_report(input, output, schemes: str | None = None, *, size=512, shadows
             raise InputError("no such file", src)
         kind = "scene"
     elif os.path.exists(src):
-        raise InputError("is neither a glTF scene (.gltf, .glb) nor a folder of textures", src)
+        raise InputError("is neither a scene (.gltf, .glb, .usd, .usda, .usdc, .usdz) nor a folder of textures", src)
     else:
         raise InputError("no such file or folder", src)
     if os.path.exists(out) and os.path.exists(src) and os.path.samefile(out, src):

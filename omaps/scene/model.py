@@ -5,7 +5,10 @@ world transform), as a BLAS shared by several TLAS instances. Each mesh keeps it
 positions, triangles, the texture coordinates the material's base colour texture reads
 (``KHR_texture_transform`` applied) and the material. Materials keep what the alpha test needs;
 ``Scene.alpha_test`` turns one into the core ``AlphaTest`` under ``MaterialRules`` -- the same
-for ``omaps trace`` and ``omaps omm``. ``omaps.scene.gltf.load_scene`` builds it.
+for ``omaps trace`` and ``omaps omm``. ``omaps.scene.load_scene`` builds it, from glTF
+(``scene.gltf``) or OpenUSD (``scene.usd``: a mesh prim is a mesh, its faces bound to one
+material a primitive, and each primitive names its prim (``source``) and each triangle the face
+it comes from (``faces``), so that an engine can attach the maps baked for it).
 """
 
 from __future__ import annotations
@@ -64,6 +67,8 @@ class Primitive:
     material: int  # index into Scene.materials
     vertex_alpha: np.ndarray | None = None  # COLOR_0 alpha (V,) when it is not 1 everywhere
     unknown: np.ndarray | None = None  # (T,) bool: triangles whose maps must be all C (see scene.gltf)
+    source: str | None = None  # where it comes from in its file when mesh/primitive do not say (a USD prim path)
+    faces: np.ndarray | None = None  # (T,) int64: the face of ``source`` each triangle comes from (None: glTF)
 
     def __post_init__(self):
         from .. import checks
@@ -75,6 +80,8 @@ class Primitive:
         checks.array(self.triangles, "triangles", shape=(None, 3), kinds="iu")
         if self.unknown is None:
             self.unknown = np.zeros(len(self.triangles), bool)
+        if self.faces is not None:
+            checks.array(self.faces, "faces", shape=(len(self.triangles),), kinds="iu")
 
     @property
     def tris_uv(self) -> np.ndarray:
@@ -88,7 +95,7 @@ class Primitive:
 
     @property
     def label(self) -> str:
-        return f"mesh {self.mesh} primitive {self.index}"
+        return f"mesh {self.mesh} primitive {self.index}" + (f" ({self.source})" if self.source else "")
 
 
 @dataclass

@@ -136,7 +136,7 @@ def trace_scene(scene: str | os.PathLike[str] | Scene, schemes: str | Sequence[s
     Parameters
     ----------
     scene : str, path or Scene
-        A .gltf / .glb file, or a scene from ``omaps.load_scene``.
+        A .gltf / .glb / .usd / .usda / .usdc / .usdz file, or a scene from ``omaps.load_scene``.
     schemes : str, or list of str or Scheme
         Comma-separated scheme names (``none``, ``triL``, ``sqN``, a codec, ``omm``, ``file:CODEC``,
         ``budget:BYTES``), or a list of names or parsed schemes.
