@@ -304,6 +304,57 @@ def test_a_point_instancer_of_palms_traces_as_its_nodes_and_bakes_the_palm_once(
     _same_bins(_omm(tmp_path, "field", usd), _omm(tmp_path, "palm", SCENES / "palm.glb"))
 
 
+@needs_usd
+def test_instanceable_prims_share_their_prototypes_meshes_per_material_binding(tmp_path):
+    """Three instanceable prims referencing one class: the two bound to material A share one mesh
+    (baked once, named by the first instance's prim), the one bound to B gets its own."""
+    from pxr import Gf, UsdGeom
+
+    values, index = _poly_st(5)
+    stage = _stage(tmp_path / "inst.usda")
+    cls = stage.CreateClassPrim("/_Tree")
+    _mesh(stage, "/_Tree/Leaf", POLY_POINTS, POLY_COUNTS, POLY_INDICES, values, "faceVarying", index)
+    tex = f"./{_png(tmp_path / 'leaf.png', _blobs())}"
+    mats = {"A": _material(stage, "/Looks/A", texture=tex, threshold=0.5),
+            "B": _material(stage, "/Looks/B", texture=tex, threshold=0.7)}
+    for k, which in enumerate("AAB"):
+        x = UsdGeom.Xform.Define(stage, f"/T{k}")
+        x.AddTranslateOp().Set(Gf.Vec3d(0, 2.0 * k, 0))
+        x.GetPrim().GetReferences().AddInternalReference(cls.GetPath())
+        x.GetPrim().SetInstanceable(True)
+        _bind(x, mats[which])
+    stage.GetRootLayer().Save()
+    scene = load_scene(tmp_path / "inst.usda")
+    assert [mi for mi, _ in scene.instances] == [0, 0, 1] and len(scene.meshes) == 2
+    assert [m.primitives[0].source for m in scene.meshes] == ["/T0/Leaf", "/T2/Leaf"]
+    assert [scene.materials[m.primitives[0].material].cutoff for m in scene.meshes] == [pytest.approx(0.5),
+                                                                                        pytest.approx(0.7)]
+    np.testing.assert_allclose([m[:3, 3] for _, m in scene.instances], [[0, 0, 0], [0, 2, 0], [0, 4, 0]])
+    out = _omm(tmp_path, "inst", tmp_path / "inst.usda")
+    summary = json.loads((out / "omm.json").read_text())
+    assert [g["prim"] for g in summary["geometries"]] == ["/T0/Leaf", "/T2/Leaf"]
+    assert summary["statistics"]["triangles"] == 2 * len(scene.meshes[0].primitives[0].triangles)
+    assert main(["omm", "--verify", str(out), "--quiet"]) == 0
+
+
+@needs_usd
+def test_a_usdz_package_reads_its_own_texture(tmp_path):
+    from pxr import UsdUtils
+
+    values, index = _poly_st(6)
+    stage = _stage(tmp_path / "pkg.usdc")
+    m = _mesh(stage, "/Poly", POLY_POINTS, POLY_COUNTS, POLY_INDICES, values, "faceVarying", index)
+    _bind(m, _material(stage, "/Looks/Leaf", texture=f"./{_png(tmp_path / 'leaf.png', _blobs())}", threshold=0.5))
+    stage.GetRootLayer().Save()
+    assert UsdUtils.CreateNewUsdzPackage(str(tmp_path / "pkg.usdc"), str(tmp_path / "pkg.usdz"))
+    (tmp_path / "leaf.png").unlink()
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        scene = load_scene(tmp_path / "pkg.usdz")
+    (tex,) = scene.textures
+    np.testing.assert_array_equal(tex.alpha, _blobs())
+
+
 # -- small stages --------------------------------------------------------------------------------
 # a quad, a pentagon and a triangle side by side in the z = 0 plane; st per face corner, indexed
 POLY_POINTS = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0],
@@ -560,6 +611,16 @@ def test_a_glTF_output_of_a_usd_input_is_refused_naming_the_parameter(tmp_path, 
     assert main(["omm", str(tmp_path / "q.usda"), "-o", str(tmp_path / "out.glb"), "--quiet"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "-o" in err[0], err
+
+
+@needs_usd
+def test_st_indices_out_of_range_are_an_input_error_naming_the_mesh(tmp_path):
+    stage = _stage(tmp_path / "idx.usda")
+    m = _mesh(stage, "/Q", POLY_POINTS[:4], [4], [0, 1, 2, 3], [[0, 0], [1, 0]], "faceVarying", [0, 1, 5, 1])
+    _bind(m, _material(stage, "/Looks/Leaf", texture=f"./{_png(tmp_path / 'leaf.png', _blobs())}", threshold=0.5))
+    stage.GetRootLayer().Save()
+    with pytest.raises(InputError, match="mesh /Q: primvar 'st': its indices name value 5 of 2"):
+        load_scene(tmp_path / "idx.usda")
 
 
 HEADER = b"#usda 1.0\n(\n    metersPerUnit = 1\n)\n\n"

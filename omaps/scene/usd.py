@@ -202,7 +202,7 @@ class _Reader:
         seen, todo = {root.identifier}, [root]
         while todo:
             layer = todo.pop()
-            for dep in sorted(layer.GetCompositionAssetDependencies()):
+            for dep in sorted(d for d in layer.GetCompositionAssetDependencies() if d):  # ('': an internal one)
                 what = f"layer {dep!r} (named by {os.path.basename(layer.realPath or layer.identifier)})"
                 scheme = self._scheme(dep)
                 if scheme:
@@ -243,9 +243,9 @@ class _Reader:
             return None, f"image file {authored!r} is missing or unreadable"
 
     def _packaged(self, resolved: str, what: str) -> bytes:
-        outer, inner = self.Ar.SplitPackageRelativePathOuter(resolved)
-        data = self._packaged(outer, what) if outer.endswith("]") else open(os.path.realpath(outer), "rb").read()
-        with zipfile.ZipFile(io.BytesIO(data)) as z:
+        outer, inner = self.Ar.SplitPackageRelativePathInner(resolved)  # (a package inside a package: outer's)
+        source = io.BytesIO(self._packaged(outer, what)) if outer.endswith("]") else os.path.realpath(outer)
+        with zipfile.ZipFile(source) as z:
             info = z.getinfo(inner)
             if info.file_size > self.max_bytes:
                 raise InputError(f"{what}: {inner} holds {info.file_size} bytes, over the size cap of "
@@ -680,7 +680,14 @@ class _Reader:
             uv_point = np.tile(np.asarray(look["fallback_st"], np.float64), (len(points), 1))
         elif name is not None:
             pv = self.UsdGeom.PrimvarsAPI(prim).GetPrimvar(name)
-            values = pv.ComputeFlattened(self.time) if pv and pv.HasValue() else None
+            values = pv.Get(self.time) if pv and pv.HasValue() else None
+            if values is not None and pv.IsIndexed():  # indices checked here (USD's flattening only warns)
+                idx = np.asarray(pv.GetIndices(self.time), np.int64)
+                if idx.size and (idx.min() < 0 or idx.max() >= len(values)):
+                    bad = int(idx.max() if idx.max() >= len(values) else idx.min())
+                    raise InputError(f"{label}: primvar {name!r}: its indices name value {bad} of {len(values)}",
+                                     self.path)
+                values = np.asarray(values, np.float64).reshape(len(values), -1)[idx] if len(values) else None
             if values is None:
                 if material.alpha_mode != "OPAQUE":
                     self.warn(f"{label}: its material's texture reads primvar {name!r}, which the mesh lacks: its "
