@@ -1,6 +1,8 @@
 """The Pareto front of a cost-benefit chart, one place for ``omaps trace --plot-frontier`` and
 ``omaps eval --plot``: which representations no other beats on both axes, and the chart panel
-that marks them (a line through the non-dominated points, dominated points drawn lighter).
+that marks them (a line through the non-dominated points, dominated points drawn lighter); and
+how far a point is from the fronts of alpha tests against bytes and against lines read
+(``gaps``, for ``omaps trace --memory``).
 
 Example::
 
@@ -12,7 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["front_mask", "front_panel", "label_panel"]
+__all__ = ["front_mask", "front_panel", "label_panel", "gaps"]
 
 
 def front_mask(cost, value, larger_is_better: bool = False) -> np.ndarray:
@@ -34,6 +36,34 @@ def front_mask(cost, value, larger_is_better: bool = False) -> np.ndarray:
     no_worse = (c[None, :] <= c[:, None]) & (v[None, :] <= v[:, None])  # [i, j]: j no worse than i
     strictly = (c[None, :] < c[:, None]) | (v[None, :] < v[:, None])
     return ~(no_worse & strictly).any(axis=1)
+
+
+def gaps(tests, cost) -> list[float | None]:
+    """Each point's gap to the front of ``cost`` against alpha ``tests`` (both per ray): its cost
+    over the least cost of any point with no more tests (itself included), so 1 means no point
+    as good costs less. None where that least cost is 0 and its own is not (an unbounded gap) or
+    where its cost is unknown (None); points of unknown cost are no one's reference.
+
+    A point's *both-fronts gap* is the larger of its gaps in map bytes and in map lines read.
+
+    Examples
+    --------
+    >>> gaps([0.5, 0.4, 0.3], [100, 300, 150])   # (0.5, 100) is on the front; 300 is 2x 150
+    [1.0, 2.0, 1.0]
+    >>> gaps([0.5, 0.4], [None, 80])
+    [None, 1.0]
+    """
+    t = np.asarray(tests, float)
+    known = np.array([c is not None for c in cost])
+    c = np.array([np.nan if v is None else float(v) for v in cost])
+    out: list[float | None] = []
+    for i in range(len(t)):
+        if not known[i]:
+            out.append(None)
+            continue
+        best = c[known & (t <= t[i])].min()
+        out.append(1.0 if c[i] == best else (None if best == 0 else float(c[i] / best)))
+    return out
 
 
 def front_panel(ax, xs, ys, larger_is_better: bool = False, colours=None, marker_pt: float = 7.0,

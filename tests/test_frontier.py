@@ -10,7 +10,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from PIL import Image
 
-from omaps.frontier import front_mask
+from omaps.frontier import front_mask, gaps
 
 DOCS = Path(__file__).resolve().parents[1] / "docs"
 
@@ -39,6 +39,23 @@ def test_front_mask_is_the_non_dominated_points(pts, larger):
     f = sorted({(c, v) for c, v, m in zip(cost, value, mask) if m})
     for (c0, v0), (c1, v1) in zip(f, f[1:]):
         assert c1 > c0 and ((v1 > v0) if larger else (v1 < v0))
+
+
+@settings(max_examples=200, deadline=None)
+@given(st.lists(st.tuples(st.integers(0, 5), st.one_of(st.none(), st.integers(0, 6))), min_size=1, max_size=10))
+def test_gaps_are_each_cost_over_the_least_cost_with_no_more_tests(pts):
+    tests, cost = [p[0] for p in pts], [p[1] for p in pts]
+    got = gaps(tests, cost)
+    for i, (t, c) in enumerate(pts):
+        refs = [d for u, d in pts if u <= t and d is not None]
+        if c is None or (min(refs) == 0 and c != 0):
+            assert got[i] is None
+        else:
+            assert got[i] == (1.0 if c == min(refs) else c / min(refs)) and got[i] >= 1
+    # a point on the front of cost against tests has gap 1
+    known = [(t, c) for t, c in pts if c is not None]
+    mask = front_mask([c for _, c in known], [t for t, _ in known]) if known else []
+    assert all(g == 1.0 for g, m in zip([g for g, (_, c) in zip(got, pts) if c is not None], mask) if m)
 
 
 def _report(memory: bool) -> dict:

@@ -290,6 +290,17 @@ def test_cli_memory_and_frontier(tmp_path, capsys):
         assert {"map_bytes", "map_reads_per_lookup", "map_lines_per_ray", "cache_misses_per_ray"} <= set(
             v["memory"]["shared"])
     assert r["schemes"][f"tri{LEVEL}"]["memory"]["shared"]["layout"].startswith("standard OMMs")
+    # each layout's gaps to the fronts, recomputed by brute force over the report's points
+    pts = [(v["alpha_tests_per_primary_ray"], v["memory"][lay]) for n, v in r["schemes"].items() if n != "none"
+           for lay in ("own", "shared")]
+    for t, m in pts:
+        least_bytes = min(o["map_bytes"] for u, o in pts if u <= t)
+        least_lines = min(o["map_lines_per_ray"] for u, o in pts if u <= t)
+        assert m["bytes_gap"] == pytest.approx(m["map_bytes"] / least_bytes) and m["bytes_gap"] >= 1
+        assert m["lines_gap"] == pytest.approx(m["map_lines_per_ray"] / least_lines) and m["lines_gap"] >= 1
+        assert m["both_fronts_gap"] == max(m["bytes_gap"], m["lines_gap"])
+    assert min(m["bytes_gap"] for _, m in pts) == 1 and min(m["lines_gap"] for _, m in pts) == 1
+    assert "bytes_gap" not in r["schemes"]["none"]["memory"]["own"]
     from PIL import Image
 
     assert Image.open(png).size[0] > 1000  # two panels

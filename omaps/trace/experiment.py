@@ -305,11 +305,29 @@ def trace_scene(scene: str | os.PathLike[str] | Scene, schemes: str | Sequence[s
             if mem is not None:
                 report["schemes"][n]["map_reads_per_lookup"] = mem["own"]["map_reads_per_lookup"]
                 report["schemes"][n]["map_lines_per_ray"] = mem["own"]["map_lines_per_ray"]
+        front_gaps(report)
         report["timings"]["memory_s"] = time.perf_counter() - t0
         report["timings"]["total_s"] = time.perf_counter() - t_start
     report["passed"] = not any(bad.values())
     report["changed_visible_result"] = {n: v for n, v in bad.items() if v}
     return TraceResult(report, names, runs, prep, camera, cam, light, bool(shadows))
+
+
+def front_gaps(report: dict) -> None:
+    """Add to each layout of each scheme's ``memory`` its ``bytes_gap``, ``lines_gap`` and
+    ``both_fronts_gap`` (``omaps.frontier.gaps``) against every (scheme, layout) point of the
+    report but ``none``: how many times more map bytes, and lines of map data per primary ray,
+    it needs than the least of any point with no more alpha tests per primary ray."""
+    from ..frontier import gaps
+
+    points = [(r["memory"][lay], r["alpha_tests_per_primary_ray"]) for n, r in report["schemes"].items()
+              if n != "none" and r.get("memory") for lay in ("own", "shared")]
+    tests = [t for _, t in points]
+    by_bytes = gaps(tests, [m["map_bytes"] for m, _ in points])
+    by_lines = gaps(tests, [m["map_lines_per_ray"] for m, _ in points])
+    for (m, _), b, li in zip(points, by_bytes, by_lines):
+        m["bytes_gap"], m["lines_gap"] = b, li
+        m["both_fronts_gap"] = None if b is None or li is None else max(b, li)
 
 
 def _light(light) -> np.ndarray:
