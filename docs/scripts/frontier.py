@@ -3,6 +3,7 @@ test scenes with every representation and ``memory=True``.
 
     python docs/scripts/frontier.py                 # trace palm and forest (tens of minutes), then render
     python docs/scripts/frontier.py --render-only   # re-render the page from docs/scripts/frontier.json
+    python docs/scripts/frontier.py --scene S.glb --level 8 --json out.json   # any scene: its gap table
 
 Each scene is traced once by ``omaps.trace_scene`` (the default camera, SIZE x SIZE pixels) with
 every scheme of ``SCHEMES``, ``memory=True`` and a ``CACHE_KIB`` tile cache; the reports are kept
@@ -36,18 +37,31 @@ CLAIMS = {"succinct": "up to 110x smaller than standard OMMs (Waldemarson & Dogg
                  "in under 6 MiB (Chernaik, Modisett & Billeter 2026)"}
 
 
+TESTS_SLACK = 1.05  # the gap table: points with at most this many times triL's alpha tests
+
+
+def scheme_set(level: int) -> str:
+    """The page's full scheme set up to ``level``: every representation at the even levels 4 to
+    ``level`` (and ``level`` itself), the deck's blocks and the raw squares."""
+    levels = sorted({lv for lv in range(4, level + 1, 2)} | {level})
+    return ",".join(["none"] + [f"{k}{lv}" for k in ("tri", "succinct", "csm") for lv in levels]
+                    + ["vq2", "vq4", "vq4x64", "sq16", "sq32", "sq64"])
+
+
 def shared_root() -> Path:
     return Path(os.environ.get("OMAPS_SHARED", ROOT.parent / "shared"))
 
 
-def run() -> dict:
+def run(scenes: dict | None = None) -> dict:
+    """Trace each scene ({name: (path, schemes)}; default: the page's) with ``memory=True``."""
     import omaps
 
-    scenes = shared_root() / "data" / "scenes"
+    folder = shared_root() / "data" / "scenes"
+    scenes = scenes or {name: (folder / f"{name}.glb", schemes) for name, schemes in SCHEMES.items()}
     out = {"size": SIZE, "cache_kib": CACHE_KIB, "scenes": {}}
-    for name, schemes in SCHEMES.items():
+    for name, (path, schemes) in scenes.items():
         t0 = time.perf_counter()
-        res = omaps.trace_scene(scenes / f"{name}.glb", schemes, size=SIZE, memory=True, cache_kib=CACHE_KIB,
+        res = omaps.trace_scene(path, schemes, size=SIZE, memory=True, cache_kib=CACHE_KIB,
                                 progress=sys.stderr.isatty())
         print(res.table(), flush=True)
         out["scenes"][name] = {"names": res.names, "report": res.report, "seconds": time.perf_counter() - t0}
@@ -86,6 +100,28 @@ def _points(report: dict) -> list[tuple]:
             label = n if lay == "own" else f"{n} shared"
             pts.append((fam, label, m["map_bytes"], t, m["map_lines_per_ray"], m["map_reads_per_lookup"]))
     return pts
+
+
+def gap_rows(report: dict) -> list[tuple]:
+    """Per level L with a traced ``triL``: (L, triL's tests per ray, the point of the page's
+    points with at most ``TESTS_SLACK`` times those tests whose both-fronts gap is least, its
+    bytes gap, lines gap and both-fronts gap); the gaps against every point of the report
+    (``omaps.frontier.gaps``)."""
+    from omaps.frontier import gaps
+
+    pts = _points(report)
+    tests = [p[3] for p in pts]
+    by_bytes, by_lines = gaps(tests, [p[2] for p in pts]), gaps(tests, [p[4] for p in pts])
+    both = [None if b is None or li is None else max(b, li) for b, li in zip(by_bytes, by_lines)]
+    rows = []
+    levels = sorted(int(n[3:]) for n in report["schemes"] if n.startswith("tri") and n[3:].isdigit())
+    for lv in levels:
+        t = report["schemes"][f"tri{lv}"]["alpha_tests_per_primary_ray"]
+        fit = [i for i, p in enumerate(pts) if p[3] <= TESTS_SLACK * t and both[i] is not None]
+        if fit:
+            i = min(fit, key=lambda k: (both[k], pts[k][2]))
+            rows.append((lv, t, pts[i], by_bytes[i], by_lines[i], both[i]))
+    return rows
 
 
 def _best(pts, fam, budget):
@@ -165,6 +201,17 @@ def render(data: dict) -> str:
         for label, b in budgets:
             lines.append("| " + " | ".join([label] + [_cell(_best(pts, f, b)) for f in ("omaps", "tri", "succinct",
                                                                                          "csm")]) + " |")
+        lines += ["", f"### {scene}: the distance to both fronts", "",
+                  "A point's *bytes gap* is its map bytes over the fewest of any point with no more alpha tests per "
+                  "primary ray; its *lines gap* the same for lines of map data per primary ray; its *both-fronts "
+                  "gap* the larger of the two (1: on both fronts; `omaps trace --memory --json` gives all three "
+                  f"per scheme and layout). Per level L, the point with the least both-fronts gap among those with at "
+                  f"most {TESTS_SLACK:g}x triL's alpha tests.", "",
+                  "| level | triL tests/ray | point | tests/ray | KiB | lines/ray | bytes gap | lines gap | "
+                  "both-fronts gap |", "|---|---|---|---|---|---|---|---|---|"]
+        for lv, t, p, b, li, both in gap_rows(rep):
+            lines.append(f"| {lv} | {t:.3f} | {p[1]} | {p[3]:.3f} | {_kib(p[2])} | {p[4]:.3f} | {b:.2f} | {li:.2f} | "
+                         f"**{both:.2f}** |")
         lines += ["", f"### {scene}: how much smaller the hierarchical micromaps are", "",
                   "Bytes of raw `triL` (a 2-bit row per triangle) and of standard OMMs (special indices, reuse) over "
                   "those of `succinctL` (own: a tree per triangle; shared: the distinct trees) and `csmL`, at the "
@@ -227,7 +274,20 @@ def draw(data: dict) -> None:
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--render-only", action="store_true", help="re-render from docs/scripts/frontier.json")
+    ap.add_argument("--scene", help="trace this glTF scene instead of the page's (the page is left alone)")
+    ap.add_argument("--level", type=int, default=8, help="with --scene: the finest level of the scheme set (8)")
+    ap.add_argument("--json", help="with --scene: write the run (the page's JSON format) here")
     a = ap.parse_args()
+    if a.scene:
+        data = run({Path(a.scene).stem: (a.scene, scheme_set(a.level))})
+        if a.json:
+            Path(a.json).write_text(json.dumps(data, indent=1))
+        for name, d in data["scenes"].items():
+            for lv, t, p, b, li, both in gap_rows(d["report"]):
+                print(f"{name} level {lv}: triL {t:.3f} tests/ray; least both-fronts gap within {TESTS_SLACK:g}x: "
+                      f"{p[1]} ({p[3]:.3f} tests/ray, {_kib(p[2])} KiB, {p[4]:.3f} lines/ray): bytes gap {b:.2f}, "
+                      f"lines gap {li:.2f}, both {both:.2f}")
+        return 0
     if a.render_only:
         data = json.loads(DATA_JSON.read_text())
     else:
