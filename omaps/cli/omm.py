@@ -13,8 +13,8 @@ from .common import (CODECS, add_asset_options, add_codec_options, add_material_
 
 def add_parser(sub) -> None:
     o = sub.add_parser(
-        "omm", help="standard opacity micromaps (Vulkan / DirectX 12) from a glTF scene or a texture + UVs",
-        description="Bake VK_EXT_opacity_micromap / DXR 1.2 opacity micromaps: from a glTF scene (every "
+        "omm", help="standard opacity micromaps (Vulkan / DirectX 12) from a scene (glTF, OpenUSD) or a texture + UVs",
+        description="Bake VK_EXT_opacity_micromap / DXR 1.2 opacity micromaps: from a glTF or OpenUSD scene (every "
                     "alpha-tested primitive) or from a texture and a .npy array of UV triangles (T, 3, 2). "
                     "Writes omm_data.bin, omm_triangles.bin, omm_index.bin, omm_usage.json and omm.json "
                     "into DIR (all or nothing). With --verify DIR: check a written folder.")

@@ -46,8 +46,8 @@ cache shared by each 8x8 tile of pixels).
 
 
 def add_parser(sub) -> None:
-    t = sub.add_parser("trace", help="ray trace a glTF scene: alpha tests per ray with each scheme's maps",
-                       description="Trace primary (and shadow) rays through a glTF 2.0 scene with Embree; "
+    t = sub.add_parser("trace", help="ray trace a scene (glTF, OpenUSD): alpha tests per ray with each scheme's maps",
+                       description="Trace primary (and shadow) rays through a glTF 2.0 scene or an OpenUSD stage with Embree; "
                                    "each scheme's maps are read in the any-hit filter, and every scheme's "
                                    "visible result is checked against 'none' (every candidate alpha-tested).",
                        epilog=TABLE_HELP.format(rounds=TIMING_ROUNDS),
