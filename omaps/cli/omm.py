@@ -13,12 +13,14 @@ from .common import (CODECS, add_asset_options, add_codec_options, add_material_
 
 def add_parser(sub) -> None:
     o = sub.add_parser(
-        "omm", help="standard opacity micromaps (Vulkan / DirectX 12) from a scene (glTF, OpenUSD) or a texture + UVs",
+        "omm", help="standard opacity micromaps (Vulkan / DirectX 12) from a scene (glTF, OpenUSD) or a texture "
+                    "+ UVs",
         description="Bake VK_EXT_opacity_micromap / DXR 1.2 opacity micromaps: from a glTF or OpenUSD scene (every "
                     "alpha-tested primitive) or from a texture and a .npy array of UV triangles (T, 3, 2). "
                     "Writes omm_data.bin, omm_triangles.bin, omm_index.bin, omm_usage.json and omm.json "
                     "into DIR (all or nothing). With --verify DIR: check a written folder.")
-    o.add_argument("inputs", nargs="*", metavar="INPUT", help="SCENE (.gltf, .glb, .usd, .usda, .usdc, .usdz), or TEXTURE UVS.npy")
+    o.add_argument("inputs", nargs="*", metavar="INPUT",
+                   help="SCENE (.gltf, .glb, .usd, .usda, .usdc, .usdz), or TEXTURE UVS.npy")
     o.add_argument("-o", "--output", metavar="DIR|OUT.glb|OUT.gltf",
                    help="output folder (replaced whole if it is empty or holds an earlier omm.json; any other "
                         "folder is left alone: error), or, for a glTF input, a .glb / .gltf file: the scene with "
@@ -84,7 +86,8 @@ def cmd_omm(a) -> int:
     if a.expand:
         return _cmd_expand(a)
     if len(a.inputs) > 2:
-        raise InputError(f"give a SCENE (.gltf, .glb, .usd, .usda, .usdc, .usdz), or TEXTURE UVS.npy, not {len(a.inputs)} inputs")
+        raise InputError(f"give a SCENE (.gltf, .glb, .usd, .usda, .usdc, .usdz), or TEXTURE UVS.npy, not "
+                         f"{len(a.inputs)} inputs")
     if a.inputs and not a.output:
         from ..jobs import omm_input_spec
 

@@ -46,8 +46,10 @@ cache shared by each 8x8 tile of pixels).
 
 
 def add_parser(sub) -> None:
-    t = sub.add_parser("trace", help="ray trace a scene (glTF, OpenUSD): alpha tests per ray with each scheme's maps",
-                       description="Trace primary (and shadow) rays through a glTF 2.0 scene or an OpenUSD stage with Embree; "
+    t = sub.add_parser("trace", help="ray trace a scene (glTF, OpenUSD): alpha tests per ray with each scheme's "
+                       "maps",
+                       description="Trace primary (and shadow) rays through a glTF 2.0 scene or an OpenUSD stage "
+                                   "with Embree; "
                                    "each scheme's maps are read in the any-hit filter, and every scheme's "
                                    "visible result is checked against 'none' (every candidate alpha-tested).",
                        epilog=TABLE_HELP.format(rounds=TIMING_ROUNDS),
@@ -77,7 +79,8 @@ def add_parser(sub) -> None:
                         "per ray), every traced scheme, the Pareto front marked")
     t.add_argument("--camera", metavar="X,Y,Z:TX,TY,TZ:FOV[:UX,UY,UZ] | gltf[:N]",
                    help="eye, target, vertical field of view in degrees and optionally the up direction "
-                        "(default +Y); or 'gltf:N', the file's camera N (default 0) placed by its node, with "
+                        "(default +Y); or 'gltf:N', the file's camera N (default 0) placed by its node (a USD stage: its "
+                        "Nth camera prim), with "
                         "this image's aspect ratio. Default: a view that frames the alpha-tested geometry "
                         "(a low grazing view across a wide scene), checked to show it")
     t.add_argument("--size", default="512", metavar="W[xH]", help="image size (default: %(default)s)")

@@ -226,7 +226,8 @@ class _Reader:
         ``InputError`` when the policy refuses it."""
         scheme = self._scheme(authored)
         if scheme:
-            problem = f"{what}: asset path {authored!r} is a {scheme}: URI; omaps never fetches URIs (no network access)"
+            problem = (f"{what}: asset path {authored!r} is a {scheme}: URI; omaps never fetches URIs (no network "
+                       "access)")
             if not self.policy.allow_outside:
                 raise InputError(problem + " ({allow_outside}: go on without it)", self.path, param="allow_outside")
             return None, problem + "; it is not read"
@@ -629,8 +630,8 @@ class _Reader:
             raise InputError(f"{label}: faceVertexCounts add up to {int(counts.sum())}, faceVertexIndices holds "
                              f"{len(fvi)}", self.path)
         if fvi.size and (fvi.min() < 0 or fvi.max() >= len(points)):
-            raise InputError(f"{label}: faceVertexIndices name point {int(fvi.max() if fvi.max() >= len(points) else fvi.min())}"
-                             f" of {len(points)}", self.path)
+            bad = int(fvi.max() if fvi.max() >= len(points) else fvi.min())
+            raise InputError(f"{label}: faceVertexIndices name point {bad} of {len(points)}", self.path)
         if not np.all(np.isfinite(points)):
             raise InputError(f"{label}: its points hold a NaN or an infinity", self.path)
         left = m.GetOrientationAttr().Get(t) == UsdGeom.Tokens.leftHanded
@@ -643,8 +644,8 @@ class _Reader:
                 owner[owner < 0] = gi
                 continue
             if faces.size and (faces.min() < 0 or faces.max() >= nf):
-                raise InputError(f"{label}: a GeomSubset names face {int(faces.max() if faces.max() >= nf else faces.min())}"
-                                 f" of {nf}", self.path)
+                bad = int(faces.max() if faces.max() >= nf else faces.min())
+                raise InputError(f"{label}: a GeomSubset names face {bad} of {nf}", self.path)
             free = faces[owner[faces] < 0]
             owner[free] = gi
         if holes is not None and len(holes):
