@@ -614,6 +614,24 @@ def test_a_glTF_output_of_a_usd_input_is_refused_naming_the_parameter(tmp_path, 
 
 
 @needs_usd
+def test_a_texture_scale_is_the_alpha_factor_and_a_bias_is_refused(tmp_path):
+    tex = f"./{_png(tmp_path / 'leaf.png', _blobs())}"
+    for name, kw in (("scaled", {"scale": (1, 1, 1, 0.5)}), ("biased", {"bias": (0, 0, 0, 0.25)})):
+        stage = _stage(tmp_path / f"{name}.usda")
+        m = _mesh(stage, "/Q", POLY_POINTS[:4], [4], [0, 1, 2, 3], [[0, 0], [1, 0], [1, 1], [0, 1]])
+        _bind(m, _material(stage, "/Looks/Leaf", texture=tex, threshold=0.5, **kw))
+        stage.GetRootLayer().Save()
+    scene = load_scene(tmp_path / "scaled.usda")
+    gl = load_scene(write_quad_gltf(tmp_path / "scaled.gltf", _blobs(), material={
+        "pbrMetallicRoughness": {"baseColorTexture": {"index": 0}, "baseColorFactor": [1, 1, 1, 0.5]}}))
+    assert scene.materials[-1].base_colour[3] == gl.materials[0].base_colour[3] == 0.5
+    assert scene.alpha_test(len(scene.materials) - 1).threshold == gl.alpha_test(0).threshold
+    with pytest.raises(InputError) as e:
+        load_scene(tmp_path / "biased.usda")
+    assert str(tmp_path / "biased.usda") in str(e.value) and "inputs:bias" in str(e.value)
+
+
+@needs_usd
 def test_st_indices_out_of_range_are_an_input_error_naming_the_mesh(tmp_path):
     stage = _stage(tmp_path / "idx.usda")
     m = _mesh(stage, "/Q", POLY_POINTS[:4], [4], [0, 1, 2, 3], [[0, 0], [1, 0]], "faceVarying", [0, 1, 5, 1])
