@@ -76,9 +76,10 @@ def __dir__():
 
 
 def load_scene(path, root=None, allow_outside=False, max_bytes=None):
-    """Load a glTF 2.0 scene (``omaps.scene.load_scene``): the files it names only under ``root``
-    (default: its own folder) unless ``allow_outside``; never a URI with a scheme; each file at
-    most ``max_bytes`` (default 2 GiB, or the environment variable ``OMAPS_MAX_ASSET_BYTES``)."""
+    """Load a glTF 2.0 scene or an OpenUSD stage (``omaps.scene.load_scene``; USD needs the extra
+    ``omaps[usd]``): the files it names only under ``root`` (default: its own folder) unless
+    ``allow_outside``; never a URI with a scheme; each file at most ``max_bytes`` (default 2 GiB,
+    or the environment variable ``OMAPS_MAX_ASSET_BYTES``)."""
     from .scene import load_scene as load
 
     return load(path, root=root, allow_outside=allow_outside, max_bytes=max_bytes)
