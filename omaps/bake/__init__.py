@@ -11,12 +11,12 @@ from ..lazy import exports
 
 # each public name's module, imported on first use: ``omaps omm`` from a texture loads the micromap
 # baker alone (start-up is part of every run's time)
-_HOME = {**dict.fromkeys(("GROW_TEXEL", "bake_micromap_rows", "bake_micromaps", "check_level", "dynamic_levels",
-                          "micro_starts"), "micromap"),
+_HOME = {**dict.fromkeys(("GROW_TEXEL", "bake_micromap_rows", "bake_micromap_runs", "bake_micromaps", "check_level",
+                          "dynamic_levels", "micro_starts"), "micromap"),
          **dict.fromkeys(("bake_pair_triangles", "bake_square", "known_fraction", "texel_limit"), "pair_maps"),
          **dict.fromkeys(("bake_pair_flags", "bake_pair_squares", "check_square_size", "or_downsample"), "square")}
 
-__all__ = ["GROW_TEXEL", "bake_micromaps", "bake_micromap_rows", "check_level", "dynamic_levels", "micro_starts",
+__all__ = ["GROW_TEXEL", "bake_micromaps", "bake_micromap_runs", "bake_micromap_rows", "check_level", "dynamic_levels", "micro_starts",
            "bake_pair_triangles", "bake_square", "known_fraction", "texel_limit", "bake_pair_flags",
            "bake_pair_squares", "check_square_size", "or_downsample"]
 

@@ -62,7 +62,7 @@ from ..raster import rows_flag
 from ..sampling import FootprintGrid
 from ..checks import typed
 
-__all__ = ["bake_micromaps", "bake_micromap_rows", "dynamic_levels", "micro_starts", "check_level",
+__all__ = ["bake_micromaps", "bake_micromap_runs", "bake_micromap_rows", "dynamic_levels", "micro_starts", "check_level",
            "check_uv_triangles", "flag_table", "locality_order", "GROW_TEXEL", "MAX_LEVEL"]
 
 # Growth of every region of real geometry, in texels: a hit's region (from barycentrics) and its
@@ -167,11 +167,26 @@ NODE_EXACT_CELLS = 16  # a node box this small with mixed cells is rasterised be
 STACK = 3 * MAX_LEVEL + 4  # nodes pending: 3 more per level down, plus the root
 
 
+@njit(cache=True, inline="always")
+def _run(runs, n_runs, lv, k, state):
+    """Append the run (node level, node index, state) when ``runs`` has room; count it always."""
+    r = n_runs[0]
+    if r < runs.shape[0]:
+        runs[r, 0] = lv
+        runs[r, 1] = k
+        runs[r, 2] = state
+    n_runs[0] = r + 1
+
+
 @njit(cache=True, _nrt=False)
 def _bake_one(sat, flags, mixed, values, bounds, period_x, period_y, tri, level, w, h, offset, grow, out, base, st_l,
-              st_k, st_v, st_f, vx, vf, vi, vj, vc_f, vc_s, stamp, ptri, buf_a, buf_b):
+              st_k, st_v, st_f, vx, vf, vi, vj, vc_f, vc_s, stamp, ptri, buf_a, buf_b, runs, n_runs):
     """States of one triangle's 4**level micro-triangles into ``out[base:]``; returns how many
-    micro-triangles had no area (the reference raises on those). ``st_*``: the node stack
+    micro-triangles had no area (the reference raises on those). With ``n_runs`` of length 1,
+    ``out`` is not written: each span of micro-triangles decided at once is appended as a *run*
+    instead, ``runs[n_runs[0]] = (node level, node index, state)`` (the node's 4**(level - node
+    level) micro-triangles from node index * that), in micro-triangle order, ``n_runs[0]``
+    counting every run even past ``runs``' length (a caller sizes ``runs`` from a count). ``st_*``: the node stack
     (level, index, barycentric grid coordinates of p0, p1, p2, and the own flags of p0, p1, p2
     where known, else -1), STACK entries; ``vx`` (6, 2),
     ``vf``, ``vi``, ``vj`` (6,) the vertices of a node's children, their flags and grid
@@ -243,6 +258,9 @@ def _bake_one(sat, flags, mixed, values, bounds, period_x, period_y, tri, level,
                 if f == 1 or f == 2:
                     state = f - 1  # known exactly: so is every micro-triangle inside it
         if state >= 0:
+            if n_runs.shape[0]:
+                _run(runs, n_runs, lv, k, state)
+                continue
             # unsigned indices: numba then drops its negative-index check and the compiler
             # vectorises the fill (about 5x faster per byte; most micro-triangles are filled here)
             span = np.uint64(1) << np.uint64(2 * (level - lv))
@@ -281,7 +299,10 @@ def _bake_one(sat, flags, mixed, values, bounds, period_x, period_y, tri, level,
                                    vx[b, 0], vx[b, 1], vx[d, 0], vx[d, 1], grow, pts, ptri, buf_a, buf_b)
                 if f == 0:
                     empty += 1
-                out[base + 4 * k + c] = _leaf_state(f)
+                if n_runs.shape[0]:
+                    _run(runs, n_runs, level, 4 * k + c, _leaf_state(f))
+                else:
+                    out[base + 4 * k + c] = _leaf_state(f)
             continue
         # children in reverse so child 0 is handled first
         for c in range(3, -1, -1):
@@ -354,7 +375,12 @@ def locality_order(tris_uv: np.ndarray, width: int, height: int) -> np.ndarray:
 
 
 @njit(cache=True, parallel=True)
-def _bake_all(sat, grid, tris, order, levels, starts, w, h, offset, grow, out, n_workers):
+def _bake_all(sat, grid, tris, order, levels, starts, w, h, offset, grow, out, n_workers, runs, run_starts, counts):
+    """Bake every triangle: its states into ``out[starts[t]:]`` (``counts`` empty); or, with
+    ``counts`` (T,), its runs (``_bake_one``), each worker appending to its own part of
+    ``runs`` (part w: rows w * C to (w + 1) * C, C = len(runs) // n_workers): triangle t's at
+    ``runs[run_starts[t]:run_starts[t] + counts[t]]``, or ``counts[t]`` = -(its number of runs)
+    when they did not fit in what was left of its worker's part (nothing kept: bake it again)."""
     flags, mixed, values, bounds, period_x, period_y = grid
     empty = np.zeros(tris.shape[0], dtype=np.int64)
     n_chunks = (tris.shape[0] + CHUNK - 1) // CHUNK
@@ -374,6 +400,10 @@ def _bake_all(sat, grid, tris, order, levels, starts, w, h, offset, grow, out, n
         ptri = np.empty((3, 2))
         buf_a = np.empty((POLY_MAX, 2))
         buf_b = np.empty((POLY_MAX, 2))
+        n_run = np.zeros(1 if counts.shape[0] else 0, dtype=np.int64)
+        part = runs.shape[0] // n_workers
+        used = worker * part  # the next free row of this worker's part
+        end = used + part
         while True:
             c = fetch_add(next_chunk, 1)
             if c >= n_chunks:
@@ -383,9 +413,18 @@ def _bake_all(sat, grid, tris, order, levels, starts, w, h, offset, grow, out, n
                 for v in range(3):
                     tri[v, 0] = tris[t, v, 0]
                     tri[v, 1] = tris[t, v, 1]
+                if n_run.shape[0]:
+                    n_run[0] = 0
                 empty[t] = _bake_one(sat, flags, mixed, values, bounds, period_x, period_y, tri, levels[t], w, h,
                                      offset, grow, out, starts[t], st_l, st_k, st_v, st_f, vx, vf, vi, vj, vc_f, vc_s, i,
-                                     ptri, buf_a, buf_b)
+                                     ptri, buf_a, buf_b, runs[used:end], n_run)
+                if n_run.shape[0]:
+                    if n_run[0] <= end - used:
+                        run_starts[t] = used
+                        counts[t] = n_run[0]
+                        used += n_run[0]
+                    else:
+                        counts[t] = -n_run[0]
     return empty
 
 
@@ -435,11 +474,79 @@ def bake_micromaps(grid: FootprintGrid, tris_uv: ArrayLike, levels: int | ArrayL
         sat = flag_table(grid) if sat is None else sat
         empty = _bake_all(sat, grid.kernel_args(), t, locality_order(t, grid.width, grid.height), lv, starts,
                           float(grid.width), float(grid.height), float(grid.offset), float(grow), out,
-                          numba.get_num_threads())
+                          numba.get_num_threads(), _NO_RUNS, _NO_STARTS, _NO_STARTS)
         if empty.any():
             bad = int(np.flatnonzero(empty)[0])
             raise InputError(f"UV triangle {bad} has micro-triangles with no area")
     return out, starts
+
+
+_NO_RUNS = np.empty((0, 3), dtype=np.int32)
+_NO_STARTS = np.empty(0, dtype=np.int64)
+
+
+def bake_micromap_runs(grid: FootprintGrid, tris_uv: ArrayLike, level: int, grow: float = 0.0,
+                       sat: np.ndarray | None = None, capacity: int | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """``bake_micromaps`` at one level as *runs*, without the 4**level states of each triangle:
+    the spans of micro-triangles the baker decides at once (a node whose box is uniform, or
+    known exactly, and each leaf below a mixed node), so the work and the output follow the
+    mixed nodes, not 4**level. The same states, bit for bit: expanding the runs gives
+    ``bake_micromaps``'.
+
+    Returns (runs, starts): runs int32 (R, 3), triangle t's at ``runs[starts[t]:starts[t+1]]``,
+    each (node level l, node index k, state): micro-triangles k * 4**(level - l) to
+    (k + 1) * 4**(level - l) - 1 have that state; in micro-triangle order, tiling the triangle.
+    ``capacity``: the runs expected in all (default: 64 per triangle); the threads write into
+    parts of a buffer that large, and a triangle whose runs did not fit is baked again in a
+    larger one. Call it on chunks of triangles to bound the memory. Parameters and errors as
+    ``bake_micromaps``.
+
+    Example::
+
+        >>> import numpy as np
+        >>> from omaps.alpha_test import StateRule
+        >>> from omaps.texture import load_alpha
+        >>> grid = StateRule("cutoff").alpha_test(load_alpha(np.array([[0, 255]], np.uint8))).grid()
+        >>> runs, starts = bake_micromap_runs(grid, np.array([[[0, 0], [1, 0], [0, 1]]]), 1)
+        >>> runs.tolist(), starts.tolist()           # the states 0, 0, 1, 0 of bake_micromaps
+        ([[1, 0, 0], [1, 1, 0], [1, 2, 1], [1, 3, 0]], [0, 4])
+    """
+    from .. import checks
+    from ..alpha_test import as_grid
+
+    grid = as_grid(grid)
+    grow = checks.number(grow, "grow", 0)
+    level = check_level(level)
+    t = np.ascontiguousarray(check_uv_triangles(tris_uv))
+    n = len(t)
+    counts = np.zeros(n, dtype=np.int64)
+    if not n:
+        return _NO_RUNS.copy(), np.zeros(1, dtype=np.int64)
+    sat = flag_table(grid) if sat is None else sat
+    workers = numba.get_num_threads()
+    size = max(workers * 64, int(capacity) if capacity else 64 * n)
+    pieces: list = [None] * n
+    todo = np.arange(n)
+    while len(todo):
+        sub = np.ascontiguousarray(t[todo])
+        buf = np.empty((size, 3), dtype=np.int32)
+        at = np.zeros(len(todo), dtype=np.int64)
+        got = np.zeros(len(todo), dtype=np.int64)
+        empty = _bake_all(sat, grid.kernel_args(), sub, locality_order(sub, grid.width, grid.height),
+                          np.full(len(todo), level, dtype=np.int64), _NO_STARTS, float(grid.width), float(grid.height),
+                          float(grid.offset), float(grow), np.empty(0, np.uint8), workers, buf, at, got)
+        if empty.any():
+            bad = int(todo[np.flatnonzero(empty)[0]])
+            raise InputError(f"UV triangle {bad} has micro-triangles with no area")
+        fit = got >= 0
+        for j in np.flatnonzero(fit):
+            pieces[todo[j]] = buf[at[j]:at[j] + got[j]]
+        counts[todo[fit]] = got[fit]
+        if not fit.all():  # again, in parts large enough for the largest that did not fit
+            size = max(2 * size, workers * int(-got[~fit].min()) * 2)
+        todo = todo[~fit]
+    starts = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
+    return np.concatenate(pieces).astype(np.int32, copy=False), starts
 
 
 def bake_micromap_rows(grid: FootprintGrid, tris_uv: ArrayLike, level: int, grow: float = 0.0) -> np.ndarray:

@@ -43,7 +43,7 @@ from ..errors import InputError
 from .bits import bit_length, get_bits, kernel_bytes
 from ..checks import typed
 
-__all__ = ["ref_bits", "build", "pack", "encode", "decode", "lookup", "blob_bits", "check", "HEADER_BITS", "csm_build", "csm_encode",
+__all__ = ["ref_bits", "build", "Builder", "pack", "encode", "decode", "lookup", "blob_bits", "check", "HEADER_BITS", "csm_build", "csm_encode",
            "csm_decode", "csm_lookup", "csm_bits", "csm_pack", "csm_check"]
 
 HEADER_BITS = 32
@@ -73,12 +73,48 @@ def _hash(a, b, c, d):
 
 
 @njit(cache=True)
+def _intern(nodes, n, slots, a, b, c, d):
+    """The reference of the mixed node with children (a, b, c, d), added when new: (reference,
+    nodes, n, slots), the arrays grown (and the open-addressing table rehashed) as needed."""
+    mask = slots.shape[0] - 1
+    h = _hash(a, b, c, d) & mask
+    while True:
+        i = slots[h]
+        if i < 0:
+            if n == nodes.shape[0]:  # grow the node array and the table, rehash
+                bigger = np.empty((2 * nodes.shape[0], 4), np.int64)
+                bigger[:n] = nodes[:n]
+                nodes = bigger
+                slots = np.full(2 * nodes.shape[0], -1, np.int64)
+                mask = slots.shape[0] - 1
+                for j in range(n):
+                    g = _hash(nodes[j, 0], nodes[j, 1], nodes[j, 2], nodes[j, 3]) & mask
+                    while slots[g] >= 0:
+                        g = (g + 1) & mask
+                    slots[g] = j
+                h = _hash(a, b, c, d) & mask
+                continue
+            nodes[n, 0] = a
+            nodes[n, 1] = b
+            nodes[n, 2] = c
+            nodes[n, 3] = d
+            slots[h] = n
+            return 3 + n, nodes, n + 1, slots
+        if nodes[i, 0] == a and nodes[i, 1] == b and nodes[i, 2] == c and nodes[i, 3] == d:
+            return 3 + i, nodes, n, slots
+        h = (h + 1) & mask
+
+
+@njit(cache=True)
+def _empty_table():
+    cap = 1 << 10
+    return np.empty((cap, 4), np.int64), 0, np.full(2 * cap, -1, np.int64)
+
+
+@njit(cache=True)
 def _build(maps, level):
     """Hash-consing over every map, bottom-up: (node array (N, 4) int64, roots (P,) int64)."""
-    cap = 1 << 10
-    nodes = np.empty((cap, 4), np.int64)
-    n = 0
-    slots = np.full(2 * cap, -1, np.int64)  # open addressing: node index or -1
+    nodes, n, slots = _empty_table()
     refs = np.empty(maps.shape[1], np.int64)
     roots = np.empty(maps.shape[0], np.int64)
     for t in range(maps.shape[0]):
@@ -95,38 +131,229 @@ def _build(maps, level):
                 if a < 3 and a == b and a == c and a == d:
                     refs[p] = a
                     continue
-                mask = slots.shape[0] - 1
-                h = _hash(a, b, c, d) & mask
-                while True:
-                    i = slots[h]
-                    if i < 0:
-                        if n == nodes.shape[0]:  # grow the node array and the table, rehash
-                            bigger = np.empty((2 * nodes.shape[0], 4), np.int64)
-                            bigger[:n] = nodes[:n]
-                            nodes = bigger
-                            slots = np.full(2 * nodes.shape[0], -1, np.int64)
-                            mask = slots.shape[0] - 1
-                            for j in range(n):
-                                g = _hash(nodes[j, 0], nodes[j, 1], nodes[j, 2], nodes[j, 3]) & mask
-                                while slots[g] >= 0:
-                                    g = (g + 1) & mask
-                                slots[g] = j
-                            h = _hash(a, b, c, d) & mask
-                            continue
-                        nodes[n, 0] = a
-                        nodes[n, 1] = b
-                        nodes[n, 2] = c
-                        nodes[n, 3] = d
-                        slots[h] = n
-                        i = n
-                        n += 1
-                        break
-                    if nodes[i, 0] == a and nodes[i, 1] == b and nodes[i, 2] == c and nodes[i, 3] == d:
-                        break
-                    h = (h + 1) & mask
-                refs[p] = 3 + i
+                refs[p], nodes, n, slots = _intern(nodes, n, slots, a, b, c, d)
         roots[t] = refs[0]
     return nodes[:n].copy(), roots
+
+
+@njit(cache=True)
+def _runs_roots(runs, starts, level, nodes, n, slots):
+    """Each map's root reference from its runs ``runs[starts[t]:starts[t + 1]]`` (node level,
+    node index, state; in micro-triangle order, covering the map exactly), hash-consed into the
+    table: (roots, nodes, n, slots); a root is -1 where the runs do not tile the map."""
+    roots = np.empty(len(starts) - 1, np.int64)
+    st_k = np.empty(level + 2, np.int64)  # the open path: node index, next child, children so far
+    st_c = np.empty(level + 2, np.int64)
+    st_r = np.empty((level + 2, 4), np.int64)
+    for t in range(len(starts) - 1):
+        ptr, hi = starts[t], starts[t + 1]
+        roots[t] = -1
+        if ptr >= hi:
+            continue
+        if runs[ptr, 0] == 0:
+            if runs[ptr, 1] == 0 and ptr + 1 == hi:
+                roots[t] = runs[ptr, 2]
+            continue
+        top = 0
+        st_k[0] = 0
+        st_c[0] = 0
+        while True:
+            c = st_c[top]
+            if c == 4:  # the node's children are known: it is uniform or a mixed node
+                a, b, cc, d = st_r[top, 0], st_r[top, 1], st_r[top, 2], st_r[top, 3]
+                if a < 3 and a == b and a == cc and a == d:
+                    ref = a
+                else:
+                    ref, nodes, n, slots = _intern(nodes, n, slots, a, b, cc, d)
+                if top == 0:
+                    if ptr == hi:
+                        roots[t] = ref
+                    break
+                top -= 1
+                st_r[top, st_c[top]] = ref
+                st_c[top] += 1
+                continue
+            if ptr >= hi:
+                break
+            k = 4 * st_k[top] + c
+            lv = runs[ptr, 0]
+            if lv == top + 1:  # a run is this child
+                if runs[ptr, 1] != k:
+                    break
+                st_r[top, c] = runs[ptr, 2]
+                st_c[top] += 1
+                ptr += 1
+            elif lv > top + 1 and top + 1 < level:  # runs below it: descend
+                top += 1
+                st_k[top] = k
+                st_c[top] = 0
+            else:
+                break
+    return roots, nodes, n, slots
+
+
+@njit(cache=True)
+def _compare(nodes, ra, rb, stack):
+    """-1, 0 or 1 as the micromap of reference ``ra`` comes before, equals or follows that of
+    ``rb`` in lexicographic order of their states (micro-triangle order); ``stack`` (4 L + 8, 2)."""
+    stack[0, 0] = ra
+    stack[0, 1] = rb
+    top = 1
+    while top > 0:
+        top -= 1
+        a, b = stack[top, 0], stack[top, 1]
+        if a == b:
+            continue
+        if a < 3 and b < 3:
+            return -1 if a < b else 1
+        for c in range(3, -1, -1):  # child 0 on top: compared first
+            stack[top, 0] = nodes[a - 3, c] if a >= 3 else a
+            stack[top, 1] = nodes[b - 3, c] if b >= 3 else b
+            top += 1
+    return 0
+
+
+@njit(cache=True)
+def _sort_maps(nodes, refs, level):
+    """The references ``refs`` (distinct) sorted by their micromaps' states (``_compare``): a
+    bottom-up merge sort."""
+    a = refs.copy()
+    b = np.empty_like(a)
+    stack = np.empty((4 * level + 8, 2), np.int64)
+    width = 1
+    m = len(a)
+    while width < m:
+        for lo in range(0, m, 2 * width):
+            mid = min(lo + width, m)
+            hi = min(lo + 2 * width, m)
+            i, j, k = lo, mid, lo
+            while i < mid and j < hi:
+                if _compare(nodes, a[j], a[i], stack) < 0:
+                    b[k] = a[j]
+                    j += 1
+                else:
+                    b[k] = a[i]
+                    i += 1
+                k += 1
+            while i < mid:
+                b[k] = a[i]
+                i += 1
+                k += 1
+            while j < hi:
+                b[k] = a[j]
+                j += 1
+                k += 1
+        a, b = b, a
+        width *= 2
+    return a
+
+
+@njit(cache=True)
+def _renumber(nodes, roots, level):
+    """Each node's index as ``_build`` numbers them over the maps of ``roots`` in that order:
+    per map, the mixed nodes of each depth from L - 1 up to 0, in micro-triangle order, a node
+    taking the next index where it first appears."""
+    new = np.full(len(nodes), -1, np.int64)
+    nxt = 0
+    cap = 1024
+    depth_nodes = np.empty(cap, np.int64)  # one map's tree, depth by depth
+    depth_start = np.empty(level + 2, np.int64)
+    for r in roots:
+        if r < 3:
+            continue
+        depth_nodes[0] = r
+        depth_start[0] = 0
+        depth_start[1] = 1
+        end = 1
+        for d in range(1, level + 1):
+            for i in range(depth_start[d - 1], depth_start[d]):
+                for c in range(4):
+                    ch = nodes[depth_nodes[i] - 3, c]
+                    if ch >= 3:
+                        if end == cap:
+                            cap *= 2
+                            bigger = np.empty(cap, np.int64)
+                            bigger[:end] = depth_nodes[:end]
+                            depth_nodes = bigger
+                        depth_nodes[end] = ch
+                        end += 1
+            depth_start[d + 1] = end
+        for d in range(level - 1, -1, -1):
+            for i in range(depth_start[d], depth_start[d + 1]):
+                j = depth_nodes[i] - 3
+                if new[j] < 0:
+                    new[j] = nxt
+                    nxt += 1
+    return new
+
+
+def _renamed(refs: np.ndarray, new: np.ndarray) -> np.ndarray:
+    """References with each node's index replaced by ``new``'s."""
+    out = refs.copy()
+    mixed = refs >= 3
+    out[mixed] = 3 + new[refs[mixed] - 3]
+    return out
+
+
+class Builder:
+    """``build`` without the states: micromaps added as *runs* (``bake_micromap_runs``: the
+    node level, node index and state of each span of micro-triangles the baker decided at once,
+    in micro-triangle order) are hash-consed into one table as they come, so a set of level-L
+    micromaps needs memory for its distinct nodes and one chunk of runs, never 4^L states per
+    micromap. ``finish`` numbers the nodes as ``build`` does over the distinct micromaps in sorted
+    order (``np.unique``), so its blob is byte for byte ``build``'s.
+
+    Example::
+
+        >>> import numpy as np
+        >>> b = Builder(1)
+        >>> runs = np.array([[1, 0, 0], [1, 1, 1], [1, 2, 1], [1, 3, 1], [0, 0, 1]])
+        >>> b.add(runs, np.array([0, 4, 5])).tolist()        # the maps 0111 and 1111
+        [3, 1]
+        >>> nodes, uniq, inverse = b.finish(np.array([3, 1, 3]))
+        >>> nodes.tolist(), uniq.tolist(), inverse.tolist()  # as build(np.unique(maps, axis=0))
+        ([[0, 1, 1, 1]], [3, 1], [0, 1, 0])
+    """
+
+    def __init__(self, level: int):
+        from ..checks import integer
+
+        self.level = integer(level, "level", 0, MAX_LEVEL)
+        self._nodes, self._n, self._slots = _empty_table()
+
+    @property
+    def n_nodes(self) -> int:
+        """The distinct mixed nodes so far."""
+        return int(self._n)
+
+    def add(self, runs: np.ndarray, starts: np.ndarray) -> np.ndarray:
+        """Each map's root reference (int64 (P,)) from its runs ``runs[starts[t]:starts[t + 1]]``
+        ((R, 3) integers); a ``ValueError`` when a map's runs do not tile it in order."""
+        runs = np.ascontiguousarray(runs)
+        if runs.dtype not in (np.int32, np.int64):
+            runs = runs.astype(np.int64)
+        roots, self._nodes, self._n, self._slots = _runs_roots(runs, np.ascontiguousarray(starts, dtype=np.int64),
+                                                               self.level, self._nodes, self._n, self._slots)
+        if (roots < 0).any():
+            raise ValueError(f"the runs of map {int(np.flatnonzero(roots < 0)[0])} do not tile its micro-triangles "
+                             "in order")
+        return roots
+
+    def finish(self, roots: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(nodes (N, 4), the distinct maps' roots in sorted order of their states, each of
+        ``roots``' index among them): ``build``'s nodes and roots of the distinct maps as
+        ``np.unique(maps, axis=0)`` orders them, for the maps whose roots ``add`` returned. Only
+        nodes those maps reach are kept."""
+        roots = np.asarray(roots, dtype=np.int64)
+        distinct = _sort_maps(self._nodes[:self._n], np.unique(roots), self.level)
+        new = _renumber(self._nodes[:self._n], distinct, self.level)
+        keep = np.flatnonzero(new >= 0)
+        nodes = np.empty((len(keep), 4), np.int64)
+        nodes[new[keep]] = _renamed(self._nodes[keep], new)
+        remap = _renamed(distinct, new)
+        order = np.argsort(distinct)  # each root's place among the distinct, found by value
+        inverse = order[np.searchsorted(distinct[order], roots)]
+        return nodes, remap, inverse
 
 
 def _check(maps, level: int) -> np.ndarray:

@@ -29,7 +29,8 @@ from ..scene.alpha import AlphaTriangles, distinct_rows, pair_corner_uvs
 from ..workers import encode_maps as parallel_encode
 from .tables import T_MAP_OFFSET, SchemeMaps
 
-__all__ = ["SchemeMaps", "build_scheme_maps", "encode_cached", "default_jobs", "dedupe_maps", "hierarchical_maps"]
+__all__ = ["SchemeMaps", "build_scheme_maps", "encode_cached", "default_jobs", "dedupe_maps", "hierarchical_maps",
+           "merged_subtree_maps"]
 
 OFFSET_BYTES = 4  # a succinct micromap's byte offset per triangle, counted in its map bytes
 
@@ -96,6 +97,54 @@ def micromap_states(at: AlphaTriangles, tests: dict, level: int):
         out[sel] = s.reshape(len(sel), -1)
     out[at.unknown[reps]] = states.C
     return out, inverse
+
+
+RUNS_PER_CHUNK = 1 << 22  # the runs of one chunk of triangles held at once (``merged_subtree_maps``)
+
+
+def merged_subtree_maps(at: AlphaTriangles, tests: dict, scheme, progress: bool = False) -> SchemeMaps:
+    """A ``csmL`` scheme's maps baked straight into the merged DAG: each distinct alpha triangle
+    baked as runs (``bake.bake_micromap_runs``) in chunks of about ``RUNS_PER_CHUNK`` runs,
+    hash-consed as they come (``codecs.csm.Builder``): the memory of the DAG and one chunk,
+    never 4**L states per triangle. The same blob, byte for byte, as ``hierarchical_maps`` of
+    the baked states (the builder numbers the nodes as ``csm.build`` does)."""
+    from ..bake import bake_micromap_runs
+    from ..codecs import csm_pack
+    from ..codecs.csm import Builder
+    from ..flag_table import flag_table
+
+    level = scheme.level
+    reps, inv_t = distinct_rows(at.uv, at.material, at.unknown)
+    builder = Builder(level)
+    roots = np.full(len(reps), states.C, np.int64)  # unknown triangles: all C
+    known_micro = np.zeros(len(reps))  # micro-triangles of each whose state is not C
+    rmat = at.material[reps]
+    todo = ~at.unknown[reps]
+    bar = tqdm(total=int(todo.sum()), desc=f"bake {scheme.name}", unit="tri", disable=not progress, leave=False)
+    for m in np.unique(rmat[todo]):
+        sel = np.flatnonzero((rmat == m) & todo)
+        grid = tests[int(m)].grid()
+        sat = flag_table(grid)
+        chunk, i, per = 256, 0, 64.0
+        while i < len(sel):
+            part = sel[i:i + chunk]
+            runs, starts = bake_micromap_runs(grid, at.uv[reps[part]], level, GROW_TEXEL, sat,
+                                              capacity=int(1.25 * per * len(part)) + 1024)
+            roots[part] = builder.add(runs, starts)
+            span = np.left_shift(np.int64(1), 2 * (level - runs[:, 0].astype(np.int64)))
+            per_tri = np.add.reduceat(np.where(runs[:, 2] != states.C, span, 0), starts[:-1]) if len(runs) else 0
+            known_micro[part] = per_tri
+            i += len(part)
+            bar.update(len(part))
+            per = max(1.0, len(runs) / len(part))  # the next chunk: about RUNS_PER_CHUNK runs
+            chunk = int(min(1 << 16, max(1, RUNS_PER_CHUNK / per)))
+    bar.close()
+    nodes, distinct, inv_u = builder.finish(roots)
+    rows = inv_u[inv_t]
+    known = float(np.mean((known_micro / float(4 ** level))[inv_t]))
+    data = np.frombuffer(csm_pack(nodes, distinct[rows]), np.uint8).copy()
+    return SchemeMaps(scheme.name, "csm", level, np.arange(len(rows), dtype=np.int32), data, len(data), len(data),
+                      len(distinct), known, None, scheme, info={"csm_nodes": int(len(nodes))})
 
 
 def hierarchical_maps(scheme, st: np.ndarray, inv_t: np.ndarray, known: float) -> SchemeMaps:
@@ -174,6 +223,8 @@ def build_scheme_maps(at: AlphaTriangles, tests: dict, schemes, jobs: int = 1,
         if s.kind == "none":
             out[s.name] = SchemeMaps(s.name, "none", 0, np.zeros(at.count, np.int32), np.zeros(1, np.uint8), 1, 0, 0,
                                      0.0, None, s)
+        elif s.kind == "micromap" and s.representation == "csm":
+            out[s.name] = merged_subtree_maps(at, tests, s, progress)
         elif s.kind == "micromap":
             if s.level not in baked:
                 baked[s.level] = micromap_states(at, tests, s.level)
