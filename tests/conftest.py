@@ -58,6 +58,17 @@ needs_scenes = pytest.mark.skipif(not (SCENES / "palm.glb").is_file(),
                                   reason=f"scenes not found at {SCENES} (../shared is absent)")
 
 
+def untimed(d):
+    """A trace report without what depends on the machine's speed (timings, rates, seconds) or
+    on the file's name: two runs of the same scene compare equal."""
+    if isinstance(d, dict):
+        return {k: untimed(v) for k, v in d.items()
+                if k not in ("timings", "timing", "file") and "per_second" not in k and "seconds" not in k}
+    if isinstance(d, list):
+        return [untimed(v) for v in d]
+    return d
+
+
 @pytest.fixture
 def rng():
     return np.random.default_rng(1234)

@@ -125,3 +125,19 @@ def test_frontier_page_is_rendered():
                 assert sch[f"csm{lv}"]["alpha_tests_per_primary_ray"] == t
                 assert sch[f"csm{lv}"]["map_bytes"] < sch[f"tri{lv}"]["map_bytes"]
         assert (DOCS / "img" / f"frontier_{scene}.png").is_file()
+
+
+def test_the_scripts_scheme_set_for_any_scene():
+    """``frontier.py --scene S --level L``: every representation at levels 4, 6, ... up to L
+    (and L itself), every scheme a valid one, the page's blocks and squares included."""
+    from omaps.schemes import parse_schemes
+
+    mod = _frontier_module()
+    for level in (4, 7, 8):
+        names = mod.scheme_set(level).split(",")
+        parsed = parse_schemes(names)
+        assert [s.name for s in parsed] == names
+        levels = sorted({*range(4, level + 1, 2), level})
+        for k in ("tri", "succinct", "csm"):
+            assert [n for n in names if n.startswith(k)] == [f"{k}{lv}" for lv in levels]
+        assert {"vq4", "vq4x64", "sq16"} <= set(names)

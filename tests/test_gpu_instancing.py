@@ -11,7 +11,7 @@ import json
 import numpy as np
 import pytest
 
-from conftest import SCENES, needs_scenes
+from conftest import SCENES, needs_scenes, untimed
 from gltf_files import instanced_field, write_quad_gltf
 from omaps.cli.main import main
 from omaps.errors import InputError
@@ -135,15 +135,6 @@ def test_a_malformed_instancing_node_exits_2_with_one_line(tmp_path, capsys):
     assert len(err) == 1 and "counts differ" in err[0], err
 
 
-def _untimed(d):
-    if isinstance(d, dict):
-        return {k: _untimed(v) for k, v in d.items()
-                if k not in ("timings", "timing", "file") and "per_second" not in k and "seconds" not in k}
-    if isinstance(d, list):
-        return [_untimed(v) for v in d]
-    return d
-
-
 @needs_scenes
 def test_a_field_of_palms_traces_as_its_nodes_and_bakes_the_palm_once(tmp_path):
     """Sixteen palms as one instancing node and as sixteen nodes: the same trace figures (every
@@ -157,7 +148,7 @@ def test_a_field_of_palms_traces_as_its_nodes_and_bakes_the_palm_once(tmp_path):
         assert main(["trace", str(path), "--json", str(tmp_path / f"{name}.json"), *opts]) == 0
     a, b = (json.loads((tmp_path / f"{n}.json").read_text()) for n in ("inst", "nodes"))
     assert a["scene"]["instances"] == 16 and a["scene"]["prototypes"] == 1
-    assert _untimed(a) == _untimed(b) and a["passed"]
+    assert untimed(a) == untimed(b) and a["passed"]
     assert a["schemes"]["none"]["alpha_tests_per_primary_ray"] > 0
     for name, path in (("inst", inst), ("palm", SCENES / "palm.glb")):
         assert main(["omm", str(path), "-o", str(tmp_path / f"omm_{name}"), "--level", "4", "--quiet"]) == 0

@@ -28,7 +28,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from PIL import Image
 
-from conftest import SCENES, needs_scenes
+from conftest import SCENES, needs_scenes, untimed
 from gltf_files import png_bytes, write_quad_gltf
 from omaps.cli.main import main
 from omaps.errors import InputError
@@ -146,15 +146,6 @@ def _blobs(seed=1, n=8, k=8):
     return np.kron((rng.random((n, n)) > 0.5).astype(np.uint8) * 255, np.ones((k, k), np.uint8))
 
 
-def _untimed(d):
-    if isinstance(d, dict):
-        return {k: _untimed(v) for k, v in d.items()
-                if k not in ("timings", "timing", "file") and "per_second" not in k and "seconds" not in k}
-    if isinstance(d, list):
-        return [_untimed(v) for v in d]
-    return d
-
-
 def _trace(tmp_path, name, path, schemes="none,sq16,tri3,vq4", size=64, extra=()):
     out = tmp_path / f"{name}.json"
     assert main(["trace", str(path), "--schemes", schemes, "--size", str(size), "--quiet", "--json", str(out),
@@ -250,7 +241,7 @@ def test_the_palm_as_usd_reads_traces_and_bakes_as_the_gltf_palm(tmp_path):
             (mb.alpha_mode, mb.cutoff, mb.wrap_u, mb.wrap_v, mb.double_sided)
         assert pa.source == "/Palm/Mesh" and len(pa.faces) == len(pa.triangles)
     x, y = _trace(tmp_path, "usd", usd), _trace(tmp_path, "gltf", SCENES / "palm.glb")
-    assert x["passed"] and _untimed(x["schemes"]) == _untimed(y["schemes"])
+    assert x["passed"] and untimed(x["schemes"]) == untimed(y["schemes"])
     assert x["schemes"]["none"]["alpha_tests_per_primary_ray"] > 0
     ou, og = _omm(tmp_path, "usd", usd), _omm(tmp_path, "gltf", SCENES / "palm.glb")
     _same_bins(ou, og)  # the same micromaps, triangle by triangle
@@ -300,7 +291,7 @@ def test_a_point_instancer_of_palms_traces_as_its_nodes_and_bakes_the_palm_once(
     x = _trace(tmp_path, "usd", usd, "none,sq16,tri3")
     y = _trace(tmp_path, "gltf", nodes, "none,sq16,tri3")
     assert x["scene"]["instances"] == 9 and x["scene"]["prototypes"] == 1 and x["passed"]
-    assert _untimed(x["schemes"]) == _untimed(y["schemes"])
+    assert untimed(x["schemes"]) == untimed(y["schemes"])
     _same_bins(_omm(tmp_path, "field", usd), _omm(tmp_path, "palm", SCENES / "palm.glb"))
 
 
@@ -522,7 +513,7 @@ def test_a_z_up_stage_in_centimetres_traces_as_its_y_up_glTF_in_metres(tmp_path)
     cam = ["--camera", "1.8,0.6,3:1.8,0.6,0:40"]
     x = _trace(tmp_path, "zup", tmp_path / "zup.usda", "none,sq16", 48, cam)
     y = _trace(tmp_path, "yup", gl, "none,sq16", 48, cam)
-    assert _untimed(x["schemes"]) == _untimed(y["schemes"])
+    assert untimed(x["schemes"]) == untimed(y["schemes"])
 
 
 @needs_usd

@@ -41,11 +41,11 @@ TESTS_SLACK = 1.05  # the gap table: points with at most this many times triL's 
 
 
 def scheme_set(level: int) -> str:
-    """The page's full scheme set up to ``level``: every representation at the even levels 4 to
-    ``level`` (and ``level`` itself), the deck's blocks and the raw squares."""
+    """The page's full scheme set up to ``level``: every micromap representation at the even
+    levels 4 to ``level`` (and ``level`` itself), and the palm's blocks and raw squares."""
     levels = sorted({lv for lv in range(4, level + 1, 2)} | {level})
-    return ",".join(["none"] + [f"{k}{lv}" for k in ("tri", "succinct", "csm") for lv in levels]
-                    + ["vq2", "vq4", "vq4x64", "sq16", "sq32", "sq64"])
+    squares = [n for n in SCHEMES["palm"].split(",") if not n.startswith(("none", "tri", "succinct", "csm"))]
+    return ",".join(["none"] + [f"{k}{lv}" for k in ("tri", "succinct", "csm") for lv in levels] + squares)
 
 
 def shared_root() -> Path:

@@ -44,7 +44,7 @@ from .bits import bit_length, get_bits, kernel_bytes
 from ..checks import typed
 
 __all__ = ["ref_bits", "build", "Builder", "pack", "encode", "decode", "lookup", "blob_bits", "check", "HEADER_BITS", "csm_build", "csm_encode",
-           "csm_decode", "csm_lookup", "csm_bits", "csm_pack", "csm_check"]
+           "csm_decode", "csm_lookup", "csm_bits", "csm_pack", "csm_check", "CsmBuilder"]
 
 HEADER_BITS = 32
 
@@ -555,3 +555,4 @@ def decode(data, level: int, n_maps: int) -> np.ndarray:
 # the package API's names (``omaps.codecs``)
 csm_build, csm_pack, csm_encode, csm_decode, csm_lookup, csm_bits = build, pack, encode, decode, lookup, blob_bits
 csm_check = check
+CsmBuilder = Builder

@@ -94,38 +94,11 @@ MAX_TEXEL_COORDINATE = float(1 << 30)
 
 
 def load_scene(path, *, root=None, allow_outside: bool = False, max_bytes: int | None = None) -> Scene:
-    """Load a .gltf or .glb file into the scene model (``omaps.scene.model``).
-
-    Parameters
-    ----------
-    path : str or path
-        The .gltf or .glb file.
-    root : str or path, optional
-        The folder every file the asset names must lie under (default: the asset's own folder).
-    allow_outside : bool
-        Read files the asset names wherever they are (for an asset you trust). URIs with a
-        scheme (``http:``, ...) are never fetched.
-    max_bytes : int, optional
-        The size cap of the asset file, each buffer, image file and data URI (default: the
-        environment variable ``OMAPS_MAX_ASSET_BYTES``, else 2 GiB).
-
-    Returns
-    -------
-    Scene
-
-    Raises
-    ------
-    InputError
-        Naming the file, for the cases the module docstring lists; recoverable problems are
-        ``SceneWarning``s (also kept in ``Scene.warnings``).
-
-    Example::
-
-        >>> from omaps.scene import load_scene                       # doctest: +SKIP
-        >>> scene = load_scene("palm.glb")                            # doctest: +SKIP
-        >>> scene.counts()["alpha_triangles"]                         # doctest: +SKIP
-        3840
-    """
+    """Load a .gltf or .glb file into the scene model (``omaps.scene.model``): the glTF reader
+    that ``omaps.scene.load_scene`` picks by the file's suffix, with its parameters (``root``,
+    ``allow_outside``, ``max_bytes``: the URI policy of ``scene.container``) and its errors (an
+    ``InputError`` naming the file, for the cases the module docstring lists; recoverable
+    problems are ``SceneWarning``s, also kept in ``Scene.warnings``)."""
     from ..checks import path as checked_path
 
     path = checked_path(path, "path")

@@ -156,6 +156,25 @@ def _unzigzag32(v):
     return (v >> 1) ^ (-(v & 1) & 0xFFFFFFFF)
 
 
+@njit(cache=True, inline="always")
+def _corner(f, explicit, data, pos, limit, nxt, last, verts, vert_at):
+    """The index a 4-bit code ``f`` gives a triangle's corner: ``nxt`` (0: a new vertex), vertex
+    FIFO entry f - 1 (1..14), or, where ``explicit``, a varint delta from ``last`` (15).
+    Returns (index, pos, nxt, last, status)."""
+    if f == 0:
+        return nxt, pos, nxt + 1, last, _OK
+    if f < 15:
+        v = verts[(vert_at - f) & 15]
+        return v, pos, nxt, last, (_FIFO if v < 0 else _OK)
+    if not explicit:
+        return np.int64(0), pos, nxt, last, _AUX
+    d, pos = _varint(data, pos, limit)
+    if pos < 0:
+        return np.int64(0), pos, nxt, last, _SHORT
+    v = (last + _unzigzag32(d)) & 0xFFFFFFFF
+    return v, pos, nxt, v, _OK
+
+
 @njit(cache=True)
 def _triangles_kernel(data, count, wide_max, out):
     """Decode a triangle stream (header checked by the caller) into ``out`` (count uint32).
@@ -200,11 +219,9 @@ def _triangles_kernel(data, count, wide_max, out):
                 verts[vert_at] = c
                 vert_at = (vert_at + 1) & 15
             else:
-                v, pos = _varint(data, pos, aux)
-                if pos < 0:
-                    return _SHORT
-                c = (last + _unzigzag32(v)) & 0xFFFFFFFF
-                last = c
+                c, pos, nxt, last, status = _corner(15, True, data, pos, aux, nxt, last, verts, vert_at)
+                if status != _OK:
+                    return status
                 verts[vert_at] = c
                 vert_at = (vert_at + 1) & 15
             edges[edge_at, 0] = c
@@ -213,79 +230,29 @@ def _triangles_kernel(data, count, wide_max, out):
             edges[edge_at, 0] = a
             edges[edge_at, 1] = c
             edge_at = (edge_at + 1) & 15
-        else:
-            if lo < 14:
-                zw = data[aux + lo]
-                z = zw >> 4
-                w = zw & 15
-                a = nxt
-                nxt += 1
-                if z == 0:
-                    b = nxt
-                    nxt += 1
-                elif z < 15:
-                    b = verts[(vert_at - z) & 15]
-                    if b < 0:
-                        return _FIFO
-                else:
-                    return _AUX
-                if w == 0:
-                    c = nxt
-                    nxt += 1
-                elif w < 15:
-                    c = verts[(vert_at - w) & 15]
-                    if c < 0:
-                        return _FIFO
-                else:
-                    return _AUX
-                push_b = z == 0
-                push_c = w == 0
-            else:
+        else:  # three indices: from the code table (0xfY) or from a data byte (0xfe, 0xff)
+            explicit = lo >= 14
+            b = c = np.int64(0)
+            if explicit:
                 if pos >= aux:
                     return _SHORT
                 zw = data[pos]
                 pos += 1
                 if zw == 0:
                     nxt = 0
-                z = zw >> 4
-                w = zw & 15
-                if lo == 14:
-                    a = nxt
-                    nxt += 1
-                else:
-                    v, pos = _varint(data, pos, aux)
-                    if pos < 0:
-                        return _SHORT
-                    a = (last + _unzigzag32(v)) & 0xFFFFFFFF
-                    last = a
-                if z == 0:
-                    b = nxt
-                    nxt += 1
-                elif z < 15:
-                    b = verts[(vert_at - z) & 15]
-                    if b < 0:
-                        return _FIFO
-                else:
-                    v, pos = _varint(data, pos, aux)
-                    if pos < 0:
-                        return _SHORT
-                    b = (last + _unzigzag32(v)) & 0xFFFFFFFF
-                    last = b
-                if w == 0:
-                    c = nxt
-                    nxt += 1
-                elif w < 15:
-                    c = verts[(vert_at - w) & 15]
-                    if c < 0:
-                        return _FIFO
-                else:
-                    v, pos = _varint(data, pos, aux)
-                    if pos < 0:
-                        return _SHORT
-                    c = (last + _unzigzag32(v)) & 0xFFFFFFFF
-                    last = c
-                push_b = z == 0 or z == 15
-                push_c = w == 0 or w == 15
+            else:
+                zw = data[aux + lo]
+            z = zw >> 4
+            w = zw & 15
+            a, pos, nxt, last, status = _corner(15 if lo == 15 else 0, True, data, pos, aux, nxt, last, verts, vert_at)
+            if status == _OK:
+                b, pos, nxt, last, status = _corner(z, explicit, data, pos, aux, nxt, last, verts, vert_at)
+            if status == _OK:
+                c, pos, nxt, last, status = _corner(w, explicit, data, pos, aux, nxt, last, verts, vert_at)
+            if status != _OK:
+                return status
+            push_b = z == 0 or z == 15
+            push_c = w == 0 or w == 15
             # the FIFO reads above use the state before this triangle's pushes
             edges[edge_at, 0] = b
             edges[edge_at, 1] = a

@@ -109,13 +109,12 @@ def merged_subtree_maps(at: AlphaTriangles, tests: dict, scheme, progress: bool 
     never 4**L states per triangle. The same blob, byte for byte, as ``hierarchical_maps`` of
     the baked states (the builder numbers the nodes as ``csm.build`` does)."""
     from ..bake import bake_micromap_runs
-    from ..codecs import csm_pack
-    from ..codecs.csm import Builder
+    from ..codecs import CsmBuilder, csm_pack
     from ..flag_table import flag_table
 
     level = scheme.level
     reps, inv_t = distinct_rows(at.uv, at.material, at.unknown)
-    builder = Builder(level)
+    builder = CsmBuilder(level)
     roots = np.full(len(reps), states.C, np.int64)  # unknown triangles: all C
     known_micro = np.zeros(len(reps))  # micro-triangles of each whose state is not C
     rmat = at.material[reps]
