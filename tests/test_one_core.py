@@ -81,7 +81,7 @@ def _requiring(tmp_path, ext):
     return path
 
 
-@pytest.mark.parametrize("ext", ["EXT_meshopt_compression", "KHR_texture_basisu"])
+@pytest.mark.parametrize("ext", ["KHR_meshopt_compression", "KHR_texture_basisu"])
 def test_required_extension_is_an_error_in_both_commands(tmp_path, capsys, ext):
     path = _requiring(tmp_path, ext)
     assert main(["trace", path, "--schemes", "none", "--size", "8", "--quiet"]) == 2

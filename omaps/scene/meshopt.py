@@ -157,6 +157,14 @@ def _unzigzag32(v):
 
 
 @njit(cache=True, inline="always")
+def _push(edges, at, x, y):
+    """Push the edge (x, y) on the edge FIFO at ``at``; returns the next position."""
+    edges[at, 0] = x
+    edges[at, 1] = y
+    return (at + 1) & 15
+
+
+@njit(cache=True, inline="always")
 def _corner(f, explicit, data, pos, limit, nxt, last, verts, vert_at):
     """The index a 4-bit code ``f`` gives a triangle's corner: ``nxt`` (0: a new vertex), vertex
     FIFO entry f - 1 (1..14), or, where ``explicit``, a varint delta from ``last`` (15).
@@ -224,12 +232,8 @@ def _triangles_kernel(data, count, wide_max, out):
                     return status
                 verts[vert_at] = c
                 vert_at = (vert_at + 1) & 15
-            edges[edge_at, 0] = c
-            edges[edge_at, 1] = b
-            edge_at = (edge_at + 1) & 15
-            edges[edge_at, 0] = a
-            edges[edge_at, 1] = c
-            edge_at = (edge_at + 1) & 15
+            edge_at = _push(edges, edge_at, c, b)
+            edge_at = _push(edges, edge_at, a, c)
         else:  # three indices: from the code table (0xfY) or from a data byte (0xfe, 0xff)
             explicit = lo >= 14
             b = c = np.int64(0)
@@ -254,15 +258,9 @@ def _triangles_kernel(data, count, wide_max, out):
             push_b = z == 0 or z == 15
             push_c = w == 0 or w == 15
             # the FIFO reads above use the state before this triangle's pushes
-            edges[edge_at, 0] = b
-            edges[edge_at, 1] = a
-            edge_at = (edge_at + 1) & 15
-            edges[edge_at, 0] = c
-            edges[edge_at, 1] = b
-            edge_at = (edge_at + 1) & 15
-            edges[edge_at, 0] = a
-            edges[edge_at, 1] = c
-            edge_at = (edge_at + 1) & 15
+            edge_at = _push(edges, edge_at, b, a)
+            edge_at = _push(edges, edge_at, c, b)
+            edge_at = _push(edges, edge_at, a, c)
             verts[vert_at] = a
             vert_at = (vert_at + 1) & 15
             if push_b:
@@ -365,26 +363,26 @@ def decode_triangles(data, count: int, size: int) -> np.ndarray:
     """Decode a mode 1 (``TRIANGLES``) stream: ``count`` indices (a multiple of 3) of ``size``
     bytes (2 or 4), as uint32 ``(count,)``. Raises ``MeshoptError`` when it does not decode
     exactly."""
-    if size not in (2, 4):
-        raise MeshoptError(f"byteStride {size} is not 2 or 4, as TRIANGLES needs")
     if count % 3:
         raise MeshoptError(f"count {count} is not a multiple of 3, as TRIANGLES needs")
-    raw = _stream(data)
-    _header(raw, _TRIANGLES_HEADER, "triangle")
-    out = np.zeros(count, np.uint32)
-    _fail(_triangles_kernel(raw, count, (1 << (8 * size)) - 1, out), size=size)
-    return out
+    return _decode_index_stream(_triangles_kernel, data, count, size, "TRIANGLES", _TRIANGLES_HEADER, "triangle")
 
 
 def decode_indices(data, count: int, size: int) -> np.ndarray:
     """Decode a mode 2 (``INDICES``) stream: ``count`` indices of ``size`` bytes (2 or 4), as
     uint32 ``(count,)``. Raises ``MeshoptError`` when it does not decode exactly."""
+    return _decode_index_stream(_indices_kernel, data, count, size, "INDICES", _INDICES_HEADER, "index")
+
+
+def _decode_index_stream(kernel, data, count: int, size: int, mode: str, header: int, what: str) -> np.ndarray:
+    """An index stream of ``mode`` decoded by ``kernel`` into ``count`` uint32, each at most
+    ``size`` bytes wide."""
     if size not in (2, 4):
-        raise MeshoptError(f"byteStride {size} is not 2 or 4, as INDICES needs")
+        raise MeshoptError(f"byteStride {size} is not 2 or 4, as {mode} needs")
     raw = _stream(data)
-    _header(raw, _INDICES_HEADER, "index")
+    _header(raw, header, what)
     out = np.zeros(count, np.uint32)
-    _fail(_indices_kernel(raw, count, (1 << (8 * size)) - 1, out), size=size)
+    _fail(kernel(raw, count, (1 << (8 * size)) - 1, out), size=size)
     return out
 
 
