@@ -309,19 +309,22 @@ def test_compile_first_off_or_cached(monkeypatch, capsys):
 def test_status_when_every_family_is_done_but_the_processes_run_on(tmp_path):
     """Between a process's last family and its exit the line says so; it never ends in an empty
     'compiling' list."""
-    import io
 
     class Running:
         def poll(self):
             return None
 
+    out = open(tmp_path / "out", "w+b")  # as the process's stdout: a real file, written at its offset
+    out.write(b"vq4\nsynth\n")
+    out.flush()
     ahead = object.__new__(precompile._Ahead)
-    ahead.procs = [(["vq4", "synth"], Running(), io.BytesIO(b"vq4\nsynth\n"), io.BytesIO())]
+    ahead.procs = [(["vq4", "synth"], Running(), out, None)]
     ahead.t0 = precompile.time.perf_counter()
     ahead.estimate = (110, 220)
     line = ahead.status()
     assert "done vq4, synth" in line and "writing the cache" in line, line
     assert not re.search(r"compiling +\(", line), line
+    out.close()
 
 
 def test_a_silent_compile_is_waited_for(monkeypatch, capsys, tmp_path):

@@ -237,11 +237,14 @@ class _Ahead:
                                out, err))
 
     def done(self) -> list[str]:
-        """The families compiled so far."""
+        """The families compiled so far. Each process's stdout is read in place (``os.pread``): the
+        file's offset is shared with the process, which writes at it, so a seek here could make
+        it write over a family it had reported."""
         names = []
         for g, _, out, _ in self.procs:
-            out.seek(0)
-            names += [f for f in out.read().decode(errors="replace").split() if f in g]
+            fd = out.fileno()
+            text = os.pread(fd, os.fstat(fd).st_size, 0).decode(errors="replace")
+            names += [f for f in text.split() if f in g]
         return names
 
     def status(self) -> str:
