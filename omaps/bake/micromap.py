@@ -455,11 +455,7 @@ def bake_micromaps(grid: FootprintGrid, tris_uv: ArrayLike, levels: int | ArrayL
     ``InputTypeError`` / ``InputError`` naming it."""
     from .. import checks
 
-    from ..alpha_test import as_grid
-
-    grid = as_grid(grid)
-    grow = checks.number(grow, "grow", 0)
-    t = np.ascontiguousarray(check_uv_triangles(tris_uv))
+    grid, t, grow = _checked(grid, tris_uv, grow)
     lv_in = checks.array(levels, "levels", ndim=(0, 1), kinds="iu")
     if lv_in.ndim == 1 and len(lv_in) != len(t):
         raise InputError(f"levels must be one level or one per triangle ({len(t)}), got {len(lv_in)}",
@@ -475,10 +471,24 @@ def bake_micromaps(grid: FootprintGrid, tris_uv: ArrayLike, levels: int | ArrayL
         empty = _bake_all(sat, grid.kernel_args(), t, locality_order(t, grid.width, grid.height), lv, starts,
                           float(grid.width), float(grid.height), float(grid.offset), float(grow), out,
                           numba.get_num_threads(), _NO_RUNS, _NO_STARTS, _NO_STARTS)
-        if empty.any():
-            bad = int(np.flatnonzero(empty)[0])
-            raise InputError(f"UV triangle {bad} has micro-triangles with no area")
+        _check_area(empty, np.arange(len(t)))
     return out, starts
+
+
+def _checked(grid, tris_uv, grow):
+    """The arguments every bake checks: (footprint grid, UV triangles (T, 3, 2) contiguous, growth)."""
+    from .. import checks
+    from ..alpha_test import as_grid
+
+    grid = as_grid(grid)
+    grow = checks.number(grow, "grow", 0)
+    return grid, np.ascontiguousarray(check_uv_triangles(tris_uv)), grow
+
+
+def _check_area(empty, index):
+    """An ``InputError`` naming the first triangle (``index`` of it) with micro-triangles of no area."""
+    if empty.any():
+        raise InputError(f"UV triangle {int(index[np.flatnonzero(empty)[0]])} has micro-triangles with no area")
 
 
 _NO_RUNS = np.empty((0, 3), dtype=np.int32)
@@ -511,13 +521,8 @@ def bake_micromap_runs(grid: FootprintGrid, tris_uv: ArrayLike, level: int, grow
         >>> runs.tolist(), starts.tolist()           # the states 0, 0, 1, 0 of bake_micromaps
         ([[1, 0, 0], [1, 1, 0], [1, 2, 1], [1, 3, 0]], [0, 4])
     """
-    from .. import checks
-    from ..alpha_test import as_grid
-
-    grid = as_grid(grid)
-    grow = checks.number(grow, "grow", 0)
+    grid, t, grow = _checked(grid, tris_uv, grow)
     level = check_level(level)
-    t = np.ascontiguousarray(check_uv_triangles(tris_uv))
     n = len(t)
     counts = np.zeros(n, dtype=np.int64)
     if not n:
@@ -535,9 +540,7 @@ def bake_micromap_runs(grid: FootprintGrid, tris_uv: ArrayLike, level: int, grow
         empty = _bake_all(sat, grid.kernel_args(), sub, locality_order(sub, grid.width, grid.height),
                           np.full(len(todo), level, dtype=np.int64), _NO_STARTS, float(grid.width), float(grid.height),
                           float(grid.offset), float(grow), np.empty(0, np.uint8), workers, buf, at, got)
-        if empty.any():
-            bad = int(todo[np.flatnonzero(empty)[0]])
-            raise InputError(f"UV triangle {bad} has micro-triangles with no area")
+        _check_area(empty, todo)
         fit = got >= 0
         for j in np.flatnonzero(fit):
             pieces[todo[j]] = buf[at[j]:at[j] + got[j]]
@@ -546,7 +549,7 @@ def bake_micromap_runs(grid: FootprintGrid, tris_uv: ArrayLike, level: int, grow
             size = max(2 * size, workers * int(-got[~fit].min()) * 2)
         todo = todo[~fit]
     starts = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
-    return np.concatenate(pieces).astype(np.int32, copy=False), starts
+    return np.concatenate(pieces), starts
 
 
 def bake_micromap_rows(grid: FootprintGrid, tris_uv: ArrayLike, level: int, grow: float = 0.0) -> np.ndarray:

@@ -199,12 +199,15 @@ class Container:
     # -- reading ----------------------------------------------------------------------------
     def buffer_data(self, i: int, uri: str | None, length: int):
         """The bytes of buffer ``i`` (at least ``length``: its byteLength): the binary chunk when
-        ``uri`` is None, else the file or data URI it names; an ``InputError`` naming the asset
+        ``uri`` is None (buffer 0 only: another is a placeholder without data), else the file or data URI it names; an ``InputError`` naming the asset
         when there is none, it is missing or unreadable, or it is shorter than ``length``."""
         if uri is None:
             data = self.bin
             if data is None:
                 raise InputError(f"buffer {i} has no URI and the file has no binary chunk", self.path)
+            if i != 0:
+                raise InputError(f"buffer {i} has no URI, and only buffer 0 may hold a .glb's binary chunk (a "
+                                 f"buffer without data is a placeholder, read only through {MESHOPT})", self.path)
         else:
             data = self.read(uri, f"buffer {i}", None if uri.startswith("data:") else length)
             if data is None:

@@ -219,9 +219,6 @@ class _Reader:
             b = self.g.buffers[i]
             uri = self._uri(b.uri, f"buffer {i}")
             length = self._int(b.byteLength, f"buffer {i}: byteLength")
-            if uri is None and i != 0:
-                raise InputError(f"buffer {i} has no URI, and only buffer 0 may hold a .glb's binary chunk (a "
-                                 f"buffer without data is a placeholder, read only through {MESHOPT})", self.path)
             self._buffers[i] = bytes(self.container.buffer_data(i, uri, length))
         return self._buffers[i]
 
