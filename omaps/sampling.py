@@ -48,25 +48,37 @@ def address(i, n, mode):
     return r if r < n else p - 1 - r
 
 
-@njit(cache=True)
-def sample_texture(value, filt, mode_u, mode_v, x, y):
-    """What a shader's texture fetch returns at texel coordinate (x, y) of ``value`` (H, W):
-    filter 0 reads texel floor(p); filter 1 blends the taps floor(p - 0.5) and + 1 on each axis,
-    clamped into the range of its taps (where exact arithmetic puts it), so rounding cannot flip
-    a comparison every tap agrees on -- which the conservative maps rely on."""
-    h, w = value.shape
+@njit(cache=True, inline="always")
+def taps(filt, mode_u, mode_v, w, h, x, y):
+    """The texels a shader's fetch at texel coordinate (x, y) of a ``w`` x ``h`` texture reads,
+    addressed: (column a, column b, row a, row b, fraction x, fraction y). Filter 0 (nearest)
+    reads texel floor(p) (b = a, fractions 0); filter 1 (linear) the taps floor(p - 0.5) and
+    + 1 on each axis, at the fractions of p - 0.5 past the first. The fetch
+    (``sample_texture``) and the texture traffic of ``trace --memory`` both read them here."""
     if filt == 0:
-        return np.float64(value[address(int(math.floor(y)), h, mode_v), address(int(math.floor(x)), w, mode_u)])
+        xa = address(int(math.floor(x)), w, mode_u)
+        ya = address(int(math.floor(y)), h, mode_v)
+        return xa, xa, ya, ya, 0.0, 0.0
     fx = x - 0.5
     fy = y - 0.5
     x0 = int(math.floor(fx))
     y0 = int(math.floor(fy))
-    xa = address(x0, w, mode_u)
-    xb = address(x0 + 1, w, mode_u)
-    ya = address(y0, h, mode_v)
-    yb = address(y0 + 1, h, mode_v)
+    return (address(x0, w, mode_u), address(x0 + 1, w, mode_u), address(y0, h, mode_v), address(y0 + 1, h, mode_v),
+            fx - x0, fy - y0)
+
+
+@njit(cache=True)
+def sample_texture(value, filt, mode_u, mode_v, x, y):
+    """What a shader's texture fetch returns at texel coordinate (x, y) of ``value`` (H, W): the
+    texel ``taps`` names (nearest), or the blend of its four taps (linear), clamped into the
+    range of its taps (where exact arithmetic puts it), so rounding cannot flip a comparison
+    every tap agrees on -- which the conservative maps rely on."""
+    h, w = value.shape
+    xa, xb, ya, yb, ax, ay = taps(filt, mode_u, mode_v, w, h, x, y)
+    if filt == 0:
+        return np.float64(value[ya, xa])
     return blend(np.float64(value[ya, xa]), np.float64(value[ya, xb]), np.float64(value[yb, xa]),
-                 np.float64(value[yb, xb]), fx - x0, fy - y0)
+                 np.float64(value[yb, xb]), ax, ay)
 
 
 @njit(cache=True, inline="always")

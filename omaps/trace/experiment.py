@@ -169,7 +169,9 @@ def trace_scene(scene: str | os.PathLike[str] | Scene, schemes: str | Sequence[s
     memory : bool
         Also model the map data each lookup of the primary pass reads (``trace.memory``): per
         scheme ``memory`` in the report, with dependent reads per lookup and 64-byte lines per
-        primary ray in its ``own`` and ``shared`` layouts (docs/FORMAT.md, "What a lookup reads").
+        primary ray in its ``own`` and ``shared`` layouts, and the 64-byte lines of alpha texture
+        its alpha tests fetch per primary ray, alone and added to each layout's map lines
+        (docs/FORMAT.md, "What a lookup reads").
     cache_kib : float, optional
         With ``memory``: also the misses per primary ray of an LRU cache of this many KiB shared
         by each 8 x 8 tile of pixels.
@@ -305,6 +307,8 @@ def trace_scene(scene: str | os.PathLike[str] | Scene, schemes: str | Sequence[s
             if mem is not None:
                 report["schemes"][n]["map_reads_per_lookup"] = mem["own"]["map_reads_per_lookup"]
                 report["schemes"][n]["map_lines_per_ray"] = mem["own"]["map_lines_per_ray"]
+                report["schemes"][n]["texture_lines_per_ray"] = mem["texture_lines_per_ray"]
+                report["schemes"][n]["total_lines_per_ray"] = mem["own"]["total_lines_per_ray"]
         front_gaps(report)
         report["timings"]["memory_s"] = time.perf_counter() - t0
         report["timings"]["total_s"] = time.perf_counter() - t_start
@@ -391,27 +395,32 @@ def _over_opaque(ratio) -> str:
 
 
 def format_memory(report: dict, names: list) -> str:
-    """``--memory``'s table: per scheme its lookups per primary ray and, in its own and shared
-    layouts, map KiB, dependent reads per lookup, 64-byte lines per primary ray (and cache misses
-    per ray)."""
+    """``--memory``'s table: per scheme its lookups per primary ray, the 64-byte lines of alpha
+    texture its alpha tests fetch per primary ray and, in its own and shared layouts, map KiB,
+    dependent reads per lookup, 64-byte lines of map data per primary ray, map plus texture
+    lines per primary ray (and cache misses per ray)."""
     mems = {n: report["schemes"][n].get("memory") for n in names}
     cache = next((m["cache_kib"] for m in mems.values() if m and m.get("cache_kib") is not None), None)
     fields = [("KiB", "map_bytes", lambda v: f"{v / 1024:.1f}"), ("reads", "map_reads_per_lookup", lambda v: f"{v:.2f}"),
-              ("lines", "map_lines_per_ray", lambda v: f"{v:.3f}")]
+              ("lines", "map_lines_per_ray", lambda v: f"{v:.3f}"), ("total", "total_lines_per_ray", lambda v: f"{v:.3f}")]
     if cache is not None:
         fields.append(("misses", "cache_misses_per_ray", lambda v: f"{v:.3f}"))
-    cols = ["scheme", "lookups/ray"] + [f"{lay} {f[0]}" for lay in ("own", "shared") for f in fields]
+    cols = ["scheme", "lookups/ray", "tex lines"] + [f"{lay} {f[0]}" for lay in ("own", "shared") for f in fields]
     rows = []
     for n, m in mems.items():
         if not m:
-            rows.append([n, "-"] + ["-"] * (2 * len(fields)))
+            rows.append([n, "-", "-"] + ["-"] * (2 * len(fields)))
             continue
-        rows.append([n, f"{m['lookups_per_primary_ray']:.3f}"]
+        rows.append([n, f"{m['lookups_per_primary_ray']:.3f}", f"{m['texture_lines_per_ray']:.3f}"]
                     + [fmt(m[lay][key]) for lay in ("own", "shared") for _, key, fmt in fields])
     head = ("what a lookup reads (primary rays; own: each pair's or triangle's map with it; shared: identical maps "
-            "once, behind a 32-bit index; triL shared = standard OMMs)")
+            "once, behind a 32-bit index; triL shared = standard OMMs; tex lines: alpha texture lines the alpha "
+            "tests fetch; total: map lines + tex lines)")
     if cache is not None:
         head += f"; misses: a {cache:g} KiB LRU cache per 8x8 pixel tile"
+    texture = next((m["texture_layout"] for m in mems.values() if m), None)
+    if texture is not None:
+        head += f"\ntexture layout: {texture}"
     return head + "\n" + format_table(cols, rows)
 
 

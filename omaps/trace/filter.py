@@ -175,6 +175,10 @@ def make_filter(state_fn):
 
 
 # ``trace --memory``: the same filters recording every lookup, module-level so numba caches them
+def _record_none(args):
+    _filter_hooked(args, lookups.no_map_state, record_lookup)
+
+
 def _record_micromap(args):
     _filter_hooked(args, lookups.micro_map_state, record_lookup)
 
@@ -191,7 +195,8 @@ def _record_pair_map(args):
     _filter_hooked(args, lookups.pair_map_state, record_lookup)
 
 
-_CACHED_RECORDING = {lookups.micro_map_state: _record_micromap, lookups.succinct_map_state: _record_succinct,
+_CACHED_RECORDING = {lookups.no_map_state: _record_none, lookups.micro_map_state: _record_micromap,
+                     lookups.succinct_map_state: _record_succinct,
                      lookups.csm_map_state: _record_csm, lookups.pair_map_state: _record_pair_map}
 _RECORDING: dict = {}
 

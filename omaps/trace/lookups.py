@@ -25,7 +25,7 @@ from .tables import (T_COUNT, T_MAP_CODEC, T_MAP_DATA, T_MAP_FORMAT, T_MAP_LEVEL
                      T_MAT_TEX_START, T_MAT_THR, T_MAT_W, T_MAT_WRAP_U, T_MAT_WRAP_V, T_TEX, T_TRI_CORNER,
                      T_TRI_MAT, T_TRI_UV, T_TRI_VALPHA)
 
-__all__ = ["clamp_bary", "shader_alpha_test", "no_map_state", "micro_map_state", "mixed_map_state", "pair_map_state",
+__all__ = ["clamp_bary", "hit_texel", "shader_alpha_test", "no_map_state", "micro_map_state", "mixed_map_state", "pair_map_state",
            "succinct_map_state", "csm_map_state", "state_function"]
 
 
@@ -41,23 +41,32 @@ def clamp_bary(b1, b2):
     return b1, b2
 
 
+@njit(cache=True, inline="always")
+def hit_texel(uv, tri, b1, b2, w, h):
+    """The texel coordinate (x, y) of alpha triangle ``tri``'s hit at clamped barycentrics (b1,
+    b2) in a ``w`` x ``h`` texture: its vertices' UVs (``uv``: 6 per triangle) interpolated,
+    times the size. The shader fetches there; ``trace.memory`` counts the lines it reads."""
+    w0 = 1.0 - b1 - b2
+    o = 6 * tri
+    u = w0 * uv[o] + b1 * uv[o + 2] + b2 * uv[o + 4]
+    v = w0 * uv[o + 1] + b1 * uv[o + 3] + b2 * uv[o + 5]
+    return u * w, v * h
+
+
 @njit(cache=True)
 def shader_alpha_test(table, tri, b1, b2):
     """The any-hit shader: the material's texture value at the hit (mip level 0, its filter and
     wrap, ``sampling.sample_texture``) times the interpolated vertex alpha, compared with the
     material's threshold (``alpha_test.AlphaTest``)."""
     m = i32_ptr(table[T_TRI_MAT])[tri]
-    uv = f64_ptr(table[T_TRI_UV])
-    w0 = 1.0 - b1 - b2
-    o = 6 * tri
-    u = w0 * uv[o] + b1 * uv[o + 2] + b2 * uv[o + 4]
-    v = w0 * uv[o + 1] + b1 * uv[o + 3] + b2 * uv[o + 5]
     w = i64_ptr(table[T_MAT_W])[m]
     h = i64_ptr(table[T_MAT_H])[m]
+    x, y = hit_texel(f64_ptr(table[T_TRI_UV]), tri, b1, b2, w, h)
     tex = carray(u16_ptr(table[T_TEX] + 2 * i64_ptr(table[T_MAT_TEX_START])[m]), (h, w))
     a = sample_texture(tex, i64_ptr(table[T_MAT_FILTER])[m], i64_ptr(table[T_MAT_WRAP_U])[m],
-                       i64_ptr(table[T_MAT_WRAP_V])[m], u * w, v * h)
+                       i64_ptr(table[T_MAT_WRAP_V])[m], x, y)
     va = f64_ptr(table[T_TRI_VALPHA])
+    w0 = 1.0 - b1 - b2
     c = w0 * va[3 * tri] + b1 * va[3 * tri + 1] + b2 * va[3 * tri + 2]
     if c != 1.0:
         a = a * c

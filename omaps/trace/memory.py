@@ -28,8 +28,18 @@ misses per ray of a fully associative LRU cache of that many KiB shared by an 8 
 pixels: it starts empty at each tile, whose 64 rays run one after another in row-major order,
 each ray's lookups in the order the filter made them.
 
-The walks compile ``pair.hit_st``, ``pair.uv_to_cell`` and ``birdcurve.bary_to_index`` into
-themselves; their cached kernels are keyed on those modules too (``omaps.kernel_cache``).
+Beside the map data, the alpha texture each alpha test the map did not spare fetches: every
+lookup that ends in C runs the any-hit shader, which reads the taps of the material's filter
+(``sampling.taps``: one texel nearest, 2 x 2 linear, addressed by the material's wrap modes) at
+the hit's texel coordinate (``lookups.hit_texel``) on mip level 0. ``TextureLayout`` places the
+textures (``TEXEL_BYTES``-byte texels in ``TEX_TILE`` x ``TEX_TILE`` tiles, one 64-byte line
+each); ``texture_lines_per_ray`` is the distinct texture lines per primary ray (mean over
+pixels), the same for every layout of a scheme's maps, and each layout's ``total_lines_per_ray``
+its map lines plus them.
+
+The walks compile ``pair.hit_st``, ``pair.uv_to_cell``, ``birdcurve.bary_to_index``,
+``lookups.hit_texel`` and ``sampling.taps`` into themselves; their cached kernels are keyed on
+those modules too (``omaps.kernel_cache``).
 """
 
 from __future__ import annotations
@@ -39,16 +49,22 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
-from .. import birdcurve, omm_format, pair
+from .. import birdcurve, omm_format, pair, states
 from ..codecs import bit_length, get_bits
+from ..sampling import taps
+from .lookups import hit_texel
 
-__all__ = ["LINE_BYTES", "TILE", "Lookups", "Layout", "record_lookups", "layouts", "touches", "measure",
+__all__ = ["LINE_BYTES", "TILE", "TEXEL_BYTES", "TEX_TILE", "Lookups", "Layout", "TextureLayout", "record_lookups",
+           "layouts", "touches", "measure", "texture_layout", "texture_touches", "texture_lines_per_ray",
            "scheme_memory", "lines_per_ray", "lru_misses"]
 
 LINE_BYTES = 64
 TILE = 8  # pixels per side of the tile of rays that shares a cache
 INDEX_BYTES = 4  # an index buffer entry or a byte offset
 RECORD_BYTES = omm_format.TRIANGLE_RECORD.itemsize  # a standard OMM triangle record
+TEXEL_BYTES = 4  # an alpha texture's texel: RGBA8, the base colour texture the alpha is read from
+TEX_TILE = 4  # texels per side of a texture tile: 4 x 4 texels of 4 bytes, one 64-byte line
+assert TEX_TILE * TEX_TILE * TEXEL_BYTES == LINE_BYTES
 
 # layout kinds (the walks below)
 K_NONE, K_ROWS, K_OMM, K_BLOCK, K_SUCCINCT, K_CSM = 0, 1, 2, 3, 4, 5
@@ -449,25 +465,119 @@ def measure(lay: Layout, lk: Lookups, cache_kib: float | None = None) -> dict:
     return out
 
 
+# ---- the texture side: the lines the alpha tests fetch ----------------------------------------
+
+TEXTURE_LAYOUT = (f"RGBA8 texels ({TEXEL_BYTES} bytes) in {TEX_TILE}x{TEX_TILE} tiles, one 64-byte line per tile, "
+                  "tiles row-major, each texture from a line of its own; mip level 0")
+
+
+@dataclass
+class TextureLayout:
+    """Where each alpha-tested material's texture lies (``TEXTURE_LAYOUT``): per material (the
+    tracer's material index) its texture's first line, width in tiles, size in texels, filter
+    code and wrap codes; ``texture_bytes`` the bytes of every distinct texture, tiles padded."""
+
+    first_line: np.ndarray
+    tiles_x: np.ndarray
+    width: np.ndarray
+    height: np.ndarray
+    filt: np.ndarray
+    wrap_u: np.ndarray
+    wrap_v: np.ndarray
+    texture_bytes: int
+    description: str = TEXTURE_LAYOUT
+
+
+def texture_layout(base: dict) -> TextureLayout:
+    """The alpha textures of the tracer's shared tables (``tables.base_tables``) one after
+    another in an address space of their own, in order of material, each distinct texture (its
+    place in the texel table and its size) once and only those an alpha triangle's material
+    reads: texel (x, y) of a ``w``-wide texture at line ``first + (y div TEX_TILE) * ceil(w /
+    TEX_TILE) + x div TEX_TILE``."""
+    from .tables import T_MAT_FILTER, T_MAT_H, T_MAT_TEX_START, T_MAT_W, T_MAT_WRAP_U, T_MAT_WRAP_V, T_TRI_MAT
+
+    start, w, h = (np.asarray(base[k], np.int64) for k in (T_MAT_TEX_START, T_MAT_W, T_MAT_H))
+    tiles_x = -(-w // TEX_TILE)
+    tiles = tiles_x * -(-h // TEX_TILE)
+    first = np.zeros(len(start), np.int64)
+    seen: dict[tuple, int] = {}
+    pos = 0
+    for m in np.unique(np.asarray(base[T_TRI_MAT], np.int64)):
+        key = (int(start[m]), int(w[m]), int(h[m]))
+        if key not in seen:
+            seen[key] = pos
+            pos += int(tiles[m])
+        first[m] = seen[key]
+    return TextureLayout(first, tiles_x, w, h, *(np.ascontiguousarray(base[k], np.int64)
+                                                  for k in (T_MAT_FILTER, T_MAT_WRAP_U, T_MAT_WRAP_V)),
+                         pos * LINE_BYTES)
+
+
+@njit(cache=True)
+def _texture_touches(tri, b1, b2, state, mat, uv, first, tiles_x, w, h, filt, wrap_u, wrap_v, starts, out):
+    """Per lookup that ends in C (the shader runs) the lines of its taps, four for a linear
+    filter (repeats kept), one for nearest; none for a decided lookup."""
+    p = 0
+    for j in range(tri.shape[0]):
+        starts[j] = p
+        if state[j] != states.C:
+            continue
+        t = tri[j]
+        m = mat[t]
+        x, y = hit_texel(uv, t, b1[j], b2[j], w[m], h[m])
+        xa, xb, ya, yb, _, _ = taps(filt[m], wrap_u[m], wrap_v[m], w[m], h[m], x, y)
+        out[p] = first[m] + (ya // TEX_TILE) * tiles_x[m] + xa // TEX_TILE
+        p += 1
+        if filt[m] != 0:
+            out[p] = first[m] + (ya // TEX_TILE) * tiles_x[m] + xb // TEX_TILE
+            out[p + 1] = first[m] + (yb // TEX_TILE) * tiles_x[m] + xa // TEX_TILE
+            out[p + 2] = first[m] + (yb // TEX_TILE) * tiles_x[m] + xb // TEX_TILE
+            p += 3
+    starts[tri.shape[0]] = p
+    return p
+
+
+def texture_touches(tex: TextureLayout, base: dict, lk: Lookups) -> tuple[np.ndarray, np.ndarray]:
+    """Per lookup the texture lines its alpha test fetches (lookup j's are
+    ``lines[starts[j]:starts[j + 1]]``; none where the map decided the hit): (starts, lines)."""
+    from .tables import T_TRI_MAT, T_TRI_UV
+
+    n = len(lk.tri)
+    starts = np.zeros(n + 1, np.int64)
+    out = np.zeros(4 * n, np.int64)
+    mat = np.ascontiguousarray(base[T_TRI_MAT], np.int64)
+    uv = np.ascontiguousarray(base[T_TRI_UV], np.float64).ravel()
+    k = _texture_touches(lk.tri, lk.b1, lk.b2, np.ascontiguousarray(lk.state, np.uint8), mat, uv, tex.first_line,
+                         tex.tiles_x, tex.width, tex.height, tex.filt, tex.wrap_u, tex.wrap_v, starts, out)
+    return starts, out[:k]
+
+
+def texture_lines_per_ray(tex: TextureLayout, base: dict, lk: Lookups) -> float:
+    """Distinct texture lines the alpha tests of a primary ray fetch, mean over every pixel of
+    the pass (a ray without an alpha test counts 0)."""
+    starts, lines = texture_touches(tex, base, lk)
+    return float(lines_per_ray(lk, starts, lines).sum()) / (lk.width * lk.height)
+
+
 def scheme_memory(prep, name: str, run, cam: np.ndarray, w: int, h: int, cache_kib: float | None = None) -> dict | None:
     """``trace --memory``'s figures of one traced scheme (``run``: its ``SchemeRun``): lookups per
-    primary ray and, per layout (``own``, ``shared``), ``measure``'s. None for a kind not
-    modelled. RuntimeError if the recording run differs from the traced one."""
+    primary ray, the texture lines its alpha tests fetch per primary ray and, per layout
+    (``own``, ``shared``), ``measure``'s with ``total_lines_per_ray`` (map lines plus texture
+    lines). None for a kind not modelled. RuntimeError if the recording run differs from the
+    traced one."""
     sm = prep.maps[name]
     lays = layouts(sm, prep.alpha)
     if not lays:
         return None
-    if sm.kind == "none":
-        lk = Lookups(np.zeros(w * h + 1, np.int64), *(np.zeros(0, t) for t in (np.int64, np.float64, np.float64,
-                                                                                  np.uint8)), w, h)
-        lookups = float(run.primary.calls.sum()) / (w * h)
-    else:
-        lk, rec = record_lookups(prep, name, cam, w, h, run.primary.calls)
-        if not (np.array_equal(rec.tests, run.primary.tests) and np.array_equal(rec.prim, run.primary.prim)):
-            raise RuntimeError(f"memory model: scheme {name}'s recording run differs from its traced run")
-        lookups = lk.count / (w * h)
-    out = {"lookups_per_primary_ray": lookups, "tile_pixels": TILE if cache_kib is not None else None,
-           "cache_kib": cache_kib}
+    lk, rec = record_lookups(prep, name, cam, w, h, run.primary.calls)
+    if not (np.array_equal(rec.tests, run.primary.tests) and np.array_equal(rec.prim, run.primary.prim)):
+        raise RuntimeError(f"memory model: scheme {name}'s recording run differs from its traced run")
+    tex = texture_layout(prep.base)
+    tex_lines = texture_lines_per_ray(tex, prep.base, lk)
+    out = {"lookups_per_primary_ray": lk.count / (w * h), "tile_pixels": TILE if cache_kib is not None else None,
+           "cache_kib": cache_kib, "texture_layout": tex.description, "texture_bytes": tex.texture_bytes,
+           "texture_lines_per_ray": tex_lines}
     for key, lay in lays.items():
         out[key] = measure(lay, lk, cache_kib)
+        out[key]["total_lines_per_ray"] = out[key]["map_lines_per_ray"] + tex_lines
     return out
