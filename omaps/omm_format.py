@@ -168,8 +168,7 @@ class Packer:
         self.format_code = int(format_code)
         self.special = bool(special)  # uniform micromaps as special indices
         self.dedup = bool(dedup)  # identical micromaps stored once
-        self.chunks: list[bytes] = []
-        self.size = 0
+        self._data = bytearray()  # the packed micromaps, one after another (grown in place: no copy)
         self.records: list[np.ndarray] = []  # TRIANGLE_RECORD arrays, in order
         self.singles: list[tuple[int, int, int]] = []  # records added one by one, after those
         self.n_records = 0
@@ -198,9 +197,11 @@ class Packer:
             return idx
         index, record_of = self.stored.get((level, fmt), (None, np.zeros(0, np.int32)))
         if index is None:
-            index = rows_mod.RowIndex(packed.shape[1])
+            index = rows_mod.RowIndex(packed.shape[1], external=True)  # it compares with the data itself
         before = index.n
-        ids = index.add(packed)
+        view = np.frombuffer(self._data, np.uint8)
+        ids = index.add(packed, view, self.size)
+        del view  # (the data grows below)
         fresh = rows_mod.first_uses(ids, before)  # the first row of each micromap not stored before
         nbytes = packed.shape[1]
         if len(fresh):
@@ -213,8 +214,7 @@ class Packer:
             self.records.append(rec)
             record_of = np.concatenate([record_of, self.n_records + np.arange(len(fresh), dtype=np.int32)])
             self.n_records += len(fresh)
-            self.chunks.append(packed[fresh].tobytes())
-            self.size += len(fresh) * nbytes
+            self._append(packed[fresh])
         self.stored[(level, fmt)] = (index, record_of)
         idx[rows] = record_of[ids]
         return idx
@@ -231,15 +231,31 @@ class Packer:
             self.records = [np.concatenate(self.records) if self.records else np.zeros(0, TRIANGLE_RECORD)]
         return self.records[0]
 
+    @property
+    def size(self) -> int:
+        """Bytes of micromap data so far."""
+        return len(self._data)
+
     def data(self) -> np.ndarray:
-        """Every micromap's packed states so far, as one uint8 array (record ``data_offset`` into it)."""
-        return np.frombuffer(b"".join(self.chunks), dtype=np.uint8).copy()
+        """Every micromap's packed states so far, as one uint8 array (record ``data_offset`` into it):
+        the packer's own bytes, not a copy (the output's data is held once); micromaps added
+        later do not change it."""
+        return np.frombuffer(self._data, dtype=np.uint8)
+
+    def _append(self, raw) -> None:
+        """Append bytes to the data: in place (a large buffer grows without a copy), unless an
+        earlier ``data()`` holds the buffer, which then stays as it is and the data moves on."""
+        raw = memoryview(np.ascontiguousarray(raw)).cast("B")
+        try:
+            self._data += raw
+        except BufferError:  # a view from ``data()`` is alive: it keeps the old buffer
+            self._data = bytearray(self._data)
+            self._data += raw
 
     def _new(self, raw: bytes, level: int, fmt: int) -> int:
         self.singles.append((self.size, level, fmt))
         self.n_records += 1
-        self.chunks.append(raw)
-        self.size += len(raw)
+        self._append(np.frombuffer(raw, np.uint8))
         if self.size > 0xFFFFFFFF:
             raise InputError("micromap data exceeds the 4 GiB a 32-bit data offset can address; lower the level")
         return self.n_records - 1

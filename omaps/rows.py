@@ -73,41 +73,78 @@ def _hash_rows(words, keys, out):
         out[i] = h
 
 
+OWN, IN_PLACE, EXTERNAL = 0, 1, 2  # where ``_insert`` finds the rows it compares
+
+
+@njit(cache=True, inline="always")
+def _same_words(store, j, words, i):
+    for w in range(words.shape[1]):
+        if store[j, w] != words[i, w]:
+            return False
+    return True
+
+
+@njit(cache=True, inline="always")
+def _same_bytes(data, at, rows, i):
+    """Whether ``data[at:at + K]`` holds row ``i`` of ``rows`` (M, K): compared a block of bytes
+    at a time, with no branch inside a block (the compiler vectorises it)."""
+    width = rows.shape[1]
+    k = 0
+    while k < width:
+        end = min(k + 256, width)
+        d = np.uint8(0)
+        for q in range(k, end):
+            d |= data[at + q] ^ rows[i, q]
+        if d:
+            return False
+        k = end
+    return True
+
+
 @njit(cache=True)
-def _insert(words, hashes, table, store, n, in_place):
+def _insert(words, hashes, table, store, n, mode, rows, data, offsets, before):
     """Each row of ``words`` (M, W) looked up in the open-addressing ``table`` (S, 2), S a power
     of two at least twice the entries it will hold: per slot an entry (-1: empty) and its row's
     hash (int64 bits). A row not found gets the id n, n + 1, ... Returns (ids, new n). A probe
     reads one slot (entry and hash together); a row's words are compared only when the hashes
     agree.
 
-    Not ``in_place``: an entry is an id, whose row is copied to ``store`` (at least n + M rows; a
-    ``RowIndex``, rows added over many calls). ``in_place`` (``first_occurrences``: every row at
+    ``mode`` OWN: an entry is an id, whose row is copied to ``store`` (at least n + M rows; a
+    ``RowIndex``, rows added over many calls). IN_PLACE (``first_occurrences``: every row at
     once, from an empty table, ``store`` is ``words``): an entry is the position of its row's first
-    occurrence in ``words``, nothing is copied."""
+    occurrence in ``words``, nothing is copied. EXTERNAL (a ``RowIndex`` over its caller's
+    bytes): an entry is an id; a row of an id below ``before`` is read from ``data`` at
+    ``offsets[id]`` and compared with the row's bytes ``rows`` (M, K), a newer one from ``words``
+    itself; nothing is copied."""
     mask = table.shape[0] - 1
     ids = np.empty(words.shape[0], dtype=np.int64)
+    first = np.empty(words.shape[0] if mode == EXTERNAL else 0, dtype=np.int64)  # the row of each new id
     for i in range(words.shape[0]):
         h = hashes[i]
         s = h & mask
         while True:
             j = table[s, 0]
             if j < 0:  # not there: a new row
-                table[s, 0] = i if in_place else n
+                table[s, 0] = i if mode == IN_PLACE else n
                 table[s, 1] = h
-                if not in_place:
+                if mode == OWN:
                     store[n] = words[i]
+                elif mode == EXTERNAL:
+                    first[n - before] = i
                 ids[i] = n
                 n += 1
                 break
             if table[s, 1] == h:
-                same = True
-                for w in range(words.shape[1]):
-                    if store[j, w] != words[i, w]:
-                        same = False
-                        break
+                if mode == OWN:
+                    same = _same_words(store, j, words, i)
+                elif mode == IN_PLACE:
+                    same = _same_words(words, j, words, i)
+                elif j >= before:
+                    same = _same_words(words, first[j - before], words, i)
+                else:
+                    same = _same_bytes(data, offsets[j], rows, i)
                 if same:
-                    ids[i] = ids[j] if in_place else j
+                    ids[i] = ids[j] if mode == IN_PLACE else j
                     break
             s = (s + 1) & mask
     return ids, n
@@ -132,6 +169,12 @@ class RowIndex:
     confirmed word by word: equal rows get one id, different rows different ids, whatever their
     hashes. The pack stage's reuse of identical micromaps, and ``first_occurrences``.
 
+    By default the index keeps a copy of each distinct row. With ``external``, it keeps none: the
+    caller keeps the distinct rows in a byte buffer of its own, passes it to every ``add``
+    (``data``) and stores the rows that call found new, in the order of their ids, at ``at``,
+    ``at + width``, ... (the rows' first occurrences, ``first_uses``), before the next ``add``.
+    The pack stage keeps its micromap data so: one copy of the output, not two.
+
     Example::
 
         >>> import numpy as np
@@ -141,22 +184,43 @@ class RowIndex:
         [0, 1, 0]
         >>> index.add(np.array([[0, 5], [7, 7]], np.uint8)).tolist()
         [1, 2]
+        >>> ext, data = RowIndex(2, external=True), bytearray()
+        >>> rows = np.array([[1, 2], [0, 5], [1, 2]], np.uint8)
+        >>> ids = ext.add(rows, np.frombuffer(data, np.uint8), len(data))
+        >>> data += rows[first_uses(ids)].tobytes()
+        >>> ext.add(np.array([[0, 5], [7, 7]], np.uint8), np.frombuffer(data, np.uint8), len(data)).tolist()
+        [1, 2]
     """
 
-    def __init__(self, width: int):
+    def __init__(self, width: int, external: bool = False):
         self.width = int(width)  # bytes per row
         self.n = 0  # distinct rows so far
+        self.external = bool(external)
         self._store = np.empty((0, -(-self.width // 8)), np.uint64)
+        self._offsets = np.empty(0, np.int64)  # external: each id's row's byte offset in the caller's data
         self._table = np.full((16, 2), -1, np.int64)
 
-    def add(self, rows: np.ndarray) -> np.ndarray:
+    def add(self, rows: np.ndarray, data: np.ndarray | None = None, at: int = 0) -> np.ndarray:
         """The id of each row (M, ...) of ``width`` bytes: an earlier equal row's, else a new one
-        (ids from ``n`` on, in the order of the rows)."""
+        (ids from ``n`` on, in the order of the rows). ``external``: ``data`` (uint8) holds every
+        earlier id's row where the caller stored it, and the new ones will be stored from byte
+        ``at`` on (see the class)."""
         a = _as_bytes(rows)
         if a.shape[1] != self.width:
             raise ValueError(f"rows of {a.shape[1]} bytes in an index of {self.width}-byte rows")
+        if self.external and data is None:
+            raise ValueError("an external RowIndex compares with the caller's data: pass it")
         need = self.n + len(a)
-        if need > len(self._store):
+        store, before = self._store, self.n
+        if self.external:
+            if need > len(self._offsets):
+                offsets = np.empty(max(need, 2 * len(self._offsets)), np.int64)
+                offsets[:self.n] = self._offsets[:self.n]
+                self._offsets = offsets
+            data = np.asarray(data, dtype=np.uint8).reshape(-1)
+            if self.n and int(self._offsets[:self.n].max()) + self.width > len(data):
+                raise ValueError("data does not hold every row this index has seen")
+        elif need > len(self._store):
             store = np.empty((max(need, 2 * len(self._store)), self._store.shape[1]), np.uint64)
             store[:self.n] = self._store[:self.n]
             self._store = store
@@ -166,9 +230,15 @@ class RowIndex:
                 size *= 2
             old, self._table = self._table, np.full((size, 2), -1, np.int64)
             _rehash(old, self._table)
-        ids, self.n = _insert(_words(a), row_hashes(a).view(np.int64), self._table, self._store, self.n,
-                              False)
+        mode = EXTERNAL if self.external else OWN
+        ids, self.n = _insert(_words(a), row_hashes(a).view(np.int64), self._table, store, self.n, mode, a,
+                              _NO_DATA if data is None else data, self._offsets, before)
+        if self.external:
+            self._offsets[before:self.n] = int(at) + self.width * np.arange(self.n - before, dtype=np.int64)
         return ids
+
+
+_NO_DATA = np.empty(0, np.uint8)
 
 
 def unique_rows(rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -198,8 +268,8 @@ def first_occurrences(rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     while size < 2 * len(flat):
         size *= 2
     words = _words(flat)
-    ids, _ = _insert(words, row_hashes(flat).view(np.int64), np.full((size, 2), -1, np.int64), words, 0,
-                     True)
+    ids, _ = _insert(words, row_hashes(flat).view(np.int64), np.full((size, 2), -1, np.int64), words, 0, IN_PLACE,
+                     flat, _NO_DATA, np.empty(0, np.int64), 0)
     return first_uses(ids), ids
 
 

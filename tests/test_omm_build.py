@@ -116,6 +116,27 @@ def test_reuse_survives_hash_collisions(rng, monkeypatch, chunk):
     np.testing.assert_array_equal(whole.index[:20], whole.index[20:40])
 
 
+def test_packer_data_views_outlive_later_micromaps(rng):
+    """``Packer.data`` is the packer's own bytes, not a copy: a view taken earlier keeps what it
+    showed while micromaps are added (the data moves on to a buffer of its own), the records
+    point into the latest data, and reuse still finds the earlier micromaps."""
+    packer = omm_format.Packer()
+    rows = rng.integers(0, 4, (6, 16)).astype(np.uint8)
+    packer.add(rows[:3], 2)
+    early = packer.data()
+    shown = early.copy()
+    ids = packer.add(np.concatenate([rows[3:], rows[:3]]), 2)
+    np.testing.assert_array_equal(early, shown)
+    data, rec = packer.data(), packer.record_array()
+    assert ids[3:].tolist() == [0, 1, 2] and len(rec) == 6 and len(data) == 6 * 4
+    for i in range(6):
+        raw = data[rec["data_offset"][i]:rec["data_offset"][i] + 4]
+        np.testing.assert_array_equal(omm_format.unpack(raw[None], 2, 2)[0], rows[i])
+    del early
+    packer.add(rows[:1] ^ 1, 2)  # grows in place again
+    assert len(packer.data()) == 7 * 4 and packer.data()[:24].tolist() == data.tolist()
+
+
 # ---- promotion -----------------------------------------------------------------------------
 
 def test_fractions_agree_with_known_states(rng):

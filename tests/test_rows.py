@@ -96,25 +96,34 @@ def test_only_integer_rows():
         unique_rows(np.zeros((3, 2)))
 
 
-@settings(max_examples=100, deadline=None)
-@given(st.data(), st.sampled_from(["hash", "collide", "few"]))
-def test_row_index_ids_across_calls(data, hashes):
+@settings(max_examples=150, deadline=None)
+@given(st.data(), st.sampled_from(["hash", "collide", "few"]), st.booleans())
+def test_row_index_ids_across_calls(data, hashes, external):
     """``RowIndex``: over several ``add`` calls (the table grows and rehashes), one id per
     distinct row, counted up in the order of first use -- checked against a dict of the rows'
-    bytes -- also when every hash collides or only a few values occur."""
+    bytes -- also when every hash collides or only a few values occur; with its own copy of the
+    rows, or ``external``: comparing with the caller's bytes (the new rows stored after some
+    junk, at an offset the caller chooses, as the pack stage keeps its data)."""
     width = data.draw(st.integers(1, 20))
     pool = data.draw(st.lists(st.binary(min_size=width, max_size=width), min_size=1, max_size=12))
     calls = data.draw(st.lists(st.lists(st.integers(0, len(pool) - 1), max_size=40), min_size=1, max_size=5))
     fake = {"collide": lambda f: np.zeros(len(f), np.uint64),
             "few": lambda f: np.frombuffer(b"".join(bytes(r[:1]) * 8 for r in f), np.uint64) & np.uint64(3)}
-    index = omaps.rows.RowIndex(width)
+    index = omaps.rows.RowIndex(width, external=external)
     ref: dict[bytes, int] = {}
+    store = bytearray()
     with pytest.MonkeyPatch.context() as mp:
         if hashes in fake:
             mp.setattr(omaps.rows, "row_hashes", fake[hashes])
         for picks in calls:
             rows = np.array([np.frombuffer(pool[p], np.uint8) for p in picks], np.uint8).reshape(len(picks), width)
-            ids = index.add(rows)
+            if external:
+                store += bytes(data.draw(st.binary(max_size=5)))  # bytes no row uses, between the rows
+                before = index.n
+                ids = index.add(rows, np.frombuffer(store, np.uint8), len(store))
+                store += rows[omaps.rows.first_uses(ids, before)].tobytes()
+            else:
+                ids = index.add(rows)
             want = [ref.setdefault(pool[p], len(ref)) for p in picks]
             assert ids.tolist() == want
     assert index.n == len(ref)
@@ -124,3 +133,9 @@ def test_row_index_rejects_another_width():
     index = omaps.rows.RowIndex(4)
     with pytest.raises(ValueError, match="5 bytes"):
         index.add(np.zeros((2, 5), np.uint8))
+    external = omaps.rows.RowIndex(4, external=True)
+    with pytest.raises(ValueError, match="pass it"):
+        external.add(np.zeros((2, 4), np.uint8))
+    external.add(np.zeros((2, 4), np.uint8), np.zeros(0, np.uint8), 0)
+    with pytest.raises(ValueError, match="does not hold"):  # the caller did not store the new row
+        external.add(np.ones((1, 4), np.uint8), np.zeros(2, np.uint8), 2)

@@ -39,18 +39,24 @@ def write_into(folder, result: OmmResult, extra_summary: dict | None = None) -> 
     """Write the OMM files into an existing (empty) folder."""
     summary = dict(result.summary, **(extra_summary or {}))
     files = {
-        omm_format.DATA_FILE: result.data.astype(np.uint8).tobytes(),
-        omm_format.TRIANGLES_FILE: result.triangles.astype(omm_format.TRIANGLE_RECORD).tobytes(),
-        omm_format.INDEX_FILE: result.index.astype(omm_format.INDEX_DTYPE).tobytes(),
+        omm_format.DATA_FILE: _raw(result.data, np.uint8),
+        omm_format.TRIANGLES_FILE: _raw(result.triangles, omm_format.TRIANGLE_RECORD),
+        omm_format.INDEX_FILE: _raw(result.index, omm_format.INDEX_DTYPE),
         omm_format.USAGE_FILE: (json.dumps(result.usage, indent=1) + "\n").encode(),
         omm_format.SUMMARY_FILE: (json.dumps(summary, indent=1) + "\n").encode(),
     }
     if result.pair_blocks is not None:
         files[omm_format.PAIR_BLOCKS_FILE] = result.pair_blocks
-        files[omm_format.PAIRS_FILE] = result.pair_records.astype(omm_format.PAIR_RECORD).tobytes()
+        files[omm_format.PAIRS_FILE] = _raw(result.pair_records, omm_format.PAIR_RECORD)
     for name, raw in files.items():
         with open(os.path.join(folder, name), "wb") as f:
             f.write(raw)
+
+
+def _raw(a: np.ndarray, dtype) -> memoryview:
+    """The bytes of an array as ``dtype``, without a copy where it is already that (the micromap
+    data can be gigabytes: written from where it lies)."""
+    return memoryview(np.ascontiguousarray(a, dtype=dtype)).cast("B")
 
 
 def _read(folder, name) -> bytes:
