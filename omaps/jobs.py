@@ -41,7 +41,7 @@ __all__ = ["bake_omms", "OmmBake", "omm_settings", "omm_input_spec", "verify_omm
 
 class TqdmProgress:
     """``omm.pipeline.Progress`` as a progress bar on stderr: one bar a stage (the budget's
-    pricing, in micro-triangles; the baking, in geometries), its total known when it starts."""
+    pricing and the baking, in micro-triangles), its total known when it starts."""
 
     FORMAT = "{desc}: {percentage:3.0f}%|{bar}| {n_fmt}/{total_fmt} {unit} [{elapsed}<{remaining}]"
 

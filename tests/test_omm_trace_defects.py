@@ -227,7 +227,7 @@ def _stages(events):
 
 def test_budget_progress_totals_are_known_from_the_start(tex_and_uvs, monkeypatch):
     from omaps.alpha_test import StateRule
-    from omaps.omm import Geometry, OmmSettings, budget, build
+    from omaps.omm import Geometry, OmmSettings, budget, build, pipeline
     from omaps.texture import AlphaTexture
 
     monkeypatch.setattr(budget, "PROGRESS_CHUNK", 64)  # the pricing's bakes in pieces: the same states
@@ -243,10 +243,15 @@ def test_budget_progress_totals_are_known_from_the_start(tex_and_uvs, monkeypatc
     assert [s[0] for s in stages] == ["pricing", "baking"]
     (_, p_total, p_unit, p_steps), (_, b_total, b_unit, b_steps) = stages
     assert p_unit == "micro-triangles" and p_total > 0 and sum(p_steps) == p_total and len(p_steps) > 2
-    assert b_unit == "geometries" and b_total == 2 and b_steps == [1, 1]
+    assert b_unit == "micro-triangles" and b_total == sum(b_steps) > 0
     rec = _Recorder()
+    monkeypatch.setattr(pipeline, "CHUNK_MICRO_TRIANGLES", 40)  # several steps per geometry
     build(geoms, OmmSettings(level=2), progress=rec)
-    assert _stages(rec.events) == [["baking", 2, "geometries", [1, 1]]]
+    distinct = len(np.unique(tris.reshape(len(tris), -1), axis=0))  # identical triangles baked once
+    (name, total, unit, steps), = _stages(rec.events)
+    distinct5 = len(np.unique(tris[:5].reshape(5, -1), axis=0))
+    assert (name, unit, total) == ("baking", "micro-triangles", 16 * (distinct + distinct5))
+    assert sum(steps) == total and len(steps) > 2 and all(s % 16 == 0 for s in steps)
 
 
 def test_budget_progress_bar_reads_well(tex_and_uvs, tmp_path, capsys, monkeypatch):
@@ -254,7 +259,7 @@ def test_budget_progress_bar_reads_well(tex_and_uvs, tmp_path, capsys, monkeypat
     monkeypatch.setenv("OMAPS_PROGRESS", "1")
     assert main(["omm", str(png), str(uvs), "-o", str(tmp_path / "o"), "--budget", "600"]) == 0
     err = capsys.readouterr().err
-    assert "micro-triangles" in err and "geometries" in err, err
+    assert "micro-triangles" in err and "geometries" not in err, err
     assert not re.search(r"\dgeometr", err), err
     def number(text):  # tqdm's scaled numbers: 189, 1.28k
         return float(text.rstrip("kMG")) * 1000 ** ("kMG".index(text[-1]) + 1 if text[-1] in "kMG" else 0)

@@ -235,8 +235,9 @@ def _triangle_levels(test: AlphaTest, tris: np.ndarray, settings: OmmSettings, n
 
 class Progress(Protocol):
     """What ``build`` reports as it goes (a progress bar): a stage begins with its total known
-    (``stage``: "pricing", micro-triangles, with --budget; then "baking", geometries), and
-    advances until its steps add up to that total."""
+    (``stage``: "pricing", micro-triangles, with --budget; then "baking", the micro-triangles
+    of the triangles baked: identical ones once), and advances until its steps add up to that
+    total."""
 
     def stage(self, name: str, total: int, unit: str) -> None: ...
 
@@ -368,10 +369,14 @@ def build(geometries: list[Geometry], settings: OmmSettings = OmmSettings(),
         from .budget import budget_levels
 
         plan, budget_report = budget_levels(geometries, settings, settings.budget, progress)
+    if plans is None:
+        plans = [plan_geometry(g, settings, n_map, plan[gi] if plan is not None else None)
+                 for gi, g in enumerate(geometries)]
     if progress is not None:
-        progress.stage("baking", len(geometries), "geometries")
+        progress.stage("baking", sum(int(np.sum(np.left_shift(np.int64(1), 2 * gp.levels))) for gp in plans),
+                       "micro-triangles")
     for gi, g in enumerate(geometries):
-        gp = plans[gi] if plans is not None else plan_geometry(g, settings, n_map, plan[gi] if plan is not None else None)
+        gp = plans[gi]
         tris, levels, weight, area, unknown, inverse, merged = (gp.tris, gp.levels, gp.weight, gp.area, gp.unknown,
                                                                 gp.inverse, gp.merged)
         n_tris = gp.n_input
@@ -441,6 +446,8 @@ def build(geometries: list[Geometry], settings: OmmSettings = OmmSettings(),
                             idx[a + sel[part]] = packer.add(rows[part], int(lvl), f)
                             bytes_no_reuse += int(part.sum()) * omm_format.micromap_bytes(int(lvl), f)
                 level_hist[int(lvl)] = level_hist.get(int(lvl), 0) + int(w[sel].sum())
+            if progress is not None:
+                progress.advance(int(starts[-1]))
         index_parts.append(idx if inverse is None else idx[inverse])
         info = {"name": g.name, "first_triangle": first, "triangles": n_tris, "texture": g.test.name,
                 "width": g.test.width, "height": g.test.height, "filter": g.test.filter,
@@ -452,8 +459,6 @@ def build(geometries: list[Geometry], settings: OmmSettings = OmmSettings(),
         geo_info.append(info)
         n_blocks_total += n_blocks
         first += n_tris
-        if progress is not None:
-            progress.advance(1)
     index = np.concatenate(index_parts) if index_parts else np.zeros(0, dtype=np.int32)
     triangles = packer.record_array()
     data = packer.data()
