@@ -88,6 +88,63 @@ def test_frontier_plot(tmp_path, memory):
     assert "csm4 shared" not in labels  # the same bytes: one point
 
 
+def _with_texture(rep: dict, none_lines: float) -> dict:
+    """``_report(True)`` with texture lines: each scheme's alpha tests read lines in proportion
+    to them, ``none``'s ``none_lines``."""
+    rep["schemes"]["none"]["memory"] = {"texture_lines_per_ray": none_lines,
+                                        **{lay: {"map_bytes": 0, "map_lines_per_ray": 0.0,
+                                                 "total_lines_per_ray": none_lines} for lay in ("own", "shared")}}
+    for n, r in rep["schemes"].items():
+        if n == "none":
+            continue
+        tex = none_lines * r["alpha_tests_per_primary_ray"]
+        r["memory"]["texture_lines_per_ray"] = tex
+        for lay in ("own", "shared"):
+            r["memory"][lay]["total_lines_per_ray"] = r["memory"][lay]["map_lines_per_ray"] + tex
+            r["memory"][lay]["map_reads_per_lookup"] = 1.0
+    return rep
+
+
+def test_frontier_plot_with_texture_lines(tmp_path):
+    from omaps.trace.pictures import _total_points, frontier_plot
+
+    rep = _with_texture(_report(True), 1.2)
+    frontier_plot(str(tmp_path / "f.png"), rep)
+    assert Image.open(tmp_path / "f.png").size[0] > 1900  # three panels
+    pts = {p[1]: p for p in _total_points(rep)}
+    assert pts["none"][2] == 1.2 and pts["none"][0] == "none"
+    assert pts["vq4 shared"][2] == pytest.approx(0.5 + 0.1 * 2 + 1.2 * 0.25)
+    assert "csm4 shared" not in pts
+
+
+@pytest.mark.parametrize("none_lines", [0.3, 3.0])
+def test_frontier_page_traffic_paragraph(none_lines):
+    """The page's paragraph on map + texture traffic says what the numbers say: whether any map
+    reads less in all than ``none``, and which point reads least."""
+    mod = _frontier_module()
+    rep = _with_texture(_report(True), none_lines)
+    tr = mod.traffic(rep)
+    totals = {p[1]: p[7] for p in mod._points(rep)}
+    best = min(totals, key=totals.get)
+    assert tr["ranked"][0][1] == best
+    assert [p[1] for p in tr["below"]] == sorted((n for n in totals if totals[n] < none_lines), key=totals.get)
+    text = mod.traffic_text("palm", tr)
+    if none_lines == 0.3:  # every map's lines exceed the texture lines it saves
+        assert not tr["below"] and "no map lowers the total" in text and tr["front"][0][1] == "none"
+    else:
+        assert tr["below"] and "no map lowers" not in text and f"the least is {best}" in text
+    assert all(f"{p[7]:.3f}" in text for p in tr["families"].values())
+    # the front of tests against totals, none among the points: nothing dominates a point on it
+    pts = [("none", none_lines, 1.0)] + [(p[1], p[7], p[3]) for p in tr["ranked"]]
+    for name, x, y in [(p[1], p[7], p[3]) for p in tr["front"]]:
+        assert not any(u <= x and t <= y and (u < x or t < y) for _, u, t in pts), name
+    plain = _report(True)
+    for n, r in plain["schemes"].items():
+        for lay in r.get("memory", {}).values():
+            lay["map_reads_per_lookup"] = 1.0
+    assert mod.traffic(plain) is None  # a run without texture lines: no section
+
+
 def test_eval_plot_marks_the_front(tmp_path):
     from omaps.corpus import report
 

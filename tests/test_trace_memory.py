@@ -283,12 +283,18 @@ def test_cli_memory_and_frontier(tmp_path, capsys):
                  "--quiet"]) == 0
     out = capsys.readouterr().out
     assert "what a lookup reads" in out and "shared lines" in out and "own misses" in out
+    assert "tex lines" in out and "own total" in out and "texture layout: RGBA8 texels" in out
     r = json.loads(j.read_text())
     for n, v in r["schemes"].items():
         assert v["differing_pixels"] == 0
         assert {"map_reads_per_lookup", "map_lines_per_ray"} <= set(v)
-        assert {"map_bytes", "map_reads_per_lookup", "map_lines_per_ray", "cache_misses_per_ray"} <= set(
-            v["memory"]["shared"])
+        assert {"map_bytes", "map_reads_per_lookup", "map_lines_per_ray", "cache_misses_per_ray",
+                "total_lines_per_ray"} <= set(v["memory"]["shared"])
+        mem = v["memory"]
+        assert v["texture_lines_per_ray"] == mem["texture_lines_per_ray"] <= r["schemes"]["none"]["texture_lines_per_ray"]
+        assert v["total_lines_per_ray"] == mem["own"]["total_lines_per_ray"]
+        for lay in ("own", "shared"):
+            assert mem[lay]["total_lines_per_ray"] == mem[lay]["map_lines_per_ray"] + mem["texture_lines_per_ray"]
     assert r["schemes"][f"tri{LEVEL}"]["memory"]["shared"]["layout"].startswith("standard OMMs")
     # each layout's gaps to the fronts, recomputed by brute force over the report's points
     pts = [(v["alpha_tests_per_primary_ray"], v["memory"][lay]) for n, v in r["schemes"].items() if n != "none"

@@ -3,6 +3,7 @@ test scenes with every representation and ``memory=True``.
 
     python docs/scripts/frontier.py                 # trace palm and forest (tens of minutes), then render
     python docs/scripts/frontier.py --render-only   # re-render the page from docs/scripts/frontier.json
+    python docs/scripts/frontier.py --scenes palm   # trace only these of the page's scenes, keep the others' runs
     python docs/scripts/frontier.py --scene S.glb --level 8 --json out.json   # any scene: its gap table
 
 Each scene is traced once by ``omaps.trace_scene`` (the default camera, SIZE x SIZE pixels) with
@@ -76,9 +77,10 @@ def _kind(report: dict, n: str) -> str:
 
 
 def _points(report: dict) -> list[tuple]:
-    """(family, label, bytes, tests per ray, lines per ray, reads per lookup) of every scheme and
-    layout; family: 'omaps' (the deck's blocks and raw squares), 'tri' (standard OMMs: triL in its
-    shared layout), 'succinct', 'csm'."""
+    """(family, label, bytes, tests per ray, lines per ray, reads per lookup, texture lines per
+    ray, map + texture lines per ray) of every scheme and layout (the last two None in a run
+    without texture lines); family: 'omaps' (the deck's blocks and raw squares), 'tri' (standard
+    OMMs: triL in its shared layout), 'succinct', 'csm'."""
     pts = []
     for n, r in report["schemes"].items():
         k = _kind(report, n)
@@ -86,20 +88,77 @@ def _points(report: dict) -> list[tuple]:
         if k == "none" or not mem:
             continue
         t = r["alpha_tests_per_primary_ray"]
+        tex = mem.get("texture_lines_per_ray")
         for lay in ("own", "shared"):
             m = mem[lay]
             if k == "raw":
-                if lay == "shared":  # the published standard OMMs; triL's own raw rows are omaps' layout
-                    pts.append(("tri", f"{n} OMM", m["map_bytes"], t, m["map_lines_per_ray"], m["map_reads_per_lookup"]))
-                else:
-                    pts.append(("omaps", f"{n} raw", m["map_bytes"], t, m["map_lines_per_ray"], m["map_reads_per_lookup"]))
-                continue
-            if k == "csm" and lay == "shared":
+                # the published standard OMMs (shared); triL's own raw rows are omaps' layout
+                fam, label = ("tri", f"{n} OMM") if lay == "shared" else ("omaps", f"{n} raw")
+            elif k == "csm" and lay == "shared":
                 continue  # the same layout
-            fam = "omaps" if k == "square" else k
-            label = n if lay == "own" else f"{n} shared"
-            pts.append((fam, label, m["map_bytes"], t, m["map_lines_per_ray"], m["map_reads_per_lookup"]))
+            else:
+                fam, label = ("omaps" if k == "square" else k), (n if lay == "own" else f"{n} shared")
+            pts.append((fam, label, m["map_bytes"], t, m["map_lines_per_ray"], m["map_reads_per_lookup"], tex,
+                        m.get("total_lines_per_ray")))
     return pts
+
+
+FAMILY_NAMES = {"omaps": "omaps", "tri": "standard OMM", "succinct": "succinct", "csm": "csm"}
+
+
+def traffic(report: dict) -> dict | None:
+    """Alpha tests against map + texture lines per primary ray: ``none``'s texture lines and
+    tests, every point with its total (``_points``), sorted by total, the points read less in
+    all than ``none``, each family's least total and the front of tests against totals
+    (``none`` among the points). None for a run without texture lines."""
+    from omaps.frontier import front_mask
+
+    none = report["schemes"].get("none", {})
+    pts = [p for p in _points(report) if p[7] is not None]
+    if not pts or "texture_lines_per_ray" not in (none.get("memory") or {}):
+        return None
+    nt, ntests = none["memory"]["texture_lines_per_ray"], none["alpha_tests_per_primary_ray"]
+    ranked = sorted(pts, key=lambda p: (p[7], p[3]))
+    fams = {}
+    for p in ranked:
+        fams.setdefault(p[0], p)
+    every = [("none", "none", 0, ntests, 0.0, 0.0, nt, nt)] + ranked
+    mask = front_mask([p[7] for p in every], [p[3] for p in every])
+    front = sorted((p for p, m in zip(every, mask) if m), key=lambda p: p[7])
+    return {"none_lines": nt, "none_tests": ntests, "ranked": ranked, "below": [p for p in ranked if p[7] < nt],
+            "families": fams, "front": front}
+
+
+def traffic_text(scene: str, tr: dict) -> str:
+    """The paragraph on a scene's total traffic, from its numbers alone (``traffic``)."""
+    nt, best = tr["none_lines"], tr["ranked"][0]
+    saved = nt - best[6]
+    out = [f"`none` reads no map and alpha-tests every candidate: {nt:.3f} lines of texture per primary ray "
+           f"({tr['none_tests']:.3f} alpha tests)."]
+    if not tr["below"]:
+        out.append(f"On {scene} no map lowers the total: the least any point reads, map and texture together, is "
+                   f"{best[1]}'s {best[7]:.3f} lines ({best[7] / nt:.2f}x `none`'s), its {best[4]:.3f} lines of map "
+                   f"more than the {saved:.3f} lines of texture its map saves. Here a map earns its place by the alpha "
+                   "tests (shader calls) it saves, not by memory traffic.")
+    else:
+        fams = sorted({FAMILY_NAMES[p[0]] for p in tr["below"]})
+        out.append(f"On {scene}, {len(tr['below'])} of {len(tr['ranked'])} points read fewer lines in all than "
+                   f"`none` (families: {', '.join(fams)}); the least is {best[1]}: {best[7]:.3f} lines "
+                   f"({best[7] / nt:.2f}x `none`'s: {best[4]:.3f} of map, {best[6]:.3f} of texture) at "
+                   f"{best[3]:.3f} alpha tests per ray.")
+    per = []
+    for fam, p in tr["families"].items():
+        verdict = "below" if p[7] < nt else "above"
+        per.append(f"{FAMILY_NAMES[fam]} {p[1]} {p[7]:.3f} ({verdict} `none`)")
+    out.append("Each family's least total: " + "; ".join(per) + ".")
+    names = [p[1] for p in tr["front"]]
+    if len(names) == 1:
+        out.append(f"{names[0]} alone is on the front of alpha tests against total lines: nothing reads less "
+                   "and tests less.")
+    else:
+        out.append("On the front of alpha tests against total lines, from the fewest lines to the fewest tests: "
+                   + ", ".join(names) + "; for every other point one of them reads no more and tests no more.")
+    return " ".join(out)
 
 
 def gap_rows(report: dict) -> list[tuple]:
@@ -151,7 +210,9 @@ def render(data: dict) -> str:
         "layout (a block stored with its pair, a raw micromap row per triangle, a succinct tree per triangle) and "
         "in its shared one (identical maps stored once behind a 32-bit index; for `triL` that is the standard "
         "OMM layout `omaps omm` writes, labelled OMM). The Pareto front (fewer bytes or lines and fewer tests) is "
-        "the line; dominated points are lighter.",
+        "the line; dominated points are lighter. A third chart adds the alpha texture each alpha test still reads: "
+        "alpha tests against map + texture lines per primary ray, with `none` (no map, every candidate tested) "
+        "as a point of its own.",
         "",
         f"The traces are {size}x{size} pixels (smaller than the guide's 512x512 so that the run fits this "
         f"machine), from each scene's default camera; the cache misses are those of a {cache:g} KiB LRU cache "
@@ -168,23 +229,43 @@ def render(data: dict) -> str:
                   f"{s['alpha_triangles']:,} alpha-tested triangles of {s['triangles']:,}, {s['pairs']:,} prototype "
                   f"pairs; traced in {d['seconds']:.0f} s. Every scheme: 0 differing pixels: "
                   f"{'yes' if rep['passed'] else 'NO'}.", "",
-                  f"![{scene}: alpha tests per primary ray against map bytes and lines read per ray]"
+                  f"![{scene}: alpha tests per primary ray against map bytes, map lines and map + texture lines "
+                  "read per ray]"
                   f"(img/frontier_{scene}.png)", "",
-                  "| scheme | tests/ray | differ | own KiB | reads/lookup | lines/ray | misses/ray | shared KiB | "
-                  "reads/lookup | lines/ray | misses/ray |",
-                  "|---|---|---|---|---|---|---|---|---|---|---|"]
+                  "| scheme | tests/ray | differ | texture lines/ray | own KiB | reads/lookup | lines/ray | "
+                  "misses/ray | total lines/ray | shared KiB | reads/lookup | lines/ray | misses/ray | "
+                  "total lines/ray |",
+                  "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
         for n in d["names"]:
             r = rep["schemes"][n]
             m = r.get("memory")
-            row = [n, f"{r['alpha_tests_per_primary_ray']:.3f}", str(r["differing_pixels"])]
+            tex = (m or {}).get("texture_lines_per_ray")
+            row = [n, f"{r['alpha_tests_per_primary_ray']:.3f}", str(r["differing_pixels"]),
+                   "—" if tex is None else f"{tex:.3f}"]
             for lay in ("own", "shared"):
                 if m:
                     x = m[lay]
+                    total = x.get("total_lines_per_ray")
                     row += [_kib(x["map_bytes"]), f"{x['map_reads_per_lookup']:.2f}", f"{x['map_lines_per_ray']:.3f}",
-                            f"{x['cache_misses_per_ray']:.3f}"]
+                            f"{x['cache_misses_per_ray']:.3f}", "—" if total is None else f"{total:.3f}"]
                 else:
-                    row += ["—"] * 4
+                    row += ["—"] * 5
             lines.append("| " + " | ".join(row) + " |")
+        tr = traffic(rep)
+        if tr is not None:
+            lines += ["", f"### {scene}: alpha tests against map + texture lines", "",
+                      "Every alpha test a map leaves still reads the alpha texture: the taps of the material's filter "
+                      "(one texel nearest, 2x2 linear), on mip level 0, with the texture stored as RGBA8 texels in "
+                      "4x4 tiles, one 64-byte line per tile (docs/FORMAT.md, \"What a lookup reads\"). A point's "
+                      "total is its lines of map data plus the texture lines its alpha tests read, per primary ray "
+                      "(the right-hand chart). Both count the distinct lines each ray touches, with no cache shared "
+                      "between rays; the tile cache's misses (the table) are modelled for map data only.", "",
+                      traffic_text(scene, tr), "",
+                      "| point (the front of tests against total lines) | tests/ray | map lines/ray | "
+                      "texture lines/ray | total lines/ray | total / none's |", "|---|---|---|---|---|---|"]
+            for p in tr["front"]:
+                lines.append(f"| {p[1]} | {p[3]:.3f} | {p[4]:.3f} | {p[6]:.3f} | {p[7]:.3f} | "
+                             f"{p[7] / tr['none_lines']:.2f} |")
         pts = _points(rep)
         sch = rep["schemes"]
         budgets = [(f"vq4 ({_kib(sch['vq4']['map_bytes'])} KiB)", sch["vq4"]["map_bytes"]),
@@ -274,6 +355,8 @@ def draw(data: dict) -> None:
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--render-only", action="store_true", help="re-render from docs/scripts/frontier.json")
+    ap.add_argument("--scenes", help="trace only these of the page's scenes (comma-separated), keeping the "
+                                     "others' runs from docs/scripts/frontier.json")
     ap.add_argument("--scene", help="trace this glTF scene instead of the page's (the page is left alone)")
     ap.add_argument("--level", type=int, default=8, help="with --scene: the finest level of the scheme set (8)")
     ap.add_argument("--json", help="with --scene: write the run (the page's JSON format) here")
@@ -290,6 +373,17 @@ def main() -> int:
         return 0
     if a.render_only:
         data = json.loads(DATA_JSON.read_text())
+    elif a.scenes:
+        names = a.scenes.split(",")
+        unknown = [n for n in names if n not in SCHEMES]
+        if unknown:
+            ap.error(f"--scenes: unknown scene {', '.join(unknown)} (choose from {', '.join(SCHEMES)})")
+        data = json.loads(DATA_JSON.read_text())
+        folder = shared_root() / "data" / "scenes"
+        new = run({n: (folder / f"{n}.glb", SCHEMES[n]) for n in names})
+        data["scenes"] = {n: new["scenes"].get(n, d) for n, d in data["scenes"].items()} | {
+            n: d for n, d in new["scenes"].items() if n not in data["scenes"]}
+        DATA_JSON.write_text(json.dumps(data, indent=1))
     else:
         data = run()
         DATA_JSON.write_text(json.dumps(data, indent=1))

@@ -36,12 +36,14 @@ the printed table, one row per scheme (every figure is also in --json):
                 above 1 (marked *) is timing noise, as every scheme does more work
   map KiB       storage of the scheme's maps over every prototype pair (or triangle), in KiB
 with --memory, a second table says what each lookup of the primary pass reads (docs/FORMAT.md, "What a
-lookup reads"): lookups/ray (filter calls per primary ray), then per layout -- own (each pair's or
-triangle's map stored with it, as map KiB counts it) and shared (identical maps once, behind a 32-bit
-index per pair or triangle; for triL the standard OMMs omaps omm writes: index buffer, record, data,
-special indices) -- KiB (its map bytes), reads (dependent reads per lookup), lines (distinct 64-byte
-lines of map data per primary ray) and, with --cache-kib K, misses (per primary ray, of a K KiB LRU
-cache shared by each 8x8 tile of pixels).
+lookup reads"): lookups/ray (filter calls per primary ray), tex lines (distinct 64-byte lines of alpha
+texture per primary ray that the alpha tests the map leaves fetch: the filter's taps on mip level 0,
+RGBA8 texels in 4x4 tiles, one line per tile), then per layout -- own (each pair's or triangle's map
+stored with it, as map KiB counts it) and shared (identical maps once, behind a 32-bit index per pair
+or triangle; for triL the standard OMMs omaps omm writes: index buffer, record, data, special
+indices) -- KiB (its map bytes), reads (dependent reads per lookup), lines (distinct 64-byte lines of
+map data per primary ray), total (lines plus tex lines) and, with --cache-kib K, misses (per primary
+ray, of a K KiB LRU cache shared by each 8x8 tile of pixels).
 """
 
 
@@ -70,13 +72,14 @@ def add_parser(sub) -> None:
                    help="alpha tests per primary ray against map bytes, every traced scheme on one chart")
     t.add_argument("--memory", action="store_true",
                    help="also model the map data each lookup reads: dependent reads per lookup and 64-byte lines "
-                        "per primary ray, per scheme in its own and its shared (indexed) layout")
+                        "per primary ray, per scheme in its own and its shared (indexed) layout, and the lines of "
+                        "alpha texture its alpha tests read, alone and added to the map lines")
     t.add_argument("--cache-kib", type=float, default=None, metavar="K",
                    help="with --memory: also the misses per primary ray of a K KiB LRU cache (64-byte lines) "
                         "shared by each 8x8 tile of pixels, empty at each tile")
     t.add_argument("--plot-frontier", metavar="FILE.png",
-                   help="alpha tests per primary ray against map bytes (and, with --memory, against lines read "
-                        "per ray), every traced scheme, the Pareto front marked")
+                   help="alpha tests per primary ray against map bytes (and, with --memory, against map lines "
+                        "and map + texture lines read per ray), every traced scheme, the Pareto front marked")
     t.add_argument("--camera", metavar="X,Y,Z:TX,TY,TZ:FOV[:UX,UY,UZ] | gltf[:N]",
                    help="eye, target, vertical field of view in degrees and optionally the up direction "
                         "(default +Y); or 'gltf:N', the file's camera N (default 0) placed by its node (a USD stage: its "

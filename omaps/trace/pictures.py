@@ -252,11 +252,35 @@ def _frontier_points(report: dict) -> list[tuple]:
     return out
 
 
+def _total_points(report: dict) -> list[tuple]:
+    """(family, label, map + texture lines per ray, tests per ray) of every (scheme, layout) that
+    ``--memory`` measured with its texture lines, ``_frontier_points``' labels, and ``none`` (its
+    texture lines alone)."""
+    out = []
+    for n, r in report["schemes"].items():
+        mem = r.get("memory")
+        if not mem or "texture_lines_per_ray" not in mem:
+            continue
+        tests = r["alpha_tests_per_primary_ray"]
+        if n == "none":
+            out.append(("none", "none", mem["texture_lines_per_ray"], tests))
+            continue
+        settings = report["settings"]["schemes"].get(n, {})
+        fam = _plot_family(n, settings)
+        out.append((fam, n, mem["own"]["total_lines_per_ray"], tests))
+        if mem["shared"]["map_bytes"] != mem["own"]["map_bytes"]:
+            tag = "OMM" if settings.get("kind") == "micromap" and settings.get("representation", "raw") == "raw" \
+                else "shared"
+            out.append((fam, f"{n} {tag}", mem["shared"]["total_lines_per_ray"], tests))
+    return out
+
+
 def frontier_plot(path: str, report: dict) -> None:
     """Alpha tests per primary ray against map bytes (log x) and, when ``--memory`` measured it,
-    against 64-byte lines of map data per primary ray: every traced scheme (its own layout and
-    its shared one), the Pareto front marked (``omaps.frontier``), dominated points lighter,
-    'none' as a level; a colour per family."""
+    against 64-byte lines of map data per primary ray and against map plus alpha-texture lines
+    per primary ray (``none`` a point there: its texture lines): every traced scheme (its own
+    layout and its shared one), the Pareto front marked (``omaps.frontier``), dominated points
+    lighter, 'none' as a level; a colour per family."""
     import os
 
     import matplotlib
@@ -267,40 +291,45 @@ def frontier_plot(path: str, report: dict) -> None:
 
     pts = _frontier_points(report)
     with_lines = [p for p in pts if p[3] is not None]  # (a budget's or a file's maps: no memory model)
+    totals = _total_points(report) if with_lines else []
+    n_panels = 1 + bool(with_lines) + bool(totals)
     dpi = 110
-    fig, axes = plt.subplots(1, 2 if with_lines else 1, figsize=(13.5 if with_lines else 7.5, 5.6), dpi=dpi,
+    fig, axes = plt.subplots(1, n_panels, figsize=(6.75 * n_panels if n_panels > 1 else 7.5, 5.6), dpi=dpi,
                              squeeze=False)
     axes = axes[0]
-    fams = list(dict.fromkeys(p[0] for p in pts))
+    fams = list(dict.fromkeys([p[0] for p in pts] + [p[0] for p in totals]))
     none = report["schemes"].get("none")
     top = max([p[4] for p in pts] + [none["alpha_tests_per_primary_ray"] if none else 0.0] + [1e-9])
     cam = report["camera"]
     scene = os.path.basename(report["scene"]["file"])
-    panels = [(axes[0], pts, [p[2] for p in pts])]
+    panels = [(axes[0], pts, [p[2] for p in pts], [p[4] for p in pts])]
     if with_lines:
-        panels.append((axes[1], with_lines, [p[3] for p in with_lines]))
+        panels.append((axes[1], with_lines, [p[3] for p in with_lines], [p[4] for p in with_lines]))
+    if totals:
+        panels.append((axes[2], totals, [p[2] for p in totals], [p[3] for p in totals]))
+    titles = ["Alpha tests per primary ray against map bytes", "Alpha tests per primary ray against map lines read per ray",
+              "Alpha tests per primary ray against map + texture lines per ray"]
     drawn = []
-    for k, (ax, ps, xs) in enumerate(panels):
+    for k, (ax, ps, xs, ys) in enumerate(panels):
         if k == 0 and ps:
             unit = _bytes_axis(ax, xs)
             xs = [x / unit for x in xs]
         elif ps:
             ax.set_xlim(0, max(xs) * 1.12 + 1e-9)
-            ax.set_xlabel("64-byte lines of map data per primary ray (own or shared layout)")
+            ax.set_xlabel("64-byte lines of map data per primary ray (own or shared layout)" if k == 1 else
+                          "64-byte lines of map data + alpha texture (RGBA8, 4x4 tiles) per primary ray")
         if ps:
-            front_panel(ax, xs, [p[4] for p in ps], colours=[f"C{fams.index(p[0]) % 10}" for p in ps],
-                        marker_pt=MARKER_PT)
-        drawn.append((ax, xs, [p[4] for p in ps], [p[1] for p in ps]))
+            front_panel(ax, xs, ys, colours=[f"C{fams.index(p[0]) % 10}" for p in ps], marker_pt=MARKER_PT)
+        drawn.append((ax, xs, ys, [p[1] for p in ps]))
         if none is not None:
             ax.axhline(none["alpha_tests_per_primary_ray"], color="grey", ls="--", lw=1,
                        label=f"none, no maps ({none['alpha_tests_per_primary_ray']:.2f})")
-        for f in fams:
+        for f in dict.fromkeys(p[0] for p in ps):
             ax.plot([], [], "o", color=f"C{fams.index(f) % 10}", ls="none", label=f)
         ax.set_ylabel("alpha tests per primary ray")
         ax.set_ylim(0, top * 1.15)
         ax.grid(True, which="both", alpha=0.3)
-        ax.set_title(("Alpha tests per primary ray against map bytes" if k == 0 else
-                      "Alpha tests per primary ray against lines read per ray") + "\n"
+        ax.set_title(titles[k] + "\n"
                      + f"{scene}, {cam['width']}x{cam['height']}; Pareto front: fewer is better on both axes",
                      fontsize=9.5)
         ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.13), ncol=3, fontsize=7.5, frameon=False)
