@@ -116,8 +116,8 @@ class TraceResult:
         budget_plot(path, self.report)
 
     def plot_frontier(self, path) -> None:
-        """Alpha tests per primary ray against map bytes and (with ``memory``) lines read per ray,
-        every traced scheme, the Pareto front marked (PNG)."""
+        """Alpha tests per primary ray against map bytes and (with ``memory``) map lines and map +
+        texture lines read per ray, every traced scheme, the Pareto front marked (PNG)."""
         from .pictures import frontier_plot
 
         frontier_plot(path, self.report)
