@@ -33,11 +33,23 @@ Example::
 
 from __future__ import annotations
 
-from numba import types
+from numba import njit, types
 from numba.core import cgutils
 from numba.extending import intrinsic
 
-__all__ = ["fetch_add"]
+__all__ = ["fetch_add", "item_size", "ITEMS_PER_THREAD"]
+
+ITEMS_PER_THREAD = 8  # work items per thread at least, where there are enough units of work
+
+
+@njit(cache=True, inline="always")
+def item_size(n, n_threads, most):
+    """Units of work (triangles) per item: ``most``, or fewer when ``n`` units would then make
+    fewer than ITEMS_PER_THREAD items per thread (at least one unit). A fine level's chunk of a
+    few triangles, each one costly, is then several items per thread, not one item for one
+    thread while the others wait."""
+    k = ITEMS_PER_THREAD * max(n_threads, 1)
+    return max(1, min(most, (n + k - 1) // k))
 
 
 @intrinsic

@@ -57,7 +57,7 @@ from ..bilinear import POLY_MAX, point_flag
 from ..birdcurve import CHILD_VERTS, MAX_LEVEL, bary_point, child
 from ..errors import InputError
 from ..flag_table import MARGIN, box_flag, flag_table
-from ..parallel import fetch_add
+from ..parallel import fetch_add, item_size
 from ..raster import rows_flag
 from ..sampling import FootprintGrid
 from ..checks import typed
@@ -315,7 +315,7 @@ def _bake_one(sat, flags, mixed, values, bounds, period_x, period_y, tri, level,
     return empty
 
 
-CHUNK = 64  # triangles per parallel work item (one node stack each)
+CHUNK = 64  # triangles per parallel work item at most (one node stack each; ``parallel.item_size``)
 TILE = 16  # texels per side of the tiles of ``locality_order``
 MAX_TILES = 1024  # tiles per axis at most (larger textures: larger tiles)
 
@@ -383,7 +383,8 @@ def _bake_all(sat, grid, tris, order, levels, starts, w, h, offset, grow, out, n
     when they did not fit in what was left of its worker's part (nothing kept: bake it again)."""
     flags, mixed, values, bounds, period_x, period_y = grid
     empty = np.zeros(tris.shape[0], dtype=np.int64)
-    n_chunks = (tris.shape[0] + CHUNK - 1) // CHUNK
+    per = item_size(tris.shape[0], n_workers, CHUNK)  # a few triangles at a fine level: items of one or two
+    n_chunks = (tris.shape[0] + per - 1) // per
     next_chunk = np.zeros(1, dtype=np.int64)
     for worker in prange(n_workers):  # each thread takes the next chunk as it frees up (``omaps.parallel``)
         st_l = np.empty(STACK, dtype=np.int64)
@@ -408,7 +409,7 @@ def _bake_all(sat, grid, tris, order, levels, starts, w, h, offset, grow, out, n
             c = fetch_add(next_chunk, 1)
             if c >= n_chunks:
                 break
-            for i in range(c * CHUNK, min((c + 1) * CHUNK, tris.shape[0])):
+            for i in range(c * per, min((c + 1) * per, tris.shape[0])):
                 t = order[i]
                 for v in range(3):
                     tri[v, 0] = tris[t, v, 0]

@@ -16,7 +16,7 @@ from .. import omm_format
 from ..alpha_test import AlphaTest
 from ..birdcurve import vertex_table
 from ..coverage import TAPS, micro_corners_of, micro_hits_with, sample_levels, sample_points, texel_triangles
-from ..parallel import fetch_add
+from ..parallel import fetch_add, item_size
 from ..promotion import HASHED, hashed_threshold, hits_needed, promotion_code
 
 __all__ = ["resolve", "resolve_counted"]
@@ -90,7 +90,8 @@ CHUNK = 16  # triangles per work item (triangles differ a lot in cost: items are
 def _resolve(states3, starts, levels, two_state, mode, seed, value, thr, inclusive, filt, mu, mv, tris,
              samples, sample_k, out, copy, counts, table, n_workers):
     n = tris.shape[0]
-    n_chunks = (n + CHUNK - 1) // CHUNK
+    per = item_size(n, n_workers, CHUNK)  # (a level-10 chunk is a few triangles: one or two an item)
+    n_chunks = (n + per - 1) // per
     next_chunk = np.zeros(1, dtype=np.int64)
     for worker in prange(n_workers):  # each thread takes the next chunk as it frees up (``omaps.parallel``)
         taps = np.empty((TAPS, TAPS))
@@ -98,7 +99,7 @@ def _resolve(states3, starts, levels, two_state, mode, seed, value, thr, inclusi
             c = fetch_add(next_chunk, 1)
             if c >= n_chunks:
                 break
-            for t in range(c * CHUNK, min((c + 1) * CHUNK, n)):
+            for t in range(c * per, min((c + 1) * per, n)):
                 base, end = starts[t], starts[t + 1]
                 n_t, n_o = _count_known(states3, base, end, out, copy)
                 counts[t, 0] = n_t
