@@ -124,7 +124,7 @@ def merged_subtree_maps(at: AlphaTriangles, tests: dict, scheme, progress: bool 
         sel = np.flatnonzero((rmat == m) & todo)
         grid = tests[int(m)].grid()
         sat = flag_table(grid)
-        chunk, i, per = 256, 0, 64.0
+        chunk, i, per = 16, 0, 64.0  # the rate is a guess at first: a short chunk (one that outgrows its buffer
         while i < len(sel):
             part = sel[i:i + chunk]
             runs, starts = bake_micromap_runs(grid, at.uv[reps[part]], level, GROW_TEXEL, sat,
@@ -135,8 +135,8 @@ def merged_subtree_maps(at: AlphaTriangles, tests: dict, scheme, progress: bool 
             known_micro[part] = per_tri
             i += len(part)
             bar.update(len(part))
-            per = max(1.0, len(runs) / len(part))  # the next chunk: about RUNS_PER_CHUNK runs
-            chunk = int(min(1 << 16, max(1, RUNS_PER_CHUNK / per)))
+            per = max(1.0, len(runs) / len(part))  # is baked again), then about RUNS_PER_CHUNK runs, growing
+            chunk = int(min(4 * len(part), 1 << 16, max(1, RUNS_PER_CHUNK / per)))  # from the rate of the last
     bar.close()
     nodes, distinct, inv_u = builder.finish(roots)
     rows = inv_u[inv_t]
