@@ -12,6 +12,7 @@ from hypothesis import strategies as st
 
 from conftest import SCENES, needs_scenes
 from gltf_files import write_quad_gltf
+from reference import _address as reference_address
 from omaps import states, trace
 from omaps.scene import load_scene
 from omaps.schemes import parse_schemes
@@ -30,13 +31,8 @@ SAMPLERS = {"linear-wrap": (9729, 10497, 10497), "nearest-clamp": (9728, 33071, 
 
 def ref_address(i, n, mode):
     """Texel index i on an axis of n texels: 0 wrap, 1 clamp, 2 mirror (glTF's REPEAT,
-    CLAMP_TO_EDGE, MIRRORED_REPEAT)."""
-    if mode == 0:
-        return i % n
-    if mode == 1:
-        return min(max(i, 0), n - 1)
-    r = i % (2 * n)
-    return r if r < n else 2 * n - 1 - r
+    CLAMP_TO_EDGE, MIRRORED_REPEAT), as the bilinear reference addresses its taps."""
+    return reference_address(i, n, ("wrap", "clamp", "mirror")[mode])
 
 
 def ref_taps(filt, mode_u, mode_v, w, h, x, y):
