@@ -158,6 +158,36 @@ def _grid_scene(path, k=24):
                       k, seed=1)
 
 
+def test_a_remembered_ctrl_c_dropped_in_a_finaliser_is_not_printed(monkeypatch):
+    """A KeyboardInterrupt raised inside a finaliser (or a garbage-collector callback) while a
+    batch waits on its cluster is dropped there by Python and handed to ``sys.unraisablehook``,
+    which prints "Exception ignored in"; once the batch has remembered the Ctrl-C (it raises it
+    again itself) the report goes nowhere. Any other dropped exception still reaches the hook
+    that was there, and so does an interrupt nobody remembered; after the batch's wait that hook
+    is back."""
+    from omaps.batch import engine
+
+    class Dropping:
+        def __init__(self, exc):
+            self.exc = exc
+
+        def __del__(self):
+            raise self.exc
+
+    reported = []
+    monkeypatch.setattr(sys, "unraisablehook", lambda u: reported.append(u.exc_type.__name__))
+    before = sys.unraisablehook
+    with engine._ctrl_c_remembered():
+        Dropping(KeyboardInterrupt())  # not remembered yet: reported
+        assert reported == ["KeyboardInterrupt"]
+        engine._CTRL_C.append(2)  # as the batch's SIGINT handler records it
+        Dropping(KeyboardInterrupt())
+        assert reported == ["KeyboardInterrupt"]
+        Dropping(ValueError("a real problem"))
+        assert reported == ["KeyboardInterrupt", "ValueError"]
+    assert sys.unraisablehook is before and not engine._CTRL_C
+
+
 @pytest.mark.long
 @pytest.mark.parametrize("phase", ["inputs", "pieces"])
 def test_ctrl_c_while_a_local_cluster_batch_runs(tmp_path, phase):

@@ -392,9 +392,12 @@ _CTRL_C: list = []  # a Ctrl-C came while the batch ran on a cluster (``_ctrl_c_
 @contextlib.contextmanager
 def _ctrl_c_remembered():
     """While the batch waits on a cluster, a Ctrl-C is remembered as well as raised: a
-    KeyboardInterrupt that Python raises inside a finaliser (a Dask future released while the
-    loop polls) is printed and dropped there, and the batch would go on; ``ClusterWatch.check``
-    raises it again within ``POLL_SECONDS``. (The main thread only; elsewhere nothing.)"""
+    KeyboardInterrupt that Python raises inside a finaliser or a garbage-collector callback (a
+    Dask future released while the loop polls, distributed's GC diagnosis) is dropped there, and
+    the batch would go on; ``ClusterWatch.check`` raises it again within ``POLL_SECONDS``. Such a
+    dropped interrupt, once remembered, is not printed either (Python's "Exception ignored in"
+    report): the batch's only word on a Ctrl-C is its one line. (The main thread only; elsewhere
+    nothing.)"""
     import signal
     import threading
 
@@ -407,11 +410,19 @@ def _ctrl_c_remembered():
         _CTRL_C.append(signum)
         previous(signum, frame)
 
+    previous_hook = sys.unraisablehook
+
+    def unraisable(u):
+        if not (_CTRL_C and u.exc_type is not None and issubclass(u.exc_type, KeyboardInterrupt)):
+            previous_hook(u)
+
     _CTRL_C.clear()
     signal.signal(signal.SIGINT, handler)
+    sys.unraisablehook = unraisable
     try:
         yield
     finally:
+        sys.unraisablehook = previous_hook
         signal.signal(signal.SIGINT, previous)
         _CTRL_C.clear()
 
