@@ -513,6 +513,12 @@ def texture_layout(base: dict) -> TextureLayout:
                          pos * LINE_BYTES)
 
 
+@njit(cache=True, inline="always")
+def _tex_line(first, tiles_x, x, y):
+    """The line of texel (x, y) of a texture from line ``first``, ``tiles_x`` tiles wide."""
+    return first + (y // TEX_TILE) * tiles_x + x // TEX_TILE
+
+
 @njit(cache=True)
 def _texture_touches(tri, b1, b2, state, mat, uv, first, tiles_x, w, h, filt, wrap_u, wrap_v, starts, out):
     """Per lookup that ends in C (the shader runs) the lines of its taps, four for a linear
@@ -526,12 +532,12 @@ def _texture_touches(tri, b1, b2, state, mat, uv, first, tiles_x, w, h, filt, wr
         m = mat[t]
         x, y = hit_texel(uv, t, b1[j], b2[j], w[m], h[m])
         xa, xb, ya, yb, _, _ = taps(filt[m], wrap_u[m], wrap_v[m], w[m], h[m], x, y)
-        out[p] = first[m] + (ya // TEX_TILE) * tiles_x[m] + xa // TEX_TILE
+        out[p] = _tex_line(first[m], tiles_x[m], xa, ya)
         p += 1
         if filt[m] != 0:
-            out[p] = first[m] + (ya // TEX_TILE) * tiles_x[m] + xb // TEX_TILE
-            out[p + 1] = first[m] + (yb // TEX_TILE) * tiles_x[m] + xa // TEX_TILE
-            out[p + 2] = first[m] + (yb // TEX_TILE) * tiles_x[m] + xb // TEX_TILE
+            out[p] = _tex_line(first[m], tiles_x[m], xb, ya)
+            out[p + 1] = _tex_line(first[m], tiles_x[m], xa, yb)
+            out[p + 2] = _tex_line(first[m], tiles_x[m], xb, yb)
             p += 3
     starts[tri.shape[0]] = p
     return p
