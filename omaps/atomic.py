@@ -32,6 +32,7 @@ import shutil
 import signal
 import threading
 
+from . import interrupt
 from .errors import InputError
 
 TEMP_PREFIX = ".omaps-"
@@ -221,6 +222,7 @@ def atomic_path(path, suffix=None):
     tmp = make_temp_file(folder, suffix)
     try:
         yield tmp
+        interrupt.check()
         os.replace(tmp, path)
     except OSError as exc:
         _remove(tmp)
@@ -239,6 +241,7 @@ def atomic_folder(folder, manifest: str):
     tmp = make_temp_folder(os.path.dirname(folder))
     try:
         yield tmp
+        interrupt.check()
         replace_folder(tmp, folder)
     except OSError as exc:
         _remove(tmp)
@@ -338,6 +341,7 @@ class Outputs:
         return self._staged[p]
 
     def _commit(self) -> None:
+        interrupt.check()  # (a Ctrl-C that something swallowed on its way: nothing is written)
         with _sigint_held():
             for p, tmp in list(self._staged.items()):
                 try:

@@ -3,8 +3,10 @@ code is ``main``'s, its output reaches a file or a pipe whole, and exit handlers
 
 import os
 import re
+import signal
 import subprocess
 import sys
+import time
 
 import numpy as np
 import pytest
@@ -158,34 +160,80 @@ def _grid_scene(path, k=24):
                       k, seed=1)
 
 
-def test_a_remembered_ctrl_c_dropped_in_a_finaliser_is_not_printed(monkeypatch):
-    """A KeyboardInterrupt raised inside a finaliser (or a garbage-collector callback) while a
-    batch waits on its cluster is dropped there by Python and handed to ``sys.unraisablehook``,
-    which prints "Exception ignored in"; once the batch has remembered the Ctrl-C (it raises it
-    again itself) the report goes nowhere. Any other dropped exception still reaches the hook
-    that was there, and so does an interrupt nobody remembered; after the batch's wait that hook
-    is back."""
-    from omaps.batch import engine
+class _Dropping:
+    """An object whose finaliser raises ``exc``: Python drops it (``sys.unraisablehook``)."""
 
-    class Dropping:
-        def __init__(self, exc):
-            self.exc = exc
+    def __init__(self, exc):
+        self.exc = exc
 
-        def __del__(self):
-            raise self.exc
+    def __del__(self):
+        raise self.exc
+
+
+def _ctrl_c():
+    """SIGINT to this process, handled (as a terminal's Ctrl-C) before this returns."""
+    with pytest.raises(KeyboardInterrupt):
+        signal.raise_signal(signal.SIGINT)
+        _until(lambda: False)
+
+
+def _until(done, limit=60.0):
+    """Run Python code (where the main thread handles signals) until ``done()``; an interrupt
+    that should come and never does fails the test after ``limit`` seconds instead of hanging."""
+    end = time.monotonic() + limit
+    while not done():
+        assert time.monotonic() < end, "no KeyboardInterrupt came"
+        time.sleep(0.001)
+
+
+def test_a_ctrl_c_dropped_in_a_finaliser_is_raised_again_and_not_printed(monkeypatch):
+    """A KeyboardInterrupt raised inside a finaliser (llvmlite's while numba compiles, a Dask
+    future released) is dropped there by Python and handed to ``sys.unraisablehook``, which
+    prints "Exception ignored in"; once a Ctrl-C has come (``interrupt.remembered``) the report
+    goes nowhere and the interrupt is raised again in the main thread, out of the finaliser. Any
+    other dropped exception still reaches the hook that was there, and so does an interrupt that
+    came before any Ctrl-C; after the block that hook and the SIGINT handler are back."""
+    from omaps import interrupt
 
     reported = []
     monkeypatch.setattr(sys, "unraisablehook", lambda u: reported.append(u.exc_type.__name__))
-    before = sys.unraisablehook
-    with engine._ctrl_c_remembered():
-        Dropping(KeyboardInterrupt())  # not remembered yet: reported
-        assert reported == ["KeyboardInterrupt"]
-        engine._CTRL_C.append(2)  # as the batch's SIGINT handler records it
-        Dropping(KeyboardInterrupt())
-        assert reported == ["KeyboardInterrupt"]
-        Dropping(ValueError("a real problem"))
+    hook, handler = sys.unraisablehook, signal.getsignal(signal.SIGINT)
+    with pytest.raises(KeyboardInterrupt), interrupt.remembered():
+        _Dropping(KeyboardInterrupt())  # no Ctrl-C has come: reported
+        assert reported == ["KeyboardInterrupt"] and not interrupt.requested()
+        _ctrl_c()
+        assert interrupt.requested()
+        _Dropping(ValueError("a real problem"))
         assert reported == ["KeyboardInterrupt", "ValueError"]
-    assert sys.unraisablehook is before and not engine._CTRL_C
+        _Dropping(KeyboardInterrupt())  # dropped: not printed, raised again moments later
+        assert reported == ["KeyboardInterrupt", "ValueError"]
+        _until(lambda: False)
+    assert sys.unraisablehook is hook and signal.getsignal(signal.SIGINT) is handler
+    assert not interrupt.requested()
+
+
+def test_a_block_that_went_on_after_a_ctrl_c_ends_interrupted(tmp_path):
+    """Whatever swallowed a Ctrl-C, the block ends in KeyboardInterrupt
+    and a command's outputs are not renamed into place: nothing is written."""
+    from omaps import interrupt
+    from omaps.atomic import Outputs, write_text
+
+    out = Outputs()
+    out.file(tmp_path / "a.json", "--json")
+    with pytest.raises(KeyboardInterrupt), interrupt.remembered():
+        _ctrl_c()  # (swallowed: by pytest.raises here)
+        with out.writing():
+            with open(out.path(tmp_path / "a.json"), "w") as f:
+                f.write("{}")
+    with pytest.raises(KeyboardInterrupt), interrupt.remembered():
+        _ctrl_c()
+        write_text(tmp_path / "b.txt", "b")
+    with pytest.raises(KeyboardInterrupt), interrupt.remembered():
+        _ctrl_c()  # a block that writes nothing ends interrupted too
+    assert sorted(os.listdir(tmp_path)) == []
+    with interrupt.remembered():  # no Ctrl-C: the block ends as it ends
+        write_text(tmp_path / "b.txt", "b")
+    assert sorted(os.listdir(tmp_path)) == ["b.txt"]
 
 
 @pytest.mark.long

@@ -8,6 +8,7 @@ import os
 import sys
 import time
 
+from .. import interrupt
 from ..errors import InputError
 from .task import BatchStopped, bake_piece_task, run_one
 
@@ -321,9 +322,8 @@ class ClusterWatch:
     def check(self) -> None:
         """``BatchStopped`` if the client has lost its scheduler (Dask closes it when it cannot
         reconnect in the client's timeout); ``KeyboardInterrupt`` again if a Ctrl-C came
-        (``_ctrl_c_remembered``) and was lost on its way."""
-        if _CTRL_C:
-            raise KeyboardInterrupt
+        and was lost on its way (``interrupt``)."""
+        interrupt.check()
         if self.client.status in ("closing", "closed"):
             raise BatchStopped(self.cancelled(None))
 
@@ -386,47 +386,6 @@ class ClusterWatch:
                                    "finish the rest")
 
 
-_CTRL_C: list = []  # a Ctrl-C came while the batch ran on a cluster (``_ctrl_c_remembered``)
-
-
-@contextlib.contextmanager
-def _ctrl_c_remembered():
-    """While the batch waits on a cluster, a Ctrl-C is remembered as well as raised: a
-    KeyboardInterrupt that Python raises inside a finaliser or a garbage-collector callback (a
-    Dask future released while the loop polls, distributed's GC diagnosis) is dropped there, and
-    the batch would go on; ``ClusterWatch.check`` raises it again within ``POLL_SECONDS``. Such a
-    dropped interrupt, once remembered, is not printed either (Python's "Exception ignored in"
-    report): the batch's only word on a Ctrl-C is its one line. (The main thread only; elsewhere
-    nothing.)"""
-    import signal
-    import threading
-
-    previous = signal.getsignal(signal.SIGINT)
-    if threading.current_thread() is not threading.main_thread() or not callable(previous):
-        yield  # (SIGINT ignored, or the system's default: as it is)
-        return
-
-    def handler(signum, frame):
-        _CTRL_C.append(signum)
-        previous(signum, frame)
-
-    previous_hook = sys.unraisablehook
-
-    def unraisable(u):
-        if not (_CTRL_C and u.exc_type is not None and issubclass(u.exc_type, KeyboardInterrupt)):
-            previous_hook(u)
-
-    _CTRL_C.clear()
-    signal.signal(signal.SIGINT, handler)
-    sys.unraisablehook = unraisable
-    try:
-        yield
-    finally:
-        sys.unraisablehook = previous_hook
-        signal.signal(signal.SIGINT, previous)
-        _CTRL_C.clear()
-
-
 def _killed(exc: BaseException) -> bool:
     from distributed.scheduler import KilledWorker
 
@@ -458,7 +417,7 @@ def run_all(command, jobs, scheduler: str, window: int | None, bar: Progress, sp
     if scheduler == "none":
         yield from _one_after_another(jobs, bar, (None, PIECES_PER_THREAD) if split else None)
         return
-    with _ctrl_c_remembered(), dask_client(scheduler) as client:
+    with interrupt.remembered(), dask_client(scheduler) as client:
         threads = sum(client.nthreads().values()) or 1
         limit = window or 2 * threads
         if split:  # one input at a time, its pieces on every worker

@@ -13,7 +13,7 @@ import threading
 import warnings
 from typing import NoReturn
 
-from .. import __version__
+from .. import __version__, interrupt
 from ..errors import InputError
 from .common import show_warning
 
@@ -103,7 +103,7 @@ def main(argv=None) -> int:
         precompile.finish_ahead(ahead)
         ahead = None
         _resume_gc()
-        with warnings.catch_warnings():
+        with warnings.catch_warnings(), interrupt.remembered():
             warnings.showwarning = show_warning
             warnings.simplefilter("always", UserWarning)
             return args.func(args)
