@@ -4,19 +4,21 @@ triangles at level 10 in under 6 MiB).
 
 The scene is built from the shared forest.glb (its own seed, into a temporary folder, or
 ``--keep DIR``): its trees re-scattered over the forest's ground, about 2.2 times as many
-instances, each with its own copy of its mesh whose texture coordinates are shifted by a random
-fraction of a texel, each connected card by its own (the sampler repeats: the same leaves,
-sampled at their own phase), so no two triangles share their texture coordinates: unique as in
-the paper's forest, not instances of a few prototypes.
+instances, each a mesh of its own (its own texture coordinates; no instancing), so every
+triangle is unique in the scene, as in the paper's forest. Their texture coordinates are the
+prototype cards' (``--uv shared``, the default): the paper's forest has the same kind of
+repetition, since its uncompressed level-10 micromaps take 175 MiB, about 700 distinct maps of
+256 KiB for its 1.2 M triangles. ``--uv phase`` is a far harder scene than the paper's: each
+connected card's coordinates are shifted by a random fraction of a texel (the sampler repeats:
+the same leaves, sampled at their own phase), so no two triangles share a map.
 
 Each level runs in a process of its own (its peak memory is that process's); a level given in
 ``--sample-levels`` bakes a random fraction ``--sample`` of the distinct triangles and states
 the time the whole scene would take at that rate (the bytes of a sample are not scaled: sharing
 grows with the triangles).
 
-    python bench/bench_million_forest.py                        # levels 4, 6 whole; 8, 10 sampled
-    python bench/bench_million_forest.py --levels 4,6,8,10 --sample-levels ''   # every level whole
-    python bench/bench_million_forest.py --trace 10             # and omaps trace --schemes none,csm10
+    python bench/bench_million_forest.py --trace 10             # levels 4 to 10, and omaps trace csm10
+    python bench/bench_million_forest.py --uv phase             # levels 4, 6 whole; 8, 10 sampled
 """
 
 from __future__ import annotations
@@ -38,8 +40,9 @@ FOREST = os.path.join(HERE, "..", "..", "shared", "data", "scenes", "forest.glb"
 PAPER = "1.2 M unique triangles at level 10 in under 6 MiB (Chernaik, Modisett & Billeter 2026)"
 
 
-def build_forest(src: str, out: str, target: int = 1_200_000, seed: int = 2026) -> int:
-    """Write the re-scattered forest to ``out`` (.glb); returns its alpha-tested triangles."""
+def build_forest(src: str, out: str, target: int = 1_200_000, seed: int = 2026, phase: bool = False) -> int:
+    """Write the re-scattered forest to ``out`` (.glb); returns its alpha-tested triangles.
+    ``phase``: each card's texture coordinates shifted by its own sub-texel phase."""
     from PIL import Image
     from pygltflib import GLTF2, Accessor, BufferView, Mesh, Node
 
@@ -91,8 +94,8 @@ def build_forest(src: str, out: str, target: int = 1_200_000, seed: int = 2026) 
                 w, h = sizes[p.material]
                 part = _components(view(p.indices, _INDEX[g.accessors[p.indices].componentType], 1).reshape(-1, 3),
                                    len(uv))
-                phase = rng.random((int(part.max()) + 1, 2)) / np.array([w, h])  # a sub-texel phase per card
-                shifted = (uv + phase[part]).astype(np.float32)
+                shift = rng.random((int(part.max()) + 1, 2)) / np.array([w, h])  # a sub-texel phase per card
+                shifted = (uv + shift[part]).astype(np.float32) if phase else uv.copy()
                 while len(blob) % 4:
                     blob.append(0)
                 g.bufferViews.append(BufferView(buffer=0, byteOffset=len(blob), byteLength=shifted.nbytes))
@@ -173,11 +176,14 @@ def _run_child(args):
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--levels", default="4,6,8,10")
-    ap.add_argument("--sample-levels", default="8,10", help="levels baked on a sample (comma list; '' for none)")
+    ap.add_argument("--sample-levels", help="levels baked on a sample (comma list; '' for none; default: none, "
+                    "with --uv phase 8,10)")
     ap.add_argument("--sample", type=float, default=0.02, help="fraction of the distinct triangles of a sampled level")
     ap.add_argument("--target", type=int, default=1_200_000, help="alpha-tested triangles at least")
     ap.add_argument("--seed", type=int, default=2026)
     ap.add_argument("--keep", help="folder to write million_forest.glb into (kept)")
+    ap.add_argument("--uv", choices=("shared", "phase"), default="shared",
+                    help="the cards' texture coordinates: the prototypes' (shared) or each at its own sub-texel phase")
     ap.add_argument("--trace", type=int, help="also run omaps trace --schemes none,csmL --size 128 --memory")
     a = ap.parse_args()
     if not os.path.isfile(FOREST):
@@ -187,10 +193,12 @@ def main() -> int:
     os.makedirs(folder, exist_ok=True)
     scene = os.path.join(folder, "million_forest.glb")
     t = time.perf_counter()
-    n_alpha = build_forest(FOREST, scene, a.target, a.seed)
+    n_alpha = build_forest(FOREST, scene, a.target, a.seed, a.uv == "phase")
     print(f"{scene}: {n_alpha:,} alpha-tested triangles ({os.path.getsize(scene) / 2**20:.0f} MiB, "
-          f"built in {time.perf_counter() - t:.1f} s, seed {a.seed})")
+          f"built in {time.perf_counter() - t:.1f} s, seed {a.seed}, texture coordinates {a.uv})")
     subprocess.run([sys.executable, "-c", CHILD, FOREST, "2", "1"], check=True, capture_output=True)  # compile once
+    if a.sample_levels is None:
+        a.sample_levels = "8,10" if a.uv == "phase" else ""
     sampled = {int(v) for v in a.sample_levels.split(",") if v.strip()}
     rows = []
     for level in [int(v) for v in a.levels.split(",")]:
@@ -214,10 +222,17 @@ def main() -> int:
               f"{r['nodes']:>12,} {mib:>9.2f}{' (sample)' if r['fraction'] < 1 else ''}")
     print(f"paper: {PAPER}")
     if a.trace is not None:
+        report = os.path.join(folder, "trace.json")
         code, _, peak, wall = _run_child(["-m", "omaps", "trace", scene, "--schemes", f"none,csm{a.trace}", "--size",
-                                          "128", "--memory", "--quiet"])
+                                          "128", "--memory", "--quiet", "--json", report])
         print(f"omaps trace --schemes none,csm{a.trace} --size 128 --memory: exit {code}, {wall:.0f} s, "
               f"peak {peak:.0f} MB")
+        if os.path.isfile(report):
+            with open(report) as f:
+                schemes = json.load(f)["schemes"]
+            for name, r in schemes.items():
+                print(f"  {name}: {r['alpha_tests_per_primary_ray']:.3f} alpha tests per primary ray, "
+                      f"{r['differing_pixels']} differing pixels, {r['map_bytes'] / 2**20:.2f} MiB of maps")
     return 0
 
 
