@@ -43,7 +43,7 @@ from ..errors import InputError
 from .bits import bit_length, get_bits, kernel_bytes
 from ..checks import typed
 
-__all__ = ["ref_bits", "build", "Builder", "pack", "encode", "decode", "lookup", "blob_bits", "check", "HEADER_BITS", "csm_build", "csm_encode",
+__all__ = ["ref_bits", "build", "Builder", "treelets", "pack", "encode", "decode", "lookup", "blob_bits", "check", "HEADER_BITS", "csm_build", "csm_treelets", "csm_encode",
            "csm_decode", "csm_lookup", "csm_bits", "csm_pack", "csm_check", "CsmBuilder"]
 
 HEADER_BITS = 32
@@ -385,6 +385,134 @@ def build(maps, level: int) -> tuple[np.ndarray, np.ndarray]:
     return _build(_check(maps, level), int(level))
 
 
+LINE_BITS = 512  # a 64-byte cache line: the unit a treelet is sized to
+
+
+@njit(cache=True)
+def _treelet_order(nodes, roots, per_line):
+    """Each node's index in the treelet layout (``treelets``), or -1 for a node no root
+    reaches; -2 in ``new[0]`` if the nodes form a cycle."""
+    n = nodes.shape[0]
+    new = np.full(n, -1, np.int64)
+    claimed = np.zeros(n, np.bool_)
+    on_path = np.zeros(n, np.bool_)
+    nxt = 0
+    cap = 4 * n + 8
+    t_node = np.empty(cap, np.int64)  # tasks: a treelet's top node, its phase, its members in ``mem``
+    t_phase = np.empty(cap, np.int64)
+    t_start = np.empty(cap, np.int64)
+    t_len = np.empty(cap, np.int64)
+    mem = np.empty(n + 1, np.int64)  # members of the treelets formed and not yet placed, a stack
+    m_top = 0
+    path = np.empty(n + 1, np.int64)  # ``place``'s path of nodes waiting for their children
+    path_c = np.empty(n + 1, np.int64)
+    front = np.empty(4 * per_line, np.int64)
+    for r in roots:
+        if r < 3 or claimed[r - 3]:
+            continue
+        top = 1
+        t_node[0], t_phase[0] = r - 3, 0
+        while top > 0:
+            top -= 1
+            v, phase = t_node[top], t_phase[top]
+            if phase == 0:  # form the treelet: v, then breadth first while the line has room
+                if claimed[v]:
+                    continue
+                start = m_top
+                claimed[v] = True
+                mem[m_top] = v
+                m_top += 1
+                i = start
+                while i < m_top and m_top - start < per_line:
+                    for c in range(4):
+                        ch = nodes[mem[i], c]
+                        if ch >= 3 and not claimed[ch - 3] and m_top - start < per_line:
+                            claimed[ch - 3] = True
+                            mem[m_top] = ch - 3
+                            m_top += 1
+                    i += 1
+                nf = 0
+                for i in range(start, m_top):
+                    for c in range(4):
+                        ch = nodes[mem[i], c]
+                        if ch >= 3 and not claimed[ch - 3]:
+                            front[nf] = ch - 3
+                            nf += 1
+                t_node[top], t_phase[top], t_start[top], t_len[top] = v, 1, start, m_top - start
+                top += 1
+                for f in range(nf - 1, -1, -1):  # the subtrees below it first, the first on top
+                    t_node[top], t_phase[top] = front[f], 0
+                    top += 1
+                continue
+            # place the treelet, deepest members first, each after every node it references
+            for i in range(t_start[top] + t_len[top] - 1, t_start[top] - 1, -1):
+                if new[mem[i]] >= 0:
+                    continue
+                depth = 1
+                path[0], path_c[0] = mem[i], 0
+                on_path[mem[i]] = True
+                while depth > 0:
+                    u = path[depth - 1]
+                    c = path_c[depth - 1]
+                    if c == 4:
+                        new[u] = nxt
+                        nxt += 1
+                        on_path[u] = False
+                        depth -= 1
+                        continue
+                    path_c[depth - 1] = c + 1
+                    ch = nodes[u, c]
+                    if ch >= 3 and new[ch - 3] < 0:
+                        if on_path[ch - 3]:
+                            new[0] = -2
+                            return new
+                        on_path[ch - 3] = True
+                        path[depth], path_c[depth] = ch - 3, 0
+                        depth += 1
+            m_top = t_start[top]
+    return new
+
+
+@typed
+def treelets(nodes: ArrayLike, roots: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
+    """The same DAG renumbered into 64-byte *treelets*: (nodes, roots) that ``pack`` lays out so
+    that a descent reads one line for several levels (``pack`` writes whatever order it is
+    given; ``encode`` and the tracer's maps use this one).
+
+    From each root in turn, a treelet is a node and its not yet placed mixed descendants, breadth
+    first, as many as one line holds (``512 // (4 W)``, at least 2); the subtrees below it are
+    laid out first, each a treelet in turn, then the treelet, deepest members first, so that
+    every node still follows the nodes it references (the format's rule). A node shared by
+    several parents is placed once, with the first to reach it. Nodes no root reaches are
+    dropped.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> nodes, roots = build(np.array([[0, 1, 1, 1, 0, 0, 0, 0, 2, 2, 2, 2, 0, 0, 0, 1]]), 2)
+    >>> nodes.tolist(), roots.tolist()              # build: bottom up
+    ([[0, 1, 1, 1], [0, 0, 0, 1], [3, 0, 2, 4]], [5])
+    >>> nodes, roots = treelets(nodes, roots)
+    >>> nodes.tolist(), roots.tolist()              # one treelet, its deepest members first
+    ([[0, 0, 0, 1], [0, 1, 1, 1], [4, 0, 2, 3]], [5])
+    """
+    from ..checks import array
+
+    nodes = np.ascontiguousarray(array(nodes, "nodes", kinds="iu", dtype=np.int64)).reshape(-1, 4)
+    roots = np.ascontiguousarray(array(roots, "roots", kinds="iu", dtype=np.int64)).ravel()
+    if (nodes.size and (nodes.min() < 0 or nodes.max() >= 3 + len(nodes))) or (
+            roots.size and (roots.min() < 0 or roots.max() >= 3 + len(nodes))):
+        raise InputError("nodes and roots must hold references 0 .. 2 + M", param="nodes")
+    per_line = max(2, LINE_BITS // (4 * ref_bits(len(nodes))))
+    new = _treelet_order(nodes, roots, per_line)
+    if len(new) and new[0] == -2:
+        raise InputError("nodes must form no cycle (a node that reaches itself)", param="nodes")
+    keep = np.flatnonzero(new >= 0)
+    out = np.empty((len(keep), 4), np.int64)
+    out[new[keep]] = _renamed(nodes[keep], new)
+    return out, _renamed(roots, new)
+
+
 @njit(cache=True)
 def _pack(nodes, roots, w, out):
     n = nodes.shape[0]
@@ -432,7 +560,7 @@ def pack(nodes: ArrayLike, roots: ArrayLike) -> bytes:
 def encode(maps, level: int) -> tuple[bytes, int]:
     """A set of micromaps (P, 4^L) -> (its blob, ``ceil(blob_bits / 8)`` bytes; the number N of
     distinct mixed nodes)."""
-    nodes, roots = build(maps, level)
+    nodes, roots = treelets(*build(maps, level))
     return pack(nodes, roots), len(nodes)
 
 
@@ -554,5 +682,6 @@ def decode(data, level: int, n_maps: int) -> np.ndarray:
 
 # the package API's names (``omaps.codecs``)
 csm_build, csm_pack, csm_encode, csm_decode, csm_lookup, csm_bits = build, pack, encode, decode, lookup, blob_bits
+csm_treelets = treelets
 csm_check = check
 CsmBuilder = Builder

@@ -109,7 +109,7 @@ def merged_subtree_maps(at: AlphaTriangles, tests: dict, scheme, progress: bool 
     never 4**L states per triangle. The same blob, byte for byte, as ``hierarchical_maps`` of
     the baked states (the builder numbers the nodes as ``csm.build`` does)."""
     from ..bake import bake_micromap_runs
-    from ..codecs import CsmBuilder, csm_pack
+    from ..codecs import CsmBuilder, csm_pack, csm_treelets
     from ..flag_table import flag_table
 
     level = scheme.level
@@ -141,7 +141,7 @@ def merged_subtree_maps(at: AlphaTriangles, tests: dict, scheme, progress: bool 
     nodes, distinct, inv_u = builder.finish(roots)
     rows = inv_u[inv_t]
     known = float(np.mean((known_micro / float(4 ** level))[inv_t]))
-    data = np.frombuffer(csm_pack(nodes, distinct[rows]), np.uint8).copy()
+    data = np.frombuffer(csm_pack(*csm_treelets(nodes, distinct[rows])), np.uint8).copy()
     return SchemeMaps(scheme.name, "csm", level, np.arange(len(rows), dtype=np.int32), data, len(data), len(data),
                       len(distinct), known, None, scheme, info={"csm_nodes": int(len(nodes))})
 
@@ -154,7 +154,7 @@ def hierarchical_maps(scheme, st: np.ndarray, inv_t: np.ndarray, known: float) -
     word ``T_MAP_OFFSET``; map bytes: each triangle's blob plus a 32-bit offset. ``csm``: one blob,
     the distinct micromaps' merged DAG with a root per alpha triangle (``T_MAP_ROW`` is the
     triangle's own index); map bytes: the blob. ``T_MAP_ROW_BYTES`` holds the data's length."""
-    from ..codecs import csm_build, csm_pack, succinct_encode_many
+    from ..codecs import csm_build, csm_pack, csm_treelets, succinct_encode_many
 
     uniq, inv_u = dedupe_maps(st)
     rows = inv_u[inv_t]
@@ -167,7 +167,7 @@ def hierarchical_maps(scheme, st: np.ndarray, inv_t: np.ndarray, known: float) -
                           len(data) + 1, map_bytes, len(uniq), known, None, scheme,
                           {T_MAP_OFFSET: np.ascontiguousarray(starts[:-1], dtype=np.int64)})
     nodes, roots = csm_build(uniq, level)
-    data = np.frombuffer(csm_pack(nodes, roots[rows]), np.uint8).copy()
+    data = np.frombuffer(csm_pack(*csm_treelets(nodes, roots[rows])), np.uint8).copy()
     return SchemeMaps(scheme.name, "csm", level, np.arange(len(rows), dtype=np.int32), data, len(data), len(data),
                       len(uniq), known, None, scheme, info={"csm_nodes": int(len(nodes))})
 
