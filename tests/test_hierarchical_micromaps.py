@@ -15,7 +15,8 @@ from conftest import SCENES, needs_scenes
 
 from omaps import states
 from omaps.codecs import (csm_bits, csm_build, csm_decode, csm_encode, csm_lookup, csm_pack, csm_treelets,
-                          succinct_bits, succinct_decode, succinct_encode, succinct_encode_many, succinct_lookup)
+                          succinct_bits, succinct_decode, succinct_encode, succinct_encode_dag, succinct_encode_many,
+                          succinct_lookup)
 from omaps.errors import InputError
 from omaps.schemes import get_scheme
 
@@ -147,6 +148,30 @@ def test_csm_layout_fields():
     assert blob == pack_bits(bits)
     assert roots.tolist() == [3 + 1, 3 + 1, 1]  # equal micromaps share their root; a uniform one is its state
     assert nodes.tolist() == [[0, 2, 0, 0], [0, 0, 3, 0]]
+
+
+@settings(max_examples=60)
+@given(micromaps(max_level=5, count=3))
+def test_succinct_from_the_dag_is_the_blob_of_the_states(case):
+    """A tree read from the merged DAG (no states) writes the same bytes as the states do, for
+    the DAG in build's order and in treelets."""
+    level, maps = case
+    data, starts, bits = succinct_encode_many(maps, level)
+    nodes, roots = csm_build(maps, level)
+    for n, r in ((nodes, roots), csm_treelets(nodes, roots)):
+        d2, s2, b2 = succinct_encode_dag(n, r, level)
+        assert d2.tobytes() == data.tobytes() and s2.tolist() == starts.tolist() and b2.tolist() == bits.tolist()
+    for i, m in enumerate(maps):
+        assert data[starts[i]:starts[i + 1]].tobytes() == pack_bits(ref_succinct_bits(m, level))
+
+
+def test_succinct_from_a_dag_refuses_a_tree_deeper_than_its_level():
+    nodes, roots = csm_build(np.array([[0, 1, 2, 0] * 4]), 2)
+    with pytest.raises(InputError, match="deeper than level 1") as e:
+        succinct_encode_dag(nodes, roots, 1)
+    assert e.value.param == "roots"
+    with pytest.raises(InputError, match="names no node"):
+        succinct_encode_dag(nodes, [3 + len(nodes)], 2)
 
 
 def ref_children_first(nodes, roots):

@@ -14,7 +14,7 @@ _REGISTRY = ["Codec", "CodecEntry", "CompileFamily", "PairMicromaps", "ENTRIES",
 _RAW = ["pack_states", "unpack_states", "row_bytes", "read_state"]  # the one 2-bit layout of every raw map
 # hierarchical micromaps (schemes succinctL, csmL): one triangle's pruned tree with rank support,
 # and a set's merged subtrees
-_SUCCINCT = ["succinct_encode", "succinct_encode_many", "succinct_decode", "succinct_lookup", "succinct_bits",
+_SUCCINCT = ["succinct_encode", "succinct_encode_many", "succinct_encode_dag", "succinct_decode", "succinct_lookup", "succinct_bits",
              "succinct_check"]
 _CSM = ["csm_build", "csm_treelets", "csm_pack", "csm_encode", "csm_decode", "csm_lookup", "csm_bits", "csm_check", "CsmBuilder"]
 _BITS = ["get_bits", "bit_length"]  # the bit-field rule of every block (docs/FORMAT.md)

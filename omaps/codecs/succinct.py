@@ -43,7 +43,7 @@ from ..errors import InputError
 from .bits import bit_length, get_bits, kernel_bytes
 from ..checks import typed
 
-__all__ = ["header_bits", "tree_counts", "encoded_bits", "encode", "encode_many", "decode", "lookup", "blob_bits", "check",
+__all__ = ["header_bits", "tree_counts", "encoded_bits", "encode", "encode_many", "encode_dag", "succinct_encode_dag", "decode", "lookup", "blob_bits", "check",
            "pair_encode", "pair_lookup",
            "uniform_levels", "succinct_encode", "succinct_encode_many", "succinct_decode", "succinct_lookup", "succinct_check",
            "succinct_bits"]
@@ -416,6 +416,113 @@ def encode_many(maps, level: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return data, starts, bits
 
 
+@njit(cache=True)
+def _expand(nodes, root, level, queue, ends):
+    """The pruned tree under DAG reference ``root`` in level order: references at depth d in
+    ``queue[ends[d]:ends[d + 1]]`` (``queue`` grown as needed, returned); -1 if a reference at
+    depth L is a node (the DAG is deeper than the level) or names no node."""
+    queue[0] = root
+    ends[0] = 0
+    ends[1] = 1
+    n = 1
+    for lv in range(level + 1):
+        for i in range(ends[lv], ends[lv + 1]):
+            r = queue[i]
+            if r < 3:
+                continue
+            if lv == level or r - 3 >= nodes.shape[0]:
+                return queue, -1
+            if n + 4 > queue.shape[0]:
+                bigger = np.empty(2 * queue.shape[0] + 4, np.int64)
+                bigger[:n] = queue[:n]
+                queue = bigger
+            for c in range(4):
+                queue[n] = nodes[r - 3, c]
+                n += 1
+        if lv < level:
+            ends[lv + 2] = n
+    return queue, n
+
+
+@njit(cache=True)
+def _dag_blobs(nodes, roots, level, out, byte_start):
+    """Each root's bits (``out`` None) or its blob written into ``out`` (zeroed) from byte
+    ``byte_start[i]``: the same fields as ``_write``, the tree read from the DAG. Returns the
+    bits per root, -1 where ``_expand`` refused."""
+    w = _header_bits(level)
+    queue = np.empty(64, np.int64)
+    ends = np.empty(level + 2, np.int64)
+    bits = np.empty(roots.shape[0], np.int64)
+    for t in range(roots.shape[0]):
+        queue, n = _expand(nodes, roots[t], level, queue, ends)
+        if n < 0:
+            bits[t] = -1
+            continue
+        n_t = ends[level]
+        n_int = 0
+        for i in range(n_t):
+            if queue[i] >= 3:
+                n_int += 1
+        bits[t] = _size(n_t, n_int, w)
+        if out is None:
+            continue
+        base = 8 * byte_start[t]
+        _put(out, base, n_t, w)
+        t0 = base + w
+        d0 = t0 + n_t
+        s0 = d0 + w * (n_t >> 6)
+        ones = 0
+        lp = 0
+        for i in range(n):
+            r = queue[i]
+            if i < n_t:
+                if i > 0 and i & 63 == 0:
+                    _put(out, d0 + w * ((i >> 6) - 1), ones, w)
+                if r >= 3:
+                    _put(out, t0 + i, 1, 1)
+                    ones += 1
+            if r < 3:
+                _put(out, s0 + 2 * lp, r, 2)
+                lp += 1
+        if n_t > 0 and n_t & 63 == 0:
+            _put(out, d0 + w * ((n_t >> 6) - 1), ones, w)
+    return bits
+
+
+@typed
+def encode_dag(nodes, roots, level: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The blobs of micromaps given as a merged DAG (``csm.build``'s or ``csm.Builder``'s nodes
+    and roots: a reference 0..2 a uniform subtree, 3 + i node i) -> (data, byte offsets (P + 1,),
+    bits (P,)), byte for byte ``encode_many`` of the micromaps the roots stand for, without
+    their 4^L states: each tree is read from the DAG, so a fine level costs its nodes.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from omaps.codecs import csm_build
+    >>> maps = np.array([[0, 0, 0, 1] * 4, [2] * 16])
+    >>> data, starts, bits = encode_dag(*csm_build(maps, 2), 2)
+    >>> data.tobytes() == encode_many(maps, 2)[0].tobytes(), bits.tolist()
+    (True, [40, 6])
+    """
+    from ..checks import array, integer
+
+    level = integer(level, "level", 0, MAX_LEVEL)
+    nodes = np.ascontiguousarray(array(nodes, "nodes", kinds="iu", dtype=np.int64)).reshape(-1, 4)
+    roots = np.ascontiguousarray(array(roots, "roots", kinds="iu", dtype=np.int64)).ravel()
+    if (nodes.size and nodes.min() < 0) or (roots.size and roots.min() < 0):
+        raise InputError("references are 0 .. 2 + the node count", param="nodes")
+    bits = _dag_blobs(nodes, roots, level, None, np.zeros(0, np.int64))
+    if (bits < 0).any():
+        raise InputError(f"the tree of root {int(np.flatnonzero(bits < 0)[0])} names no node or is deeper than "
+                         f"level {level}", param="roots")
+    starts = np.zeros(len(roots) + 1, np.int64)
+    np.cumsum((bits + 7) // 8, out=starts[1:])
+    data = np.zeros(int(starts[-1]), np.uint8)
+    _dag_blobs(nodes, roots, level, data, starts)
+    return data, starts, bits
+
+
 def pair_encode(first, second, has_second, level: int) -> tuple[np.ndarray, np.ndarray]:
     """Pairs' blocks: micromaps (P, 4^L) of each pair's first and second triangle -> (data, byte
     offsets (P + 1,)): pair i's block ``data[starts[i]:starts[i + 1]]`` is the first triangle's
@@ -477,3 +584,4 @@ def succinct_bits(maps, level: int):
 # the package API's names (``omaps.codecs``)
 succinct_encode, succinct_encode_many, succinct_decode, succinct_lookup = encode, encode_many, decode, lookup
 succinct_check = check
+succinct_encode_dag = encode_dag

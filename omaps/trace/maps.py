@@ -5,7 +5,8 @@ Square schemes bake each distinct pair (corner UVs, B or not, material) at the f
 for, with growth ``bake.GROW_TEXEL``; coarser sizes are OR-downsampled, which is exact. Micromap
 schemes bake each distinct triangle with the micromap baker; ``succinctL`` stores each distinct
 micromap as its succinct tree (a byte offset per row), ``csmL`` the scene's micromaps as one
-merged DAG with a root per alpha triangle (``hierarchical_maps``). Triangles the scene reader marks
+merged DAG with a root per alpha triangle; both are written from one merged DAG baked straight
+from the baker's runs (``baked_tree``, ``hierarchical_maps``), never every micro-triangle's state. Triangles the scene reader marks
 unknown get all-C maps (a pair with one such triangle is all C). Work is done per prototype and
 shared by its instances, as a BLAS shares it.
 """
@@ -30,7 +31,7 @@ from ..workers import encode_maps as parallel_encode
 from .tables import T_MAP_OFFSET, SchemeMaps
 
 __all__ = ["SchemeMaps", "build_scheme_maps", "encode_cached", "default_jobs", "dedupe_maps", "hierarchical_maps",
-           "merged_subtree_maps"]
+           "merged_subtree_maps", "baked_tree"]
 
 OFFSET_BYTES = 4  # a succinct micromap's byte offset per triangle, counted in its map bytes
 
@@ -102,24 +103,24 @@ def micromap_states(at: AlphaTriangles, tests: dict, level: int):
 RUNS_PER_CHUNK = 1 << 22  # the runs of one chunk of triangles held at once (``merged_subtree_maps``)
 
 
-def merged_subtree_maps(at: AlphaTriangles, tests: dict, scheme, progress: bool = False) -> SchemeMaps:
-    """A ``csmL`` scheme's maps baked straight into the merged DAG: each distinct alpha triangle
+def baked_tree(at: AlphaTriangles, tests: dict, level: int, progress: bool = False, name: str = "tree"):
+    """Every distinct alpha triangle's level-L micromap baked straight into one merged DAG:
     baked as runs (``bake.bake_micromap_runs``) in chunks of about ``RUNS_PER_CHUNK`` runs,
     hash-consed as they come (``codecs.csm.Builder``): the memory of the DAG and one chunk,
-    never 4**L states per triangle. The same blob, byte for byte, as ``hierarchical_maps`` of
-    the baked states (the builder numbers the nodes as ``csm.build`` does)."""
+    never 4**L states per triangle. Returns (nodes, the distinct micromaps' roots in sorted order
+    of their states, each alpha triangle's distinct micromap, the mean known fraction): the DAG
+    ``csm.build`` makes of the distinct states, node for node. ``name``: the progress bar's."""
     from ..bake import bake_micromap_runs
-    from ..codecs import CsmBuilder, csm_pack, csm_treelets
+    from ..codecs import CsmBuilder
     from ..flag_table import flag_table
 
-    level = scheme.level
     reps, inv_t = distinct_rows(at.uv, at.material, at.unknown)
     builder = CsmBuilder(level)
     roots = np.full(len(reps), states.C, np.int64)  # unknown triangles: all C
     known_micro = np.zeros(len(reps))  # micro-triangles of each whose state is not C
     rmat = at.material[reps]
     todo = ~at.unknown[reps]
-    bar = tqdm(total=int(todo.sum()), desc=f"bake {scheme.name}", unit="tri", disable=not progress, leave=False)
+    bar = tqdm(total=int(todo.sum()), desc=f"bake {name}", unit="tri", disable=not progress, leave=False)
     for m in np.unique(rmat[todo]):
         sel = np.flatnonzero((rmat == m) & todo)
         grid = tests[int(m)].grid()
@@ -141,35 +142,37 @@ def merged_subtree_maps(at: AlphaTriangles, tests: dict, scheme, progress: bool 
     nodes, distinct, inv_u = builder.finish(roots)
     rows = inv_u[inv_t]
     known = float(np.mean((known_micro / float(4 ** level))[inv_t]))
-    data = np.frombuffer(csm_pack(*csm_treelets(nodes, distinct[rows])), np.uint8).copy()
-    return SchemeMaps(scheme.name, "csm", level, np.arange(len(rows), dtype=np.int32), data, len(data), len(data),
-                      len(distinct), known, None, scheme, info={"csm_nodes": int(len(nodes))})
+    return nodes, distinct, rows, known
 
 
-def hierarchical_maps(scheme, st: np.ndarray, inv_t: np.ndarray, known: float) -> SchemeMaps:
-    """A ``succinctL`` or ``csmL`` scheme's maps from the distinct triangles' micromaps ``st``
-    (D, 4**L) and every alpha triangle's distinct index ``inv_t``.
+def merged_subtree_maps(at: AlphaTriangles, tests: dict, scheme, progress: bool = False) -> SchemeMaps:
+    """A ``csmL`` or ``succinctL`` scheme's maps, baked straight into a tree (``baked_tree``)."""
+    return hierarchical_maps(scheme, baked_tree(at, tests, scheme.level, progress, scheme.name))
 
-    ``succinct``: the distinct micromaps' blobs, byte-aligned, each row's byte offset in the table
-    word ``T_MAP_OFFSET``; map bytes: each triangle's blob plus a 32-bit offset. ``csm``: one blob,
-    the distinct micromaps' merged DAG with a root per alpha triangle (``T_MAP_ROW`` is the
-    triangle's own index); map bytes: the blob. ``T_MAP_ROW_BYTES`` holds the data's length."""
-    from ..codecs import csm_build, csm_pack, csm_treelets, succinct_encode_many
 
-    uniq, inv_u = dedupe_maps(st)
-    rows = inv_u[inv_t]
+def hierarchical_maps(scheme, tree) -> SchemeMaps:
+    """A ``succinctL`` or ``csmL`` scheme's maps from the scene's micromaps as a merged DAG
+    (``baked_tree``'s (nodes, distinct roots, each alpha triangle's distinct map, known)).
+
+    ``succinct``: the distinct micromaps' blobs, each tree read from the DAG
+    (``succinct_encode_dag``), byte-aligned, each row's byte offset in the table word
+    ``T_MAP_OFFSET``; map bytes: each triangle's blob plus a 32-bit offset. ``csm``: one blob,
+    the DAG in treelets with a root per alpha triangle (``T_MAP_ROW`` is the triangle's own
+    index); map bytes: the blob. ``T_MAP_ROW_BYTES`` holds the data's length."""
+    from ..codecs import csm_pack, csm_treelets, succinct_encode_dag
+
+    nodes, distinct, rows, known = tree
     level = scheme.level
     if scheme.representation == "succinct":
-        data, starts, _ = succinct_encode_many(uniq, level)
+        data, starts, _ = succinct_encode_dag(nodes, distinct, level)
         sizes = np.diff(starts)
         map_bytes = int(sizes[rows].sum()) + OFFSET_BYTES * len(rows)
         return SchemeMaps(scheme.name, "succinct", level, rows.astype(np.int32), np.append(data, np.uint8(0)),
-                          len(data) + 1, map_bytes, len(uniq), known, None, scheme,
+                          len(data) + 1, map_bytes, len(distinct), known, None, scheme,
                           {T_MAP_OFFSET: np.ascontiguousarray(starts[:-1], dtype=np.int64)})
-    nodes, roots = csm_build(uniq, level)
-    data = np.frombuffer(csm_pack(*csm_treelets(nodes, roots[rows])), np.uint8).copy()
+    data = np.frombuffer(csm_pack(*csm_treelets(nodes, distinct[rows])), np.uint8).copy()
     return SchemeMaps(scheme.name, "csm", level, np.arange(len(rows), dtype=np.int32), data, len(data), len(data),
-                      len(uniq), known, None, scheme, info={"csm_nodes": int(len(nodes))})
+                      len(distinct), known, None, scheme, info={"csm_nodes": int(len(nodes))})
 
 
 def pair_square_states(at: AlphaTriangles, tests: dict, sizes, cache: dict | None = None) -> tuple[dict, np.ndarray]:
@@ -217,21 +220,20 @@ def build_scheme_maps(at: AlphaTriangles, tests: dict, schemes, jobs: int = 1,
             sizes |= {get_codec(o).map_size for s in all_schemes if s.kind == "budget"
                       for o in (s.options or PAIR_OPTIONS) if o != "none" and not entry(o).variable}
         pair_states, pair_inverse = pair_square_states(at, tests, sizes, cache)
-    baked: dict[int, tuple] = {}  # level -> micromap_states: triL, succinctL and csmL of one level bake once
+    baked: dict[int, tuple] = {}  # level -> micromap_states: triL of one level bakes once
+    trees: dict[int, tuple] = {}  # level -> baked_tree: succinctL and csmL of one level bake once
     for s in schemes:
         if s.kind == "none":
             out[s.name] = SchemeMaps(s.name, "none", 0, np.zeros(at.count, np.int32), np.zeros(1, np.uint8), 1, 0, 0,
                                      0.0, None, s)
-        elif s.kind == "micromap" and s.representation == "csm":
-            out[s.name] = merged_subtree_maps(at, tests, s, progress)
+        elif s.kind == "micromap" and s.representation != "raw":  # succinctL, csmL: from one tree per level
+            if s.level not in trees:
+                trees[s.level] = baked_tree(at, tests, s.level, progress, s.name)
+            out[s.name] = hierarchical_maps(s, trees[s.level])
         elif s.kind == "micromap":
             if s.level not in baked:
                 baked[s.level] = micromap_states(at, tests, s.level)
             st, inv_t = baked[s.level]
-            if s.representation != "raw":
-                known = float(np.mean((st != states.C).mean(axis=1)[inv_t]))
-                out[s.name] = hierarchical_maps(s, st, inv_t, known)
-                continue
             uniq, inv_u = dedupe_maps(st)
             data = pack_states(uniq)
             known = float(np.mean((st != states.C).mean(axis=1)[inv_t]))
