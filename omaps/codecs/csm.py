@@ -498,7 +498,10 @@ def treelets(nodes: ArrayLike, roots: ArrayLike) -> tuple[np.ndarray, np.ndarray
     """
     from ..checks import array
 
-    nodes = np.ascontiguousarray(array(nodes, "nodes", kinds="iu", dtype=np.int64)).reshape(-1, 4)
+    nodes = array(nodes, "nodes", kinds="iu", dtype=np.int64)
+    if nodes.size % 4:
+        raise InputError(f"nodes must have shape (M, 4), got {nodes.shape}", param="nodes")
+    nodes = np.ascontiguousarray(nodes).reshape(-1, 4)
     roots = np.ascontiguousarray(array(roots, "roots", kinds="iu", dtype=np.int64)).ravel()
     if (nodes.size and (nodes.min() < 0 or nodes.max() >= 3 + len(nodes))) or (
             roots.size and (roots.min() < 0 or roots.max() >= 3 + len(nodes))):

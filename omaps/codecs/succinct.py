@@ -508,7 +508,10 @@ def encode_dag(nodes, roots, level: int) -> tuple[np.ndarray, np.ndarray, np.nda
     from ..checks import array, integer
 
     level = integer(level, "level", 0, MAX_LEVEL)
-    nodes = np.ascontiguousarray(array(nodes, "nodes", kinds="iu", dtype=np.int64)).reshape(-1, 4)
+    nodes = array(nodes, "nodes", kinds="iu", dtype=np.int64)
+    if nodes.size % 4:
+        raise InputError(f"nodes must have shape (M, 4), got {nodes.shape}", param="nodes")
+    nodes = np.ascontiguousarray(nodes).reshape(-1, 4)
     roots = np.ascontiguousarray(array(roots, "roots", kinds="iu", dtype=np.int64)).ravel()
     if (nodes.size and nodes.min() < 0) or (roots.size and roots.min() < 0):
         raise InputError("references are 0 .. 2 + the node count", param="nodes")
