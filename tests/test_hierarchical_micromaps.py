@@ -170,7 +170,7 @@ def test_succinct_from_a_dag_refuses_a_tree_deeper_than_its_level():
     with pytest.raises(InputError, match="deeper than level 1") as e:
         succinct_encode_dag(nodes, roots, 1)
     assert e.value.param == "roots"
-    with pytest.raises(InputError, match="names no node"):
+    with pytest.raises(InputError, match="must hold references"):
         succinct_encode_dag(nodes, [3 + len(nodes)], 2)
 
 

@@ -388,6 +388,22 @@ def build(maps, level: int) -> tuple[np.ndarray, np.ndarray]:
 LINE_BITS = 512  # a 64-byte cache line: the unit a treelet is sized to
 
 
+def checked_dag(nodes, roots) -> tuple[np.ndarray, np.ndarray]:
+    """A merged DAG as given by a caller, checked: nodes (M, 4) and roots (P,) int64, each a
+    reference 0 .. 2 + M; an InputError naming ``nodes`` otherwise."""
+    from ..checks import array
+
+    nodes = array(nodes, "nodes", kinds="iu", dtype=np.int64)
+    if nodes.size % 4:
+        raise InputError(f"nodes must have shape (M, 4), got {nodes.shape}", param="nodes")
+    nodes = np.ascontiguousarray(nodes).reshape(-1, 4)
+    roots = np.ascontiguousarray(array(roots, "roots", kinds="iu", dtype=np.int64)).ravel()
+    if (nodes.size and (nodes.min() < 0 or nodes.max() >= 3 + len(nodes))) or (
+            roots.size and (roots.min() < 0 or roots.max() >= 3 + len(nodes))):
+        raise InputError("nodes and roots must hold references 0 .. 2 + M", param="nodes")
+    return nodes, roots
+
+
 @njit(cache=True)
 def _treelet_order(nodes, roots, per_line):
     """Each node's index in the treelet layout (``treelets``), or -1 for a node no root
@@ -496,16 +512,7 @@ def treelets(nodes: ArrayLike, roots: ArrayLike) -> tuple[np.ndarray, np.ndarray
     >>> nodes.tolist(), roots.tolist()              # one treelet, its deepest members first
     ([[0, 0, 0, 1], [0, 1, 1, 1], [4, 0, 2, 3]], [5])
     """
-    from ..checks import array
-
-    nodes = array(nodes, "nodes", kinds="iu", dtype=np.int64)
-    if nodes.size % 4:
-        raise InputError(f"nodes must have shape (M, 4), got {nodes.shape}", param="nodes")
-    nodes = np.ascontiguousarray(nodes).reshape(-1, 4)
-    roots = np.ascontiguousarray(array(roots, "roots", kinds="iu", dtype=np.int64)).ravel()
-    if (nodes.size and (nodes.min() < 0 or nodes.max() >= 3 + len(nodes))) or (
-            roots.size and (roots.min() < 0 or roots.max() >= 3 + len(nodes))):
-        raise InputError("nodes and roots must hold references 0 .. 2 + M", param="nodes")
+    nodes, roots = checked_dag(nodes, roots)
     per_line = max(2, LINE_BITS // (4 * ref_bits(len(nodes))))
     new = _treelet_order(nodes, roots, per_line)
     if len(new) and new[0] == -2:
@@ -542,16 +549,7 @@ def _pack(nodes, roots, w, out):
 def pack(nodes: ArrayLike, roots: ArrayLike) -> bytes:
     """The blob of a merged DAG (``build``'s nodes and any roots: a micromap's root may be listed
     for each triangle that uses it), ``ceil(blob_bits / 8)`` bytes."""
-    from ..checks import array
-
-    nodes = array(nodes, "nodes", kinds="iu", dtype=np.int64)
-    if nodes.size % 4:
-        raise InputError(f"nodes must have shape (M, 4), got {nodes.shape}", param="nodes")
-    nodes = np.ascontiguousarray(nodes).reshape(-1, 4)
-    roots = np.ascontiguousarray(array(roots, "roots", kinds="iu", dtype=np.int64)).ravel()
-    if (nodes.size and (nodes.min() < 0 or nodes.max() >= 3 + len(nodes))) or (
-            roots.size and (roots.min() < 0 or roots.max() >= 3 + len(nodes))):
-        raise InputError("nodes and roots must hold references 0 .. 2 + M", param="nodes")
+    nodes, roots = checked_dag(nodes, roots)
     if len(nodes) >= 1 << 32:
         raise InputError("a csm set holds fewer than 2^32 mixed nodes")
     out = np.zeros(-(-blob_bits(len(nodes), len(roots)) // 8), np.uint8)

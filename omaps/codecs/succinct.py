@@ -216,6 +216,16 @@ def _put(out, pos, v, n):
             out[(pos + b) >> 3] |= np.uint8(1 << ((pos + b) & 7))
 
 
+@njit(cache=True, inline="always")
+def _header(out, base, n_t, w):
+    """Write a blob's ``n_T`` at bit ``base``; the bits where its T sequence, rank directory and
+    leaf states start."""
+    _put(out, base, n_t, w)
+    t0 = base + w
+    d0 = t0 + n_t
+    return t0, d0, d0 + w * (n_t >> 6)
+
+
 @njit(cache=True)
 def _sizes(maps, level, off):
     w = _header_bits(level)
@@ -236,11 +246,7 @@ def _write(maps, level, off, out, byte_start):
     for i in range(maps.shape[0]):
         _uniform_levels(maps[i], level, uni, off)
         n_t, n_int = _counts(uni, off, level)
-        base = 8 * byte_start[i]
-        _put(out, base, n_t, w)
-        t0 = base + w
-        d0 = t0 + n_t
-        s0 = d0 + w * (n_t >> 6)
+        t0, d0, s0 = _header(out, 8 * byte_start[i], n_t, w)
         tp = 0
         lp = 0
         ones = 0
@@ -466,11 +472,7 @@ def _dag_blobs(nodes, roots, level, out, byte_start):
         bits[t] = _size(n_t, n_int, w)
         if out is None:
             continue
-        base = 8 * byte_start[t]
-        _put(out, base, n_t, w)
-        t0 = base + w
-        d0 = t0 + n_t
-        s0 = d0 + w * (n_t >> 6)
+        t0, d0, s0 = _header(out, 8 * byte_start[t], n_t, w)
         ones = 0
         lp = 0
         for i in range(n):
@@ -505,20 +507,15 @@ def encode_dag(nodes, roots, level: int) -> tuple[np.ndarray, np.ndarray, np.nda
     >>> data.tobytes() == encode_many(maps, 2)[0].tobytes(), bits.tolist()
     (True, [40, 6])
     """
-    from ..checks import array, integer
+    from ..checks import integer
+    from .csm import checked_dag
 
     level = integer(level, "level", 0, MAX_LEVEL)
-    nodes = array(nodes, "nodes", kinds="iu", dtype=np.int64)
-    if nodes.size % 4:
-        raise InputError(f"nodes must have shape (M, 4), got {nodes.shape}", param="nodes")
-    nodes = np.ascontiguousarray(nodes).reshape(-1, 4)
-    roots = np.ascontiguousarray(array(roots, "roots", kinds="iu", dtype=np.int64)).ravel()
-    if (nodes.size and nodes.min() < 0) or (roots.size and roots.min() < 0):
-        raise InputError("references are 0 .. 2 + the node count", param="nodes")
+    nodes, roots = checked_dag(nodes, roots)
     bits = _dag_blobs(nodes, roots, level, None, np.zeros(0, np.int64))
     if (bits < 0).any():
-        raise InputError(f"the tree of root {int(np.flatnonzero(bits < 0)[0])} names no node or is deeper than "
-                         f"level {level}", param="roots")
+        raise InputError(f"the tree of root {int(np.flatnonzero(bits < 0)[0])} is deeper than level {level}",
+                         param="roots")
     starts = np.zeros(len(roots) + 1, np.int64)
     np.cumsum((bits + 7) // 8, out=starts[1:])
     data = np.zeros(int(starts[-1]), np.uint8)
