@@ -465,11 +465,7 @@ def _dag_blobs(nodes, roots, level, out, byte_start):
             bits[t] = -1
             continue
         n_t = ends[level]
-        n_int = 0
-        for i in range(n_t):
-            if queue[i] >= 3:
-                n_int += 1
-        bits[t] = _size(n_t, n_int, w)
+        bits[t] = _size(n_t, (n - 1) >> 2, w)  # every internal node added its 4 children
         if out is None:
             continue
         t0, d0, s0 = _header(out, 8 * byte_start[t], n_t, w)

@@ -6,9 +6,9 @@ for, with growth ``bake.GROW_TEXEL``; coarser sizes are OR-downsampled, which is
 schemes bake each distinct triangle with the micromap baker; ``succinctL`` stores each distinct
 micromap as its succinct tree (a byte offset per row), ``csmL`` the scene's micromaps as one
 merged DAG with a root per alpha triangle; both are written from one merged DAG baked straight
-from the baker's runs (``baked_tree``, ``hierarchical_maps``), never every micro-triangle's state. Triangles the scene reader marks
-unknown get all-C maps (a pair with one such triangle is all C). Work is done per prototype and
-shared by its instances, as a BLAS shares it.
+from the baker's runs (``baked_tree``, ``hierarchical_maps``), never every micro-triangle's
+state. Triangles the scene reader marks unknown get all-C maps (a pair with one such triangle is
+all C). Work is done per prototype and shared by its instances, as a BLAS shares it.
 """
 
 from __future__ import annotations
@@ -100,7 +100,7 @@ def micromap_states(at: AlphaTriangles, tests: dict, level: int):
     return out, inverse
 
 
-RUNS_PER_CHUNK = 1 << 22  # the runs of one chunk of triangles held at once (``merged_subtree_maps``)
+RUNS_PER_CHUNK = 1 << 22  # the runs of one chunk of triangles held at once (``baked_tree``)
 
 
 def baked_tree(at: AlphaTriangles, tests: dict, level: int, progress: bool = False, name: str = "tree"):
