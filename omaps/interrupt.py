@@ -57,9 +57,17 @@ def _handle_pending() -> None:
     """Nothing; calling a Python function lets the main thread handle a pending signal."""
 
 
+def _drop(u) -> None:
+    """An unraisable-exception hook that reports nothing."""
+
+
 @contextlib.contextmanager
-def remembered():
-    """Remember a Ctrl-C for the block (see the module's docstring); nested: the outer one."""
+def remembered(quiet_after: bool = False):
+    """Remember a Ctrl-C for the block (see the module's docstring); nested: the outer one.
+    ``quiet_after``: when a Ctrl-C came, leave the process's finalisers unreported after the
+    block (a program that ends on the interrupt: objects it cut short while they were torn down,
+    such as llvmlite's, may fail again in their finalisers at exit; the program's one line is
+    its word)."""
     previous = signal.getsignal(signal.SIGINT)
     if _ACTIVE or threading.current_thread() is not threading.main_thread() or not callable(previous):
         yield
@@ -101,9 +109,9 @@ def remembered():
             _handle_pending()
         except KeyboardInterrupt:
             pass
-        sys.unraisablehook = previous_hook
-        signal.signal(signal.SIGINT, previous)
         came = bool(_SEEN)
+        sys.unraisablehook = _drop if came and quiet_after else previous_hook
+        signal.signal(signal.SIGINT, previous)
         _SEEN.clear()
     if finished and came:  # the block went on after a Ctrl-C that was dropped: it was interrupted
         raise KeyboardInterrupt

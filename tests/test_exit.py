@@ -192,7 +192,8 @@ def test_a_ctrl_c_dropped_in_a_finaliser_is_raised_again_and_not_printed(monkeyp
     prints "Exception ignored in"; once a Ctrl-C has come (``interrupt.remembered``) the report
     goes nowhere and the interrupt is raised again in the main thread, out of the finaliser. Any
     other dropped exception still reaches the hook that was there, and so does an interrupt that
-    came before any Ctrl-C; after the block that hook and the SIGINT handler are back."""
+    came before any Ctrl-C; after the block that hook and the SIGINT handler are back, unless the
+    block is a program that ends on the interrupt (``quiet_after``): then nothing is reported."""
     from omaps import interrupt
 
     reported = []
@@ -210,6 +211,10 @@ def test_a_ctrl_c_dropped_in_a_finaliser_is_raised_again_and_not_printed(monkeyp
         _until(lambda: False)
     assert sys.unraisablehook is hook and signal.getsignal(signal.SIGINT) is handler
     assert not interrupt.requested()
+    with pytest.raises(KeyboardInterrupt), interrupt.remembered(quiet_after=True):  # a program ending on it
+        _ctrl_c()
+    _Dropping(AttributeError("a half torn-down object"))  # after the block: not reported
+    assert reported == ["KeyboardInterrupt", "ValueError"] and sys.unraisablehook is not hook
 
 
 def test_a_block_that_went_on_after_a_ctrl_c_ends_interrupted(tmp_path):

@@ -103,7 +103,7 @@ def main(argv=None) -> int:
         precompile.finish_ahead(ahead)
         ahead = None
         _resume_gc()
-        with warnings.catch_warnings(), interrupt.remembered():
+        with warnings.catch_warnings(), interrupt.remembered(quiet_after=True):
             warnings.showwarning = show_warning
             warnings.simplefilter("always", UserWarning)
             return args.func(args)
