@@ -125,9 +125,9 @@ def lines_per_ray(pixel: np.ndarray, ids: np.ndarray, pixels: int) -> float:
 
 def measure(path: str, levels: list[int], size: int) -> list[dict]:
     import omaps
+    from omaps import birdcurve
     from omaps.trace.maps import baked_tree
     from omaps.trace.memory import record_lookups
-    from omaps import birdcurve
 
     names = ",".join(f"tri{lv},csm{lv}" for lv in levels)
     res = omaps.trace_scene(path, names, size=size, memory=True)
