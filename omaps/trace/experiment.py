@@ -298,11 +298,12 @@ def trace_scene(scene: str | os.PathLike[str] | Scene, schemes: str | Sequence[s
     bad = {n: r["differing_pixels"] + r.get("differing_shadow_rays", 0) + r.get("deferred_differing_shadow_rays", 0)
            for n, r in report["schemes"].items()}
     if memory:
-        from .memory import scheme_memory
+        from .memory import scheme_memory, texture_layout
 
         t0 = time.perf_counter()
+        tex = texture_layout(prep.base)  # one layout of the scene's textures for every scheme
         for n in tqdm(names, desc="memory", unit="scheme", disable=not progress, leave=False):
-            mem = scheme_memory(prep, n, runs[n], cam, w, h, cache_kib)
+            mem = scheme_memory(prep, n, runs[n], cam, w, h, cache_kib, tex)
             report["schemes"][n]["memory"] = mem
             if mem is not None:
                 report["schemes"][n]["map_reads_per_lookup"] = mem["own"]["map_reads_per_lookup"]

@@ -565,12 +565,14 @@ def texture_lines_per_ray(tex: TextureLayout, base: dict, lk: Lookups) -> float:
     return float(lines_per_ray(lk, starts, lines).sum()) / (lk.width * lk.height)
 
 
-def scheme_memory(prep, name: str, run, cam: np.ndarray, w: int, h: int, cache_kib: float | None = None) -> dict | None:
+def scheme_memory(prep, name: str, run, cam: np.ndarray, w: int, h: int, cache_kib: float | None = None,
+                  tex: TextureLayout | None = None) -> dict | None:
     """``trace --memory``'s figures of one traced scheme (``run``: its ``SchemeRun``): lookups per
     primary ray, the texture lines its alpha tests fetch per primary ray and, per layout
     (``own``, ``shared``), ``measure``'s with ``total_lines_per_ray`` (map lines plus texture
     lines). None for a kind not modelled. RuntimeError if the recording run differs from the
-    traced one."""
+    traced one. ``tex``: the scene's ``texture_layout`` (made here when not given; a caller
+    measuring several schemes of one scene makes it once)."""
     sm = prep.maps[name]
     lays = layouts(sm, prep.alpha)
     if not lays:
@@ -578,7 +580,7 @@ def scheme_memory(prep, name: str, run, cam: np.ndarray, w: int, h: int, cache_k
     lk, rec = record_lookups(prep, name, cam, w, h, run.primary.calls)
     if not (np.array_equal(rec.tests, run.primary.tests) and np.array_equal(rec.prim, run.primary.prim)):
         raise RuntimeError(f"memory model: scheme {name}'s recording run differs from its traced run")
-    tex = texture_layout(prep.base)
+    tex = texture_layout(prep.base) if tex is None else tex
     tex_lines = texture_lines_per_ray(tex, prep.base, lk)
     out = {"lookups_per_primary_ray": lk.count / (w * h), "tile_pixels": TILE if cache_kib is not None else None,
            "cache_kib": cache_kib, "texture_layout": tex.description, "texture_bytes": tex.texture_bytes,
