@@ -67,7 +67,7 @@ DEFAULT_MAX_BYTES = 2 << 30  # 2 GiB: any one asset file, buffer, image file or 
 MAX_BYTES_ENV = "OMAPS_MAX_ASSET_BYTES"
 MESHOPT = "EXT_meshopt_compression"  # bufferViews whose bytes are compressed in another buffer's range
 GLB_MAGIC, JSON_CHUNK, BIN_CHUNK = 0x46546C67, 0x4E4F534A, 0x004E4942
-_SCHEME = re.compile(r"^([A-Za-z][A-Za-z0-9+.\-]*):")
+URI_SCHEME = re.compile(r"^([A-Za-z][A-Za-z0-9+.\-]*):")
 _DRIVE = re.compile(r"^[A-Za-z]:([\\/]|$)")
 
 
@@ -128,7 +128,8 @@ class Location:
     problem: str | None = None
 
 
-def _inside(path: str, root: str) -> bool:
+def inside_root(path: str, root: str) -> bool:
+    """``path`` is ``root`` or lies under it (both real, absolute paths)."""
     return path == root or path.startswith(root.rstrip(os.sep) + os.sep)
 
 
@@ -165,7 +166,7 @@ class Container:
         Windows path) is allowed to go unread with ``allow_outside`` (an image: then missing)."""
         if uri.startswith("data:"):
             return Location("data")
-        scheme = _SCHEME.match(uri)
+        scheme = URI_SCHEME.match(uri)
         local = None
         if _DRIVE.match(uri) or uri.startswith(("\\\\", "//")):
             return self._never_read(what, uri, "is a Windows or network path, not a relative path: omaps reads "
@@ -188,7 +189,7 @@ class Container:
             self._refuse(what, uri, "holds a NUL character: not a file name")
         full = os.path.join(self.folder, decoded)
         real = os.path.realpath(full)
-        if self.policy.allow_outside or _inside(real, self.root):
+        if self.policy.allow_outside or inside_root(real, self.root):
             return Location("file", real)
         kind = ("is a file: URI" if local is not None else "is an absolute path" if os.path.isabs(decoded)
                 else "leads")

@@ -58,7 +58,7 @@ import numpy as np
 from ..errors import InputError
 from .container import MESHOPT, AssetPolicy, Container, Location, read_container
 from .files import check_scene_file
-from .model import ALPHA_MODES, Material, Mesh, Primitive, Scene, SceneCamera, SceneWarning, Texture
+from .model import ALPHA_MODES, Material, Mesh, Primitive, Scene, SceneCamera, SceneWarning, Texture, own_vertices
 
 __all__ = ["load_scene", "SUPPORTED_EXTENSIONS", "node_matrix", "texture_transform_matrix"]
 
@@ -357,7 +357,7 @@ class _Reader:
                 with warnings.catch_warnings():
                     warnings.simplefilter("error", Image.DecompressionBombWarning)
                     with open_image(io.BytesIO(data), label) as pil:
-                        return _texture(label, pil)
+                        return Texture.from_image(label, pil)
             except InputError as exc:
                 if "DecompressionBomb" in exc.problem:  # a service's limit, not a broken file: an error
                     raise InputError(f"image {ii} ({label!r}) is over Pillow's decompression-bomb limit of "
@@ -530,7 +530,7 @@ class _Reader:
                         self.warn(f"{label}: COLOR_0 alpha is not 1 everywhere: its {len(tris)} triangles are "
                                   "unknown and the tracer's shader multiplies by it")
             if own is not None:
-                positions, uvs, tris, vertex_alpha = _own_vertices(positions, uvs, tris, vertex_alpha, own)
+                positions, uvs, tris, vertex_alpha = own_vertices(positions, uvs, tris, vertex_alpha, own)
             prims.append(Primitive(mi, pi, positions, uvs, tris, material, vertex_alpha, unknown))
         return Mesh(mi, name, prims)
 
@@ -747,19 +747,6 @@ class _Reader:
         return SceneCamera(ci, name, kind, yfov, aspect, node, eye, forward, up, problem)
 
 
-def _texture(label: str, pil) -> Texture:
-    if pil.mode in ("P", "PA", "RGBa", "La", "1"):
-        pil = pil.convert("RGBA")
-    bands = pil.getbands()
-    if pil.mode in ("I;16", "I;16B", "I;16L", "I"):
-        alpha = np.clip(np.asarray(pil, dtype=np.int64), 0, 65535).astype(np.uint16)  # a 16-bit mask
-        grey = (alpha >> 8).astype(np.uint8)
-        return Texture(label, np.ascontiguousarray(alpha), 65535, np.repeat(grey[..., None], 3, axis=2), None, True)
-    rgba = np.asarray(pil.convert("RGBA"), dtype=np.uint8)
-    has_alpha = "A" in bands
-    return Texture(label, np.ascontiguousarray(rgba[..., 3]), 255, np.ascontiguousarray(rgba[..., :3]), None, has_alpha)
-
-
 def _base_image(g, m):
     pbr = m.pbrMetallicRoughness
     info = pbr.baseColorTexture if pbr else None
@@ -793,21 +780,6 @@ def _triangles(idx: np.ndarray, mode: int) -> np.ndarray:
         b = np.where(k % 2 == 0, idx[k + 1], idx[k])
         return np.stack([a, b, idx[k + 2]], axis=1)
     return np.stack([np.full(len(k), idx[0]), idx[k + 1], idx[k + 2]], axis=1)  # fan
-
-
-def _own_vertices(positions, uvs, tris, vertex_alpha, sel):
-    """Triangles ``sel`` get three new vertices each (same positions and vertex alpha) at UV
-    (0, 0): a triangle with NaN texture coordinates reads one defined point of the texture, and
-    its neighbours keep theirs. Pairing welds by position, so the pairs are unchanged."""
-    k = np.flatnonzero(sel)
-    old = tris[k].ravel()
-    tris = tris.copy()
-    tris[k] = len(positions) + np.arange(3 * len(k)).reshape(-1, 3)
-    positions = np.concatenate([positions, positions[old]])
-    uvs = np.concatenate([uvs, np.zeros((len(old), 2))])
-    if vertex_alpha is not None:
-        vertex_alpha = np.concatenate([vertex_alpha, vertex_alpha[old]])
-    return positions, uvs, tris, vertex_alpha
 
 
 def node_matrix(n) -> np.ndarray:

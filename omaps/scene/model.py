@@ -41,6 +41,36 @@ class Texture:
     problem: str | None = None
     has_alpha: bool = True
 
+    @classmethod
+    def from_image(cls, label: str, pil) -> "Texture":
+        """A decoded Pillow image as a texture: 16-bit greyscale as a 16-bit mask (``maxval``
+        65535), anything else through RGBA (its alpha band, or opaque where it has none)."""
+        if pil.mode in ("P", "PA", "RGBa", "La", "1"):
+            pil = pil.convert("RGBA")
+        bands = pil.getbands()
+        if pil.mode in ("I;16", "I;16B", "I;16L", "I"):
+            alpha = np.clip(np.asarray(pil, dtype=np.int64), 0, 65535).astype(np.uint16)  # a 16-bit mask
+            grey = (alpha >> 8).astype(np.uint8)
+            return cls(label, np.ascontiguousarray(alpha), 65535, np.repeat(grey[..., None], 3, axis=2), None, True)
+        rgba = np.asarray(pil.convert("RGBA"), dtype=np.uint8)
+        return cls(label, np.ascontiguousarray(rgba[..., 3]), 255, np.ascontiguousarray(rgba[..., :3]), None,
+                   "A" in bands)
+
+
+def own_vertices(positions, uvs, tris, vertex_alpha, sel):
+    """Triangles ``sel`` get three new vertices each (same positions and vertex alpha) at UV
+    (0, 0): a triangle with NaN texture coordinates reads one defined point of the texture, and
+    its neighbours keep theirs. Pairing welds by position, so the pairs are unchanged."""
+    k = np.flatnonzero(sel)
+    old = tris[k].ravel()
+    tris = tris.copy()
+    tris[k] = len(positions) + np.arange(3 * len(k)).reshape(-1, 3)
+    positions = np.concatenate([positions, positions[old]])
+    uvs = np.concatenate([uvs, np.zeros((len(old), 2))])
+    if vertex_alpha is not None:
+        vertex_alpha = np.concatenate([vertex_alpha, vertex_alpha[old]])
+    return positions, uvs, tris, vertex_alpha
+
 
 @dataclass(frozen=True)
 class Material:

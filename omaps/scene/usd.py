@@ -54,23 +54,21 @@ from __future__ import annotations
 import io
 import math
 import os
-import re
 import warnings
 import zipfile
 
 import numpy as np
 
 from ..errors import InputError
-from .container import MAX_BYTES_ENV, AssetPolicy, _inside, max_asset_bytes
+from .container import MAX_BYTES_ENV, URI_SCHEME, AssetPolicy, inside_root, max_asset_bytes
 from .files import USD_SUFFIXES, is_usd_file
-from .gltf import MAX_TEXEL_COORDINATE, _own_vertices, _texture
-from .model import Material, Mesh, Primitive, Scene, SceneCamera, SceneWarning, Texture
+from .gltf import MAX_TEXEL_COORDINATE
+from .model import Material, Mesh, Primitive, Scene, SceneCamera, SceneWarning, Texture, own_vertices
 
 __all__ = ["load_scene", "INSTALL_HINT"]
 
 INSTALL_HINT = "pip install 'omaps[usd]'"
 UNCHECKED = "malformed USD"
-_SCHEME = re.compile(r"^([A-Za-z][A-Za-z0-9+.\-]*):")
 _WRAPS = {"repeat": "wrap", "clamp": "clamp", "mirror": "mirror", "black": "black", "useMetadata": "black"}
 _CHANNELS = {"r": 0, "g": 1, "b": 2, "a": 3}
 
@@ -166,7 +164,7 @@ class _Reader:
         return resolved
 
     def _scheme(self, authored: str) -> str | None:
-        m = _SCHEME.match(authored)
+        m = URI_SCHEME.match(authored)
         if m and len(m.group(1)) > 1 and m.group(1).lower() != "file":  # (a one-letter scheme: a drive)
             return m.group(1).lower()
         return None
@@ -175,7 +173,7 @@ class _Reader:
         """The real path of the file a resolved asset path leads to (its package for a path
         inside a .usdz), under the policy; an ``InputError`` naming ``what`` when it is refused."""
         real = os.path.realpath(self._outer(resolved))
-        if not self.policy.allow_outside and not _inside(real, self.root):
+        if not self.policy.allow_outside and not inside_root(real, self.root):
             raise InputError(f"{what}: asset path {authored!r} leads to {real}, outside {self.root} "
                              f"({self.root_label}): omaps reads only files under it ({{root}}: a folder holding "
                              "both; {allow_outside}: if you trust this stage)", self.path,
@@ -554,7 +552,7 @@ class _Reader:
                 warnings.simplefilter("error", Image.DecompressionBombWarning)
                 with open_image(io.BytesIO(data), label) as pil:
                     sixteen = pil.mode in ("I;16", "I;16B", "I;16L", "I")
-                    t = _texture(label, pil)
+                    t = Texture.from_image(label, pil)
         except InputError as exc:
             if "DecompressionBomb" in exc.problem:
                 raise InputError(f"{what}: image {label!r} is over Pillow's decompression-bomb limit of "
@@ -738,7 +736,7 @@ class _Reader:
                 if material.alpha_mode != "OPAQUE":
                     self.warn(f"{label}: {int(bad_t.sum())} triangles have NaN, infinite or huge (beyond 2^30 texels) "
                               "texture coordinates: they are unknown (all C), read as UV (0, 0) at every vertex")
-                pos, uv, tris, _ = _own_vertices(pos, uv, tris, None, bad_t)
+                pos, uv, tris, _ = own_vertices(pos, uv, tris, None, bad_t)
         return Primitive(index, pi, pos, uv, tris.astype(np.int64), mat, None, unknown, str(prim.GetPath()),
                          face_ids.astype(np.int64))
 
