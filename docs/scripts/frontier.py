@@ -53,20 +53,60 @@ def shared_root() -> Path:
     return Path(os.environ.get("OMAPS_SHARED", ROOT.parent / "shared"))
 
 
+COST_SCHEMES = "tri6,succinct6,csm6,vq4"  # what building and looking up cost (bench/bench_lookup_cost.py)
+COST_ROUNDS = 3
+
+
+def _bench(name: str):
+    """A module of bench/ (the cost and reach measurements are the benches' own)."""
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location(name, ROOT / "bench" / f"{name}.py")
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+def reach_levels(level: int) -> list[int]:
+    """The levels of the reach table: the even levels from 6 to ``level`` (``level`` alone below 6)."""
+    return list(range(6, level + 1, 2)) or [level]
+
+
 def run(scenes: dict | None = None) -> dict:
-    """Trace each scene ({name: (path, schemes)}; default: the page's) with ``memory=True``."""
+    """Trace each scene ({name: (path, schemes, finest level)}; default: the page's) with
+    ``memory=True``; then what each representation costs (``bench_lookup_cost``) and how near a
+    map stored with its triangle or pair can come (``bench_both_fronts_reach``)."""
     import omaps
 
     folder = shared_root() / "data" / "scenes"
-    scenes = scenes or {name: (folder / f"{name}.glb", schemes) for name, schemes in SCHEMES.items()}
+    scenes = scenes or {name: (folder / f"{name}.glb", schemes, LEVEL[name]) for name, schemes in SCHEMES.items()}
     out = {"size": SIZE, "cache_kib": CACHE_KIB, "scenes": {}}
-    for name, (path, schemes) in scenes.items():
+    cost, reach = _bench("bench_lookup_cost"), _bench("bench_both_fronts_reach")
+    for name, (path, schemes, level) in scenes.items():
         t0 = time.perf_counter()
         res = omaps.trace_scene(path, schemes, size=SIZE, memory=True, cache_kib=CACHE_KIB,
                                 progress=sys.stderr.isatty())
         print(res.table(), flush=True)
-        out["scenes"][name] = {"names": res.names, "report": res.report, "seconds": time.perf_counter() - t0}
+        seconds = time.perf_counter() - t0
+        costs = cost.measure(str(path), COST_SCHEMES, SIZE, COST_ROUNDS)
+        print(cost.format_result(costs), flush=True)
+        out["scenes"][name] = {"names": res.names, "report": res.report, "seconds": seconds, "costs": costs,
+                               "reach": _jsonable(reach.measure(str(path), reach_levels(level), SIZE))}
     return out
+
+
+def _jsonable(x):
+    import numpy as np
+
+    if isinstance(x, dict):
+        return {k: _jsonable(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [_jsonable(v) for v in x]
+    if isinstance(x, np.ndarray):
+        return x.tolist()
+    if isinstance(x, np.generic):
+        return x.item()
+    return x
 
 
 def _kind(report: dict, n: str) -> str:
@@ -311,6 +351,7 @@ def render(data: dict) -> str:
             lines.append(f"| {lv} | {_kib(raw)} | {_kib(omm)} | {_kib(so)} KiB: {raw / so:.1f}x raw, {omm / so:.2f}x OMM | "
                          f"{_kib(ss)} KiB: {raw / ss:.1f}x, {omm / ss:.2f}x | {_kib(cs)} KiB: {raw / cs:.1f}x, "
                          f"{omm / cs:.2f}x | {tests} |")
+        lines += cost_lines(scene, d.get("costs")) + reach_lines(scene, d.get("reach"))
     lines += ["", "## The papers' claims beside these figures", "",
               f"- succinct: {CLAIMS['succinct']}.", f"- csm: {CLAIMS['csm']}.", ""]
     for scene, d in data["scenes"].items():
@@ -345,6 +386,54 @@ def render(data: dict) -> str:
     return "\n".join(lines)
 
 
+def cost_lines(scene: str, c: dict | None) -> list[str]:
+    """The page's table of what building and looking up each representation cost (``bench_lookup_cost``)."""
+    if not c:
+        return []
+    out = ["", f"### {scene}: what building and looking up cost", "",
+           f"Measured by `python bench/bench_lookup_cost.py` on this machine (2 cores), best of {c['rounds']} rounds. "
+           "Build: the scheme's maps from the scene's alpha triangles as the tracer builds them (bake, keep the "
+           "distinct maps, store), per million alpha triangles (prototypes). Lookup: every lookup of the primary "
+           "pass above replayed in ray order through the tracer's state function (the hit's micro-triangle or "
+           f"cell, then the stored data); the rounds alternate between schemes, ratios to {c['reference']}'s.", "",
+           f"| scheme | map KiB | build s | s per million triangles | ns per lookup | x {c['reference']} |",
+           "|---|---|---|---|---|---|"]
+    for r in c["rows"]:
+        out.append(f"| {r['scheme']} | {_kib(r['map_bytes'])} | {r['build_s']:.2f} | {r['build_s_per_million']:.1f} | "
+                   f"{r['lookup_ns']:.1f} | {r['lookup_over_first']:.2f} |")
+    return out
+
+
+def reach_lines(scene: str, rows: list | None) -> list[str]:
+    """The page's table of how near a map whose top is stored with its triangle or pair can come
+    (``bench_both_fronts_reach``): per level, its best case and its nearer ``fit`` case."""
+    if not rows:
+        return []
+    out = ["", f"### {scene}: how near a map stored with its triangle or pair can come", "",
+           "Where each lookup of the primary pass ends (the depth of the uniform subtree or leaf that decides it), "
+           "and the best case of one family of designs (`python bench/bench_both_fronts_reach.py`): a fixed "
+           "record of R bytes per alpha triangle or per prototype pair at an address computed from its index, "
+           "holding the top of its maps (one byte per mixed node, whole levels, as deep as fit, no pointer), and "
+           "shared storage for the rest. A lookup that ends within the record reads its line only. Every other "
+           "lookup also reads one line of shared data: in the *best case* one line per map and ray (as if a whole "
+           "map fit in a line); in the *fit* case one line per subtree that fits in a line (the first node of its "
+           "descent with at most 64 mixed nodes below it, each distinct one stored once). Bytes: the records (fit: "
+           "and those subtrees, and a byte per mixed node above them). Real designs also store pointers and read "
+           "the nodes above a subtree, so they read and store more. The gaps are against triL's raw rows' lines "
+           "and csmL's bytes from the same trace, each the least over records of 4 to 128 bytes: the best case's "
+           "is the least any such design could reach; the fit case's is nearer to one that could be built.", "",
+           "| level | decided at depth 0, 1, ... L | best case: least gap (record) | fit: least gap (record) | "
+           "fit: lines/ray, KiB |", "|---|---|---|---|---|"]
+    for r in rows:
+        best = min(r["cases"], key=lambda c: c["gap"])
+        fit = min(r["cases"], key=lambda c: c["fit_gap"])
+        share = ", ".join(f"{v:.2f}" for v in r["depth_share"])
+        out.append(f"| {r['level']} | {share} | {best['gap']:.2f} ({best['record']} B a {best['unit']}) | "
+                   f"{fit['fit_gap']:.2f} ({fit['record']} B a {fit['unit']}) | {fit['fit_lines']:.3f}, "
+                   f"{_kib(fit['fit_bytes'])} |")
+    return out
+
+
 def draw(data: dict) -> None:
     from omaps.trace.pictures import frontier_plot
 
@@ -362,7 +451,7 @@ def main() -> int:
     ap.add_argument("--json", help="with --scene: write the run (the page's JSON format) here")
     a = ap.parse_args()
     if a.scene:
-        data = run({Path(a.scene).stem: (a.scene, scheme_set(a.level))})
+        data = run({Path(a.scene).stem: (a.scene, scheme_set(a.level), a.level)})
         if a.json:
             Path(a.json).write_text(json.dumps(data, indent=1))
         for name, d in data["scenes"].items():
@@ -380,7 +469,7 @@ def main() -> int:
             ap.error(f"--scenes: unknown scene {', '.join(unknown)} (choose from {', '.join(SCHEMES)})")
         data = json.loads(DATA_JSON.read_text())
         folder = shared_root() / "data" / "scenes"
-        new = run({n: (folder / f"{n}.glb", SCHEMES[n]) for n in names})
+        new = run({n: (folder / f"{n}.glb", SCHEMES[n], LEVEL[n]) for n in names})
         data["scenes"] = {n: new["scenes"].get(n, d) for n, d in data["scenes"].items()} | {
             n: d for n, d in new["scenes"].items() if n not in data["scenes"]}
         DATA_JSON.write_text(json.dumps(data, indent=1))
