@@ -92,7 +92,7 @@ class OmmBake:
     skipped: list = field(default_factory=list)
     warnings: list = field(default_factory=list)
     seconds: float = 0.0
-    source_blocks: dict | None = None  # expand_omms: the pair blocks expanded (codec, blocks)
+    source_blocks: dict | None = None  # expand_omms: what was expanded (pair blocks: codec, blocks; merged: scheme, nodes, bytes)
 
     @property
     def statistics(self) -> dict:
@@ -182,7 +182,9 @@ def omm_settings(*, level: int | None = None, dynamic: float | None = None, max_
                                  param="budget")
         budget = checks.integer(budget, "budget", 1)
     if level is not None and source != "texture":
-        raise InputError("source fixes the level to log2 N of the square map; drop level", param=("source", "level"))
+        fixed = ("the L of csmL" if isinstance(source, str) and source.strip().lower().startswith("csm")
+                 else "log2 N of the square map")
+        raise InputError(f"source fixes the level to {fixed}; drop level", param=("source", "level"))
     return OmmSettings(format=format, level=4 if level is None else level, dynamic_scale=dynamic,
                        max_level=max_level, promotion=promote, special=special, dedup=dedup, source=source,
                        encoder=encoder, effort=effort, seed=seed, jobs=jobs, budget=budget)
@@ -399,8 +401,9 @@ def verify_omms(path: str | os.PathLike[str], *, root: str | os.PathLike[str] | 
 
 def expand_omms(baked: str | os.PathLike[str], output: str | os.PathLike[str], *,
                 root: str | os.PathLike[str] | None = None, allow_outside: bool = False) -> OmmBake:
-    """A baked .glb / .gltf holding the deck's pair blocks (OMAPS_pair_opacity_maps), decoded
-    and expanded into standard micromaps (EXT_mesh_opacity_micromap only), written to
+    """A baked .glb / .gltf holding the deck's pair blocks (OMAPS_pair_opacity_maps) or merged
+    micromaps (OMAPS_merged_micromaps, ``omm --from csmL``), decoded and expanded into standard
+    micromaps (EXT_mesh_opacity_micromap only), written to
     ``output`` (.glb / .gltf). ``root``, ``allow_outside``: the URI policy (``omaps.load_scene``).
 
     Raises
@@ -422,12 +425,12 @@ def expand_omms(baked: str | os.PathLike[str], output: str | os.PathLike[str], *
     outputs.file(output, "-o")
     t0 = time.perf_counter()
     res = gltf_io.read_gltf(baked, root=root, allow_outside=allow_outside)
-    if res.pair_blocks is None:
-        raise InputError("holds no OMAPS_pair_opacity_maps pair blocks to expand", baked)
+    if res.pair_blocks is None and res.merged_micromaps is None:
+        raise InputError("holds no OMAPS_pair_opacity_maps pair blocks or OMAPS_merged_micromaps to expand", baked)
     out = expand_result(res, root=root, allow_outside=allow_outside)
     bake = OmmBake(out, None, {"kind": "gltf", "path": os.path.abspath(baked)}, os.fspath(output),
                    seconds=time.perf_counter() - t0)
     with outputs.writing():
         bake.warnings = list(gltf_io.write_gltf_result(baked, outputs.path(output), output, out, None, root=root, allow_outside=allow_outside))
-    bake.source_blocks = dict(res.summary["pair_blocks"])
+    bake.source_blocks = dict(res.summary.get("pair_blocks") or res.summary["merged_micromaps"])
     return bake

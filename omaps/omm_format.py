@@ -48,6 +48,7 @@ USAGE_FILE = "omm_usage.json"
 SUMMARY_FILE = "omm.json"
 PAIR_BLOCKS_FILE = "pair_blocks.bin"  # --from SCHEME: the stored pair maps the OMMs expand from
 PAIRS_FILE = "omm_pairs.bin"  # --from SCHEME: per triangle its pair and the corner codes of its vertices
+MERGED_FILE = "merged_micromaps.bin"  # --from csmL: every triangle's micromap in one merged DAG (codecs.csm's blob)
 PAIR_RECORD = np.dtype([("pair", "<i4"), ("corners", "u1", (3,)), ("pad", "u1")])
 
 

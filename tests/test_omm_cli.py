@@ -91,7 +91,8 @@ def test_from_square_maps_and_codec(tex_and_uvs, tmp_path, capsys):
     (["--level", "3", "--dynamic", "2"], "exclude each other"),
     (["--from", "sq12"], "power of two"),
     (["--from", "vq9"], "unknown scheme 'vq9'"),
-    (["--from", "tri3"], "--from takes texture or a square scheme"),
+    (["--from", "tri3"], "--from takes texture, a square scheme"),
+    (["--from", "csm13"], "level"),
     (["--from", "sq8", "--dynamic", "2"], "--dynamic needs the texture source"),
     (["--cutoff", "2"], "cutoff must be in"),
 ])

@@ -50,8 +50,12 @@ def test_trace_and_omm_reject_a_non_gltf_scene_alike(tmp_path, capsys, command):
 
 def _listed(message: str) -> set[str]:
     """Every scheme name the --from message lists (``sqN: N = 1, 2, ...`` and ``base[-a|-b]``)."""
-    inside = message[message.index("(") + 1:message.rindex(")")]
+    inside = message[message.index("(") + 1:message.index("), not")]
     names = set()
+    m = re.search(r"csmL, L = (\d+) \.\. (\d+)", inside)
+    if m:
+        names |= {f"csm{lv}" for lv in range(int(m.group(1)), int(m.group(2)) + 1)}
+        inside = inside[:m.start()]
     m = re.search(r"sqN, N = ([\d, or]+)", inside)
     if m:
         names |= {f"sq{n}" for n in re.findall(r"\d+", m.group(1))}
@@ -82,12 +86,13 @@ def test_from_message_lists_exactly_the_accepted_schemes(tex_and_uvs, tmp_path, 
     out = tmp_path / "o"
     assert main(["omm", str(png), str(uvs), "-o", str(out), "--from", "tri3"]) == 2
     err = capsys.readouterr().err
-    assert "--from takes texture or a square scheme" in err and "'tri3'" in err
+    assert "--from takes texture, a square scheme" in err and "'tri3'" in err
     listed = _listed(err.strip().splitlines()[-1])
-    assert {"sq1", "sq16", "sq128", "vq2", "vq4-paper", "vq4-synth", "wavelet3-fast"} <= listed, listed
+    assert {"sq1", "sq16", "sq128", "vq2", "vq4-paper", "vq4-synth", "wavelet3-fast", "csm0", "csm12"} <= listed, listed
     for name in listed:  # every scheme listed is accepted ...
         assert _accepted(name), name
     candidates = {f"sq{n}" for n in range(0, 260)} | {"tri3", "none", "texel", "omm", "file:vq2", "budget:1000"}
+    candidates |= {f"{kind}{lv}" for kind in ("csm", "succinct", "tri") for lv in range(-1, 15)}
     for c in codec_names() + ["vq8", "sq"]:
         candidates |= {c} | {f"{c}-{v}" for v in VARIANTS + ("best", "slow")}
     accepted = {c for c in candidates if _accepted(c)}

@@ -24,13 +24,13 @@ def add_parser(sub) -> None:
     o.add_argument("-o", "--output", metavar="DIR|OUT.glb|OUT.gltf",
                    help="output folder (replaced whole if it is empty or holds an earlier omm.json; any other "
                         "folder is left alone: error), or, for a glTF input, a .glb / .gltf file: the scene with "
-                        "the EXT_mesh_opacity_micromap extension (and OMAPS_pair_opacity_maps with --from)")
+                        "the EXT_mesh_opacity_micromap extension (and OMAPS_pair_opacity_maps or OMAPS_merged_micromaps with --from)")
     o.add_argument("--verify", metavar="DIR|FILE.glb",
                    help="check an OMM folder or glTF file: layout (the extension's rules), usage counts, pair "
-                        "blocks, and a re-bake from its recorded inputs (a glTF file: its own textures)")
+                        "blocks or merged micromaps, and a re-bake from its recorded inputs (a glTF file: its own textures)")
     o.add_argument("--expand", action="store_true",
-                   help="with one baked .glb/.gltf input holding OMAPS_pair_opacity_maps and -o OUT.glb|.gltf: "
-                        "decode the pair blocks into standard micromaps (EXT_mesh_opacity_micromap only)")
+                   help="with one baked .glb/.gltf input holding OMAPS_pair_opacity_maps or OMAPS_merged_micromaps "
+                        "and -o OUT.glb|.gltf: decode them into standard micromaps (EXT_mesh_opacity_micromap only)")
     lv = o.add_argument_group("subdivision")
     lv.add_argument("--level", type=int, default=None, help="one subdivision level for all, 0..12 (default 4)")
     lv.add_argument("--dynamic", type=float, default=None, metavar="SCALE",
@@ -59,7 +59,9 @@ def add_parser(sub) -> None:
     r.add_argument("--no-special", action="store_true", help="no special indices for uniform triangles")
     r.add_argument("--no-dedup", action="store_true", help="no sharing of identical micromaps")
     r.add_argument("--from", dest="source", default="texture", metavar="SCHEME",
-                   help="texture (default), or a square scheme: sqN (the pair's N x N map, expanded to level "
+                   help="texture (default); csmL: the texture's micromaps at level L, also stored as one merged "
+                        "DAG of identical subtrees (OMAPS_merged_micromaps in a glTF output, which --expand turns "
+                        "back into standard micromaps); or a square scheme: sqN (the pair's N x N map, expanded to level "
                         f"log2 N) or a codec ({CODECS}; also with -fast, -medium or -thorough where it has "
                         "efforts, and -paper where it has the deck's encoder): square maps "
                         "stored, decoded, expanded. Pairs: the tracer's (shared edges) in a glTF scene, triangles "
@@ -128,8 +130,8 @@ def _cmd_verify(folder, a=None) -> int:
 
 
 def _cmd_expand(a) -> int:
-    """``omaps omm BAKED.glb --expand -o STD.glb``: the stored pair blocks decoded and expanded
-    into standard micromaps, packed as a bake packs them."""
+    """``omaps omm BAKED.glb --expand -o STD.glb``: the stored pair blocks or merged micromaps
+    decoded and expanded into standard micromaps, packed as a bake packs them."""
     from ..jobs import expand_omms
 
     if len(a.inputs) != 1 or not a.output:
@@ -139,7 +141,9 @@ def _cmd_expand(a) -> int:
         print(f"omaps: warning: {w}", file=sys.stderr)
     st = bake.statistics
     blocks = bake.source_blocks
-    print(f"{a.output}: {plural(st['triangles'], 'triangle')} from "
-          f"{plural(blocks['blocks'], blocks['codec'] + ' pair block')}; {plural(st['micromaps'], 'micromap')}, "
-          f"{plural(st['data_bytes'], 'data byte')}")
+    source = (plural(blocks["blocks"], blocks["codec"] + " pair block") if "codec" in blocks else
+              f"{blocks['scheme']} merged micromaps ({plural(blocks['nodes'], 'node')}, "
+              f"{plural(blocks['bytes'], 'byte')})")
+    print(f"{a.output}: {plural(st['triangles'], 'triangle')} from {source}; "
+          f"{plural(st['micromaps'], 'micromap')}, {plural(st['data_bytes'], 'data byte')}")
     return 0

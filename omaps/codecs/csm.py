@@ -115,6 +115,14 @@ def _empty_table():
 def _build(maps, level):
     """Hash-consing over every map, bottom-up: (node array (N, 4) int64, roots (P,) int64)."""
     nodes, n, slots = _empty_table()
+    roots, nodes, n, slots = _states_roots(maps, level, nodes, n, slots)
+    return nodes[:n].copy(), roots
+
+
+@njit(cache=True)
+def _states_roots(maps, level, nodes, n, slots):
+    """Each map's root reference from its states (P, 4^L), hash-consed bottom-up into the table:
+    (roots, nodes, n, slots)."""
     refs = np.empty(maps.shape[1], np.int64)
     roots = np.empty(maps.shape[0], np.int64)
     for t in range(maps.shape[0]):
@@ -133,7 +141,7 @@ def _build(maps, level):
                     continue
                 refs[p], nodes, n, slots = _intern(nodes, n, slots, a, b, c, d)
         roots[t] = refs[0]
-    return nodes[:n].copy(), roots
+    return roots, nodes, n, slots
 
 
 @njit(cache=True)
@@ -337,6 +345,13 @@ class Builder:
         if (roots < 0).any():
             raise ValueError(f"the runs of map {int(np.flatnonzero(roots < 0)[0])} do not tile its micro-triangles "
                              "in order")
+        return roots
+
+    def add_states(self, maps) -> np.ndarray:
+        """Each map's root reference (int64 (P,)) from its states (P, 4^L) of 0..2 (an InputError
+        naming ``maps`` otherwise): ``add`` for maps already baked state by state."""
+        m = _check(maps, self.level)
+        roots, self._nodes, self._n, self._slots = _states_roots(m, self.level, self._nodes, self._n, self._slots)
         return roots
 
     def finish(self, roots: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -1,8 +1,10 @@
-"""Pair blocks (``OMAPS_pair_opacity_maps`` of a baked glTF) expanded into standard micromaps:
-decoded by their codec, each pair's square map split into its triangles' level-log2 N micromaps
-(``pairs.expand``), unknown regions resolved by the recorded promotion with the scene's own
-alpha tests (``resolve.resolve``), then given special indices and shared as ``pipeline.build``
-does (its ``Packer``): the micromaps equal those ``omm --from`` wrote beside the blocks."""
+"""Stored maps of a baked glTF expanded into standard micromaps: pair blocks
+(``OMAPS_pair_opacity_maps``) decoded by their codec, each pair's square map split into its
+triangles' level-log2 N micromaps (``pairs.expand``), or merged micromaps
+(``OMAPS_merged_micromaps``, a ``csmL`` source) decoded from their DAG; then unknown regions
+resolved by the recorded promotion with the scene's own alpha tests (``resolve.resolve``), given
+special indices and shared as ``pipeline.build`` does (its ``Packer``): the micromaps equal those
+``omm --from`` wrote beside the stored maps."""
 
 from __future__ import annotations
 
@@ -18,7 +20,7 @@ from .files import settings_from_summary
 from .inputs import load_geometries
 from .pipeline import OmmResult
 
-__all__ = ["decoded_blocks", "expand_result"]
+__all__ = ["decoded_blocks", "stored_states", "expand_result"]
 
 
 def decoded_blocks(res: OmmResult) -> np.ndarray:
@@ -30,14 +32,27 @@ def decoded_blocks(res: OmmResult) -> np.ndarray:
     return codec.decode_many(raw)
 
 
+def stored_states(res: OmmResult) -> tuple[np.ndarray, int, str]:
+    """Every triangle's T/O/C micromap (T, 4^L) from the stored maps of a result read with pair
+    blocks or merged micromaps, their level, and the summary key that describes them."""
+    if res.merged_micromaps is not None:
+        from ..codecs import csm_decode
+
+        info = res.summary["merged_micromaps"]
+        level = int(info["level"])
+        return csm_decode(res.merged_micromaps, level, len(res.index)), level, "merged_micromaps"
+    maps = decoded_blocks(res)
+    rec = res.pair_records
+    return (pairs.expand(maps, rec["pair"].astype(np.int64), rec["corners"]), pairs.level_of_size(maps.shape[1]),
+            "pair_blocks")
+
+
 def expand_result(res: OmmResult, **assets) -> OmmResult:
-    """Standard micromaps only (no pair blocks) from a result read with pair blocks."""
+    """Standard micromaps only (no stored pair blocks or merged micromaps) from a result read
+    with them."""
     settings = settings_from_summary(res.summary)
     fmt = settings.format_code
-    maps = decoded_blocks(res)
-    level = pairs.level_of_size(maps.shape[1])
-    rec = res.pair_records
-    three = pairs.expand(maps, rec["pair"].astype(np.int64), rec["corners"])  # (T, 4**L)
+    three, level, key = stored_states(res)  # (T, 4**L)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         geoms, _, _ = load_geometries(res.summary["input"], **assets)  # (root, allow_outside: load_scene's)
@@ -59,8 +74,8 @@ def expand_result(res: OmmResult, **assets) -> OmmResult:
     triangles = packer.record_array()
     data = packer.data()
     usage = omm_format.usage_histograms(triangles["level"], triangles["format"], index)
-    summary = {k: v for k, v in res.summary.items() if k != "pair_blocks"}
-    summary["expanded_from"] = res.summary["pair_blocks"]
+    summary = {k: v for k, v in res.summary.items() if k != key}
+    summary["expanded_from"] = res.summary[key]
     summary["statistics"] = dict(summary.get("statistics") or {}, triangles=int(len(index)),
                                  micromaps=int(len(triangles)), data_bytes=int(len(data)))
     return OmmResult(data, triangles, index, usage, summary)

@@ -48,6 +48,8 @@ def write_into(folder, result: OmmResult, extra_summary: dict | None = None) -> 
     if result.pair_blocks is not None:
         files[omm_format.PAIR_BLOCKS_FILE] = result.pair_blocks
         files[omm_format.PAIRS_FILE] = _raw(result.pair_records, omm_format.PAIR_RECORD)
+    if result.merged_micromaps is not None:
+        files[omm_format.MERGED_FILE] = result.merged_micromaps
     for name, raw in files.items():
         with open(os.path.join(folder, name), "wb") as f:
             f.write(raw)
@@ -145,6 +147,29 @@ def _pair_blocks_info(summary: dict, path) -> int:
     return n
 
 
+def merged_info(summary: dict, blob: bytes, n_triangles: int, path) -> dict:
+    """omm.json's ``merged_micromaps`` (a csmL source's scheme, level and micromaps), checked
+    against the blob ``blob`` (``codecs.csm.check``: every reference in range, every descent ending
+    within the level) and the ``n_triangles`` triangles; InputError naming ``path`` otherwise."""
+    from ..codecs import csm_check
+
+    info = summary.get("merged_micromaps")
+    if not isinstance(info, dict):
+        raise InputError(f"merged_micromaps is {info!r}: the merged DAG is present but not described", path)
+    level, n = info.get("level"), info.get("micromaps")
+    if isinstance(level, bool) or not isinstance(level, int) or not 0 <= level <= omm_format.MAX_LEVEL:
+        raise InputError(f"merged_micromaps.level is {level!r}, not a level 0..{omm_format.MAX_LEVEL}", path)
+    if n != n_triangles or isinstance(n, bool):
+        raise InputError(f"merged_micromaps.micromaps is {n!r}, the index holds {n_triangles} triangles", path)
+    if info.get("scheme") != f"csm{level}":
+        raise InputError(f"merged_micromaps.scheme is {info.get('scheme')!r}, its level is {level}", path)
+    try:
+        csm_check(np.frombuffer(blob, np.uint8), level, n)
+    except InputError as exc:
+        raise InputError(exc.problem, path) from None
+    return info
+
+
 @typed
 def read(folder: str | os.PathLike[str]) -> OmmResult:
     """Load and check an OMM folder."""
@@ -205,6 +230,12 @@ def read(folder: str | os.PathLike[str]) -> OmmResult:
         records = np.frombuffer(raw, dtype=omm_format.PAIR_RECORD)
         if np.any(records["pair"] < 0) or np.any(records["pair"] >= n_blocks) or np.any(records["corners"] > 3):
             raise InputError("a pair index or corner code is out of range", rec_path)
+    merged = None
+    if os.path.exists(os.path.join(folder, omm_format.MERGED_FILE)):
+        merged = _read(folder, omm_format.MERGED_FILE)
+        merged_info(summary, merged, len(index), os.path.join(folder, omm_format.MERGED_FILE))
+    elif summary.get("merged_micromaps") is not None:
+        raise InputError("missing: omm.json describes merged_micromaps", os.path.join(folder, omm_format.MERGED_FILE))
     stats = summary.get("statistics")
     if not isinstance(stats, dict):
         raise InputError(f"statistics is {stats!r}, not an object", sum_path)
@@ -212,4 +243,4 @@ def read(folder: str | os.PathLike[str]) -> OmmResult:
         if stats.get(key) != got or isinstance(stats.get(key), bool):
             raise InputError(f"statistics.{key} is {stats.get(key)!r}, the files hold {got}", sum_path)
     return OmmResult(data.copy(), tris.copy(), index.copy(), usage, summary, blocks,
-                     None if records is None else records.copy())
+                     None if records is None else records.copy(), merged)

@@ -1,5 +1,6 @@
 """``omaps omm SCENE -o OUT.glb|OUT.gltf``: the baked micromaps written into the scene itself
-(``EXT_mesh_opacity_micromap``, and ``OMAPS_pair_opacity_maps`` for ``--from SCHEME``), and
+(``EXT_mesh_opacity_micromap``, and ``OMAPS_pair_opacity_maps`` or ``OMAPS_merged_micromaps`` for
+``--from SCHEME``), and
 read back as an ``OmmResult`` for ``--verify`` and ``--expand``. The glTF side (JSON, buffers,
 the extension's rules) is ``omaps.scene.micromaps``; this module maps geometries to primitives.
 
@@ -58,11 +59,17 @@ def write_gltf_result(src, out_tmp, out_final, result: OmmResult, extra_summary:
     usage = [(u["count"], u["subdivisionLevel"], u["format"])
              for u in omm_format.usage_histograms(triangles["level"], triangles["format"],
                                                   np.zeros(0, np.int32))["micromap_array"]]
-    prim_omm, prim_pairs = {}, {}
+    prim_omm, prim_pairs, prim_merged = {}, {}, {}
     for mesh, prim, first, n in _ranges(summary):
         prim_omm[(mesh, prim)] = (0, result.index[first:first + n].astype(np.int64))
         if result.pair_records is not None:
             prim_pairs[(mesh, prim)] = (0, result.pair_records[first:first + n])
+        prim_merged[(mesh, prim)] = first
+    merged = None
+    if result.merged_micromaps is not None:
+        info = summary["merged_micromaps"]
+        merged = {"level": info["level"], "micromaps": info["micromaps"], "dag": result.merged_micromaps,
+                  "extras": {OMAPS_KEY: {"scheme": info["scheme"]}}}
     pair_maps = []
     if result.pair_blocks is not None:
         info = summary["pair_blocks"]
@@ -73,7 +80,8 @@ def write_gltf_result(src, out_tmp, out_final, result: OmmResult, extra_summary:
     said = []
     write_gltf(src, out_tmp, out_final,
                [{"data": data.tobytes(), "triangles": triangles, "usage": usage, "extras": {OMAPS_KEY: summary}}],
-               prim_omm, pair_maps, prim_pairs, said.append, **assets)
+               prim_omm, pair_maps, prim_pairs, said.append, merged=merged,
+               prim_merged=prim_merged if merged is not None else None, **assets)
     return said
 
 
@@ -120,6 +128,9 @@ def read_gltf(path, scene=None, **assets) -> OmmResult:
                 raise InputError(f"mesh {mesh} primitive {prim} has no OMAPS_pair_opacity_maps pairs", path)
             rec = q.records.copy()
             pair_parts.append(rec)
+        if stored.merged is not None and stored.merged_primitives.get((mesh, prim)) != start:
+            raise InputError(f"mesh {mesh} primitive {prim}: its OMAPS_merged_micromaps first is "
+                             f"{stored.merged_primitives.get((mesh, prim))!r}, not its first triangle {start}", path)
         first += n
     index = np.concatenate(parts).astype(np.int32) if parts else np.zeros(0, np.int32)
     triangles, data = arr.triangles, arr.data
@@ -135,10 +146,24 @@ def read_gltf(path, scene=None, **assets) -> OmmResult:
             0, omm_format.PAIR_RECORD)
         summary["pair_blocks"] = dict(summary.get("pair_blocks") or {}, codec=pm.codec, block_bytes=pm.block_bytes,
                                       blocks=len(pm.blocks) // pm.block_bytes, map_size=pm.map_size)
+    merged = None
+    if stored.merged is not None:
+        mm = stored.merged
+        if mm.micromaps != len(index):
+            raise InputError(f"OMAPS_merged_micromaps holds {mm.micromaps} micromaps for {len(index)} triangles", path)
+        from ..codecs import get_bits
+
+        merged = mm.dag
+        nodes = int(get_bits(np.frombuffer(mm.dag, np.uint8), 0, 32))  # the blob's header (checked when read)
+        summary["merged_micromaps"] = dict(summary.get("merged_micromaps") or {}, level=mm.level,
+                                           micromaps=mm.micromaps, nodes=nodes, bytes=len(mm.dag),
+                                           scheme=f"csm{mm.level}")
+    elif summary.get("merged_micromaps") is not None:
+        raise InputError("extras.omaps describes merged_micromaps, the file has no OMAPS_merged_micromaps", path)
     stats = summary.get("statistics")
     if isinstance(stats, dict):
         for key, got in (("triangles", len(index)), ("micromaps", len(triangles)), ("data_bytes", len(data))):
             if stats.get(key) != got:
                 raise InputError(f"extras.omaps.statistics.{key} is {stats.get(key)!r}, the file holds {got}", path)
     return OmmResult(np.asarray(data, np.uint8).copy(), np.asarray(triangles).astype(omm_format.TRIANGLE_RECORD),
-                     index, usage, summary, blocks, records)
+                     index, usage, summary, blocks, records, merged)

@@ -4,9 +4,10 @@ index buffer, usage histograms), with special indices and reuse of identical mic
 A ``Geometry`` is a set of UV triangles with one alpha test (a glTF primitive, or a texture and
 a UV array) and its pairing. Each triangle's micromap comes either straight from the texture
 (``source`` ``texture``: the micromap baker, at one level or a level per triangle from its texel
-area) or from the deck's square pair maps (a square scheme of ``omaps.schemes``: ``sqN``, or a
-codec such as ``vq2`` or ``vq4-paper``: baked by the pair-square baker, stored by the codec,
-decoded, then expanded by ``pairs.expand``). Real geometry is baked with growth
+area; ``csmL``: the same baker at level L, every micromap also stored in one merged DAG, the
+``merged_micromaps`` blob of ``codecs.csm``) or from the deck's square pair maps (a square
+scheme of ``omaps.schemes``: ``sqN``, or a codec such as ``vq2`` or ``vq4-paper``: baked by the
+pair-square baker, stored by the codec, decoded, then expanded by ``pairs.expand``). Real geometry is baked with growth
 ``bake.GROW_TEXEL``, as the tracer bakes it.
 
 Example::
@@ -98,7 +99,7 @@ class OmmSettings:
     promotion: str = "nearest"
     special: bool = True
     dedup: bool = True
-    source: str = "texture"  # texture, or a square scheme (``schemes.square_scheme_choices``)
+    source: str = "texture"  # texture, csmL, or a square scheme (``schemes.square_scheme_choices``)
     encoder: str | None = None  # codec encoder and effort (None: the codec's defaults)
     effort: str | None = None
     seed: int = 0  # of the hashed promotion
@@ -133,16 +134,17 @@ class OmmSettings:
         if self.budget is not None and self.format != "4state":
             raise InputError("budget chooses each micromap's format (2-state where it has no unknown region): "
                              "drop format", param=("budget", "format"))
-        if self.dynamic_scale is not None and self.source != "texture":
-            raise InputError("dynamic needs the texture source: square pair maps fix the level to log2 N",
-                             param="dynamic")
         if self.source != "texture":
             s = self.scheme
-            if s.kind != "square":
+            if s.kind != "square" and not (s.kind == "micromap" and s.representation == "csm"):
                 from ..schemes import square_scheme_choices
 
-                raise InputError(f"source takes texture or a square scheme ({square_scheme_choices()}), "
-                                 f"not {self.source!r}", param="source")
+                raise InputError(f"source takes texture, a square scheme ({square_scheme_choices()}) or csmL, "
+                                 f"L = 0 .. {omm_format.MAX_LEVEL} (the micromaps at level L, also stored as one "
+                                 f"merged DAG), not {self.source!r}", param="source")
+            if self.dynamic_scale is not None:
+                fixed = "csmL fixes the level to L" if s.kind == "micromap" else "square pair maps fix the level to log2 N"
+                raise InputError(f"dynamic needs the texture source: {fixed}", param="dynamic")
 
     @property
     def scheme(self):
@@ -154,6 +156,12 @@ class OmmSettings:
         return get_scheme(self.source, self.encoder, self.effort)
 
     @property
+    def merged_level(self) -> int | None:
+        """The level L of a ``csmL`` source (the micromaps also stored as one merged DAG), else None."""
+        s = self.scheme
+        return s.level if s is not None and s.kind == "micromap" else None
+
+    @property
     def format_code(self) -> int:
         return omm_format.FORMAT_NAMES[self.format]
 
@@ -162,7 +170,9 @@ class OmmSettings:
 class OmmResult:
     """The buffers, as written to disk: ``data`` (uint8), ``triangles`` (TRIANGLE_RECORD),
     ``index`` (int32 per input triangle), ``usage`` and ``summary`` (the two JSON files) and,
-    for a square source, the stored pair maps ``pair_blocks`` and ``pair_records``."""
+    for a square source, the stored pair maps ``pair_blocks`` and ``pair_records``; for a ``csmL``
+    source, ``merged_micromaps``: every input triangle's micromap (T/O/C, before the format's
+    resolution of C) as one merged DAG, a root per triangle in index order (``codecs.csm``'s blob)."""
 
     data: np.ndarray
     triangles: np.ndarray
@@ -171,6 +181,7 @@ class OmmResult:
     summary: dict
     pair_blocks: bytes | None = None
     pair_records: np.ndarray | None = None  # PAIR_RECORD per triangle, with pair_blocks
+    merged_micromaps: bytes | None = None  # a csmL source's blob
 
     def micromap_states(self, i: int) -> np.ndarray:
         """States of micromap ``i`` (0..3), decoded from ``data``."""
@@ -224,6 +235,8 @@ def _pair_states(g: Geometry, grid, tris: np.ndarray, scheme, jobs: int = 1) -> 
 
 
 def _triangle_levels(test: AlphaTest, tris: np.ndarray, settings: OmmSettings, n_map: int | None) -> np.ndarray:
+    if settings.merged_level is not None:
+        return np.full(len(tris), settings.merged_level, dtype=np.int64)
     if n_map is not None:
         from .pairs import level_of_size
 
@@ -352,8 +365,18 @@ def build(geometries: list[Geometry], settings: OmmSettings = OmmSettings(),
     unknown regions to the OMM states the format holds, with counts), pack (``Packer``: special
     indices, reuse of identical micromaps)."""
     scheme = settings.scheme
-    n_map = scheme.codec.map_size if scheme is not None else None
+    merged_level = settings.merged_level
+    n_map = scheme.codec.map_size if scheme is not None and merged_level is None else None
     fmt = settings.format_code
+    if merged_level is not None and chunks is not None:
+        raise InputError("a csmL source is baked in one process (its DAG needs every micromap's states)",
+                         param="chunks")
+    builder = None
+    if merged_level is not None:
+        from ..codecs import CsmBuilder
+
+        builder = CsmBuilder(merged_level)
+    merged_roots = []
     packer = Packer(fmt, settings.special, settings.dedup)
     index_parts, blocks_all, records_all, geo_info = [], [], [], []
     n_blocks_total = 0
@@ -383,6 +406,7 @@ def build(geometries: list[Geometry], settings: OmmSettings = OmmSettings(),
         grid = g.test.grid() if gp.baked is None and chunks is None else None
         sat = flag_table(grid) if n_map is None and grid is not None else None
         idx = np.empty(len(tris), dtype=np.int32)
+        roots = np.empty(len(tris), dtype=np.int64) if builder is not None else None
         n_blocks = 0
         if gp.baked is not None:
             starts_all = micro_starts(levels)
@@ -412,6 +436,8 @@ def build(geometries: list[Geometry], settings: OmmSettings = OmmSettings(),
                 if chunk_unknown is not None:
                     for i in np.flatnonzero(chunk_unknown):
                         s3[starts[i]:starts[i + 1]] = states.C
+            if builder is not None:  # the T/O/C states, before resolve overwrites them
+                roots[a:b] = builder.add_states(s3.reshape(b - a, -1))
             if gp.baked is None and chunks is None:
                 mine = [t for t in merged if a <= t < b]  # --budget: micromaps shared by merging (their meet)
                 for t in mine:
@@ -449,6 +475,8 @@ def build(geometries: list[Geometry], settings: OmmSettings = OmmSettings(),
             if progress is not None:
                 progress.advance(int(starts[-1]))
         index_parts.append(idx if inverse is None else idx[inverse])
+        if roots is not None:
+            merged_roots.append(roots if inverse is None else roots[inverse])
         info = {"name": g.name, "first_triangle": first, "triangles": n_tris, "texture": g.test.name,
                 "width": g.test.width, "height": g.test.height, "filter": g.test.filter,
                 "wrap_u": g.test.wrap_u, "wrap_v": g.test.wrap_v, "threshold": g.test.threshold,
@@ -467,7 +495,9 @@ def build(geometries: list[Geometry], settings: OmmSettings = OmmSettings(),
     summary = {
         "omaps": __version__,
         "format": settings.format, "format_code": fmt,
-        "settings": {"source": settings.source, "level": None if (settings.dynamic_scale or n_map or settings.budget is not None) else settings.level,
+        "settings": {"source": settings.source,
+                     "level": None if (settings.dynamic_scale or n_map or merged_level is not None
+                                       or settings.budget is not None) else settings.level,
                      "dynamic_scale": settings.dynamic_scale, "max_level": settings.max_level,
                      "promotion": settings.promotion, "special": settings.special, "dedup": settings.dedup,
                      "seed": settings.seed, "encoder": settings.encoder, "effort": settings.effort,
@@ -493,6 +523,15 @@ def build(geometries: list[Geometry], settings: OmmSettings = OmmSettings(),
     }
     if budget_report is not None:
         summary["budget"] = budget_report
+    if builder is not None:
+        from ..codecs import csm_pack, csm_treelets
+
+        every = np.concatenate(merged_roots) if merged_roots else np.zeros(0, np.int64)
+        nodes, distinct, inverse_u = builder.finish(every)
+        blob = csm_pack(*csm_treelets(nodes, distinct[inverse_u]))
+        summary["merged_micromaps"] = {"scheme": scheme.name, "level": merged_level, "micromaps": int(len(every)),
+                                       "nodes": int(len(nodes)), "bytes": len(blob)}
+        return OmmResult(data, triangles, index, usage, summary, merged_micromaps=blob)
     if scheme is not None:
         codec = scheme.codec
         summary["pair_blocks"] = {"scheme": scheme.name, "codec": codec.name, "block_bytes": codec.block_bytes,

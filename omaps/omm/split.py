@@ -48,6 +48,8 @@ def splittable(settings: OmmSettings) -> str | None:
     names as ``{budget}`` or ``{source}``, as ``InputError`` templates do)."""
     if settings.budget is not None:
         return "a {budget} bake chooses every triangle's level over the whole scene at once"
+    if settings.merged_level is not None:
+        return "a {source} bake merges every triangle's micromap into one DAG in one process"
     if settings.source != "texture":
         return "a {source} bake encodes its pair maps with the codec's own worker processes"
     return None

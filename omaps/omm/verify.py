@@ -52,6 +52,12 @@ def verify(folder, **assets) -> tuple[OmmResult, list[str], list[str]]:
         problems += _check_pair_blocks(res, folder if gltf_io.is_gltf(folder) else
                                        os.path.join(folder, omm_format.PAIR_BLOCKS_FILE))
         done.append("micromaps against the decoded pair blocks")
+    if res.merged_micromaps is not None:
+        from ..codecs import csm_decode
+
+        level = int(res.summary["merged_micromaps"]["level"])  # (checked when read)
+        problems += _against(res, csm_decode(res.merged_micromaps, level, len(res.index)), "merged micromap")
+        done.append("micromaps against the merged micromaps")
     spec = res.summary.get("input")
     if spec is not None:
         src = spec.get("path") or spec.get("texture")
@@ -154,15 +160,20 @@ def _check_pair_blocks(res: OmmResult, path) -> list[str]:
     except InputError as exc:  # a block that decodes to no map (a raw map holding code 3)
         raise InputError(exc.problem, path) from None
     rec = res.pair_records
-    expanded = pairs.expand(maps, rec["pair"].astype(np.int64), rec["corners"])
+    return _against(res, pairs.expand(maps, rec["pair"].astype(np.int64), rec["corners"]), "decoded pair block")
+
+
+def _against(res: OmmResult, stored: np.ndarray, what: str) -> list[str]:
+    """Each triangle's micromap against its stored T/O/C states (T, 4^L): T and O the same, C
+    an unknown state (any state in 2-state output); the first triangle that differs."""
     two_state = res.summary["format_code"] == omm_format.FORMAT_2_STATE
     for t in range(len(res.index)):
         s = res.triangle_states(t)
-        want = expanded[t]
+        want = stored[t]
         if len(s) not in (1, len(want)):
-            return [f"triangle {t} has {len(s)} micro-triangles, its pair map expands to {len(want)}"]
+            return [f"triangle {t} has {len(s)} micro-triangles, its {what} has {len(want)}"]
         s = np.broadcast_to(s, want.shape)
         known = want < 2
         if not (np.array_equal(s[known], want[known]) and (two_state or np.all(s[~known] >= 2))):
-            return [f"triangle {t} disagrees with its decoded pair block"]
+            return [f"triangle {t} disagrees with its {what}"]
     return []

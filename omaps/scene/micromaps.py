@@ -1,6 +1,7 @@
 """Opacity micromaps stored in a glTF file: the draft extension ``EXT_mesh_opacity_micromap``
 (KhronosGroup/glTF pull request 2623) and omaps' own ``OMAPS_pair_opacity_maps`` (the deck's
-compressed square maps per pair). docs/FORMAT.md "Opacity micromaps in glTF" states every field.
+compressed square maps per pair) and ``OMAPS_merged_micromaps`` (every triangle's micromap in one
+merged DAG of identical subtrees, ``codecs.csm``). docs/FORMAT.md "Opacity micromaps in glTF" states every field.
 
 Reading (``read_extensions``) runs inside the one scene reader (``scene.gltf``: it passes its
 checked accessor and bufferView readers), so the tracer and ``omaps omm --verify`` see exactly
@@ -26,11 +27,14 @@ from ..errors import InputError
 from ..omm_format import MAX_LEVEL, PAIR_RECORD, TRIANGLE_RECORD, record_problem
 from .container import AssetPolicy, read_container, self_contained, write_glb, write_json
 
-__all__ = ["EXT_OMM", "EXT_PAIRS", "MicromapArray", "PrimitiveMicromap", "PairMaps", "PrimitivePairs",
-           "StoredMicromaps", "read_extensions", "write_gltf", "index_component_type", "encode_indices"]
+__all__ = ["EXT_OMM", "EXT_PAIRS", "EXT_MERGED", "MicromapArray", "PrimitiveMicromap", "PairMaps", "PrimitivePairs",
+           "MergedMicromaps", "StoredMicromaps", "read_extensions", "write_gltf", "index_component_type",
+           "encode_indices"]
 
 EXT_OMM = "EXT_mesh_opacity_micromap"
 EXT_PAIRS = "OMAPS_pair_opacity_maps"
+EXT_MERGED = "OMAPS_merged_micromaps"
+_EXTS = (EXT_OMM, EXT_PAIRS, EXT_MERGED)
 RECORD = TRIANGLE_RECORD  # VkMicromapTriangleKHR (omm_format's)
 _UNSIGNED = {5121: 8, 5123: 16, 5125: 32}
 _SIGNED = {5122: 16, 5124: 32}
@@ -76,11 +80,24 @@ class PrimitivePairs:
 
 
 @dataclass
+class MergedMicromaps:
+    """``OMAPS_merged_micromaps``: level-``level`` micromaps in one merged DAG (``codecs.csm``'s
+    blob, checked), ``micromaps`` roots; a primitive's triangle t is micromap first + t."""
+
+    level: int
+    micromaps: int
+    dag: bytes
+    extras: dict = field(default_factory=dict)
+
+
+@dataclass
 class StoredMicromaps:
     micromaps: list  # MicromapArray
     primitives: dict  # (glTF mesh, primitive) -> PrimitiveMicromap
     pair_maps: list  # PairMaps
     pair_primitives: dict  # (glTF mesh, primitive) -> PrimitivePairs
+    merged: MergedMicromaps | None = None
+    merged_primitives: dict = field(default_factory=dict)  # (glTF mesh, primitive) -> its first micromap
 
 
 # ---- reading (inside scene.gltf's reader) ------------------------------------------------------
@@ -93,10 +110,9 @@ def read_extensions(r) -> StoredMicromaps | None:
     ``r.view_bytes``, ``r.accessor``, ``r.path``); None when the file has neither."""
     g = r.g
     root = g.extensions if isinstance(g.extensions, dict) else {}
-    has_prim = any(isinstance(getattr(p, "extensions", None), dict)
-                   and (EXT_OMM in p.extensions or EXT_PAIRS in p.extensions)
+    has_prim = any(isinstance(getattr(p, "extensions", None), dict) and any(e in p.extensions for e in _EXTS)
                    for m in (g.meshes or []) for p in (getattr(m, "primitives", None) or []))
-    if EXT_OMM not in root and EXT_PAIRS not in root and not has_prim:
+    if not any(e in root for e in _EXTS) and not has_prim:
         return None
     path = r.path
 
@@ -115,7 +131,8 @@ def read_extensions(r) -> StoredMicromaps | None:
         raise InputError(f"{EXT_PAIRS}: the root extension needs a maps array", path)
     for i, pm in enumerate(pext["maps"]):
         pair_maps.append(_read_pair_maps(r, i, pm))
-    prims, pair_prims = {}, {}
+    merged = _read_merged(r, root[EXT_MERGED]) if EXT_MERGED in root else None
+    prims, pair_prims, merged_prims = {}, {}, {}
     for mi, m in enumerate(g.meshes or []):
         for pi, p in enumerate(getattr(m, "primitives", None) or []):
             exts = p.extensions if isinstance(getattr(p, "extensions", None), dict) else {}
@@ -123,7 +140,9 @@ def read_extensions(r) -> StoredMicromaps | None:
                 prims[(mi, pi)] = _read_primitive(r, mi, pi, p, exts[EXT_OMM], arrays, bad)
             if EXT_PAIRS in exts:
                 pair_prims[(mi, pi)] = _read_pair_primitive(r, mi, pi, p, exts[EXT_PAIRS], pair_maps)
-    return StoredMicromaps(arrays, prims, pair_maps, pair_prims)
+            if EXT_MERGED in exts:
+                merged_prims[(mi, pi)] = _read_merged_primitive(r, mi, pi, p, exts[EXT_MERGED], merged)
+    return StoredMicromaps(arrays, prims, pair_maps, pair_prims, merged, merged_prims)
 
 
 def _read_array(r, i, mm, bad) -> MicromapArray:
@@ -266,6 +285,43 @@ def _read_pair_primitive(r, mi, pi, p, e, pair_maps) -> PrimitivePairs:
     return PrimitivePairs(int(e["maps"]), rec)
 
 
+def _read_merged(r, e) -> MergedMicromaps:
+    """The root ``OMAPS_merged_micromaps``: its level, micromap count and DAG, the blob checked
+    (``codecs.csm.check``: every reference in range, every descent ending within the level)."""
+    from ..codecs import csm_check
+
+    if not isinstance(e, dict):
+        raise InputError(f"{EXT_MERGED}: the root extension is not an object", r.path)
+    level, n = e.get("level"), e.get("micromaps")
+    if not _is_int(level) or not 0 <= level <= MAX_LEVEL:
+        raise InputError(f"{EXT_MERGED}: level is {level!r}, not a level 0..{MAX_LEVEL}", r.path)
+    if not _is_int(n) or n < 0:
+        raise InputError(f"{EXT_MERGED}: micromaps is {n!r}, not a count", r.path)
+    if not _is_int(e.get("dag")):
+        raise InputError(f"{EXT_MERGED}: dag is {e.get('dag')!r}, not a bufferView index", r.path)
+    raw, stride = r.view_bytes(e["dag"])
+    if stride is not None:
+        raise InputError(f"{EXT_MERGED}: the dag bufferView has a byteStride", r.path)
+    try:
+        csm_check(np.frombuffer(bytes(raw), np.uint8), int(level), int(n))
+    except InputError as exc:
+        raise InputError(f"{EXT_MERGED}: the dag: {exc.problem}", r.path) from None
+    extras = e.get("extras") if isinstance(e.get("extras"), dict) else {}
+    return MergedMicromaps(int(level), int(n), bytes(raw), extras)
+
+
+def _read_merged_primitive(r, mi, pi, p, e, merged) -> int:
+    what = f"{EXT_MERGED}: mesh {mi} primitive {pi}"
+    if merged is None:
+        raise InputError(f"{what}: the file has no root {EXT_MERGED}", r.path)
+    first = e.get("first") if isinstance(e, dict) else None
+    n = _triangle_count(r, p) or 0
+    if not _is_int(first) or first < 0 or first + n > merged.micromaps:
+        raise InputError(f"{what}: first is {first!r}: its {n} triangles are not among the {merged.micromaps} "
+                         "merged micromaps", r.path)
+    return int(first)
+
+
 # ---- writing -------------------------------------------------------------------------------
 def index_component_type(n_records: int) -> int:
     """The smallest unsigned component type whose two's-complement specials (-1..-4, the top four
@@ -299,7 +355,7 @@ class _Appender:
 
 def write_gltf(src, out_tmp, out_final, micromaps: list[dict], prim_omm: dict, pair_maps: list[dict],
                prim_pairs: dict, warn=None, *, root=None, allow_outside: bool = False,
-               max_bytes: int | None = None) -> None:
+               max_bytes: int | None = None, merged: dict | None = None, prim_merged: dict | None = None) -> None:
     """Write ``src`` with the extensions to ``out_tmp`` (.glb or .gltf by ``out_final``'s suffix;
     ``out_final`` is where it will be renamed to). Earlier micromaps of either extension in
     ``src`` are replaced. The output is self-contained (``container.self_contained``): a .glb
@@ -309,7 +365,9 @@ def write_gltf(src, out_tmp, out_final, micromaps: list[dict], prim_omm: dict, p
     ``micromaps``: [{data: bytes, triangles: RECORD array, usage: [(count, level, format)], extras}];
     ``prim_omm``: (mesh, primitive) -> (micromap, signed int64 lookup values);
     ``pair_maps``: [{codec, blockBytes, mapSize, blocks: bytes, extras}];
-    ``prim_pairs``: (mesh, primitive) -> (maps, PAIR_RECORD array). ``root``, ``allow_outside``,
+    ``prim_pairs``: (mesh, primitive) -> (maps, PAIR_RECORD array); ``merged``: {level,
+    micromaps, dag: bytes, extras} of ``OMAPS_merged_micromaps`` (or None), ``prim_merged``: (mesh,
+    primitive) -> its first merged micromap. ``root``, ``allow_outside``,
     ``max_bytes``: the URI policy (``scene.container``) of ``src``, as the scene reader's: every
     file it names is read or copied under it."""
     c = read_container(src, AssetPolicy.of(root, allow_outside, max_bytes))
@@ -332,16 +390,16 @@ def write_gltf(src, out_tmp, out_final, micromaps: list[dict], prim_omm: dict, p
         buffers.append({"byteLength": 0})
     # drop earlier micromaps of both extensions (their views stay, unreferenced)
     root_ext = doc.setdefault("extensions", {})
-    for name in (EXT_OMM, EXT_PAIRS):
+    for name in _EXTS:
         root_ext.pop(name, None)
     for m in doc.get("meshes") or []:
         for p in (m.get("primitives") or []) if isinstance(m, dict) else []:
             if isinstance(p, dict) and isinstance(p.get("extensions"), dict):
-                for name in (EXT_OMM, EXT_PAIRS):
+                for name in _EXTS:
                     p["extensions"].pop(name, None)
                 if not p["extensions"]:
                     del p["extensions"]
-    used = [e for e in doc.get("extensionsUsed") or [] if e not in (EXT_OMM, EXT_PAIRS)]
+    used = [e for e in doc.get("extensionsUsed") or [] if e not in _EXTS]
     first_view = len(views)
     if micromaps:
         items = []
@@ -384,6 +442,18 @@ def write_gltf(src, out_tmp, out_final, micromaps: list[dict], prim_omm: dict, p
                 continue
             view = first_view + app.add(np.asarray(rec, PAIR_RECORD).tobytes())
             prim.setdefault("extensions", {})[EXT_PAIRS] = {"maps": int(k), "pairs": view}
+    if merged is not None:
+        item = {"level": int(merged["level"]), "micromaps": int(merged["micromaps"]),
+                "dag": first_view + app.add(bytes(merged["dag"]))}
+        if merged.get("extras"):
+            item["extras"] = merged["extras"]
+        root_ext[EXT_MERGED] = item
+        used.append(EXT_MERGED)
+        for (mi, pi), first in sorted((prim_merged or {}).items()):
+            prim = doc["meshes"][mi]["primitives"][pi]
+            if prim.get("mode", 4) != 4:
+                continue
+            prim.setdefault("extensions", {})[EXT_MERGED] = {"first": int(first)}
     if not root_ext:
         del doc["extensions"]
     if used:
