@@ -19,7 +19,9 @@ computed from its index, holding the top of its map, and shared storage for the 
 A second, nearer case (``fit``) lets a lookup's shared line hold only a subtree that fits in one:
 the first node of its descent whose tree is at most 64 mixed nodes (64 bytes at one byte a node),
 one line per such distinct subtree in the scene (shared by every map that holds it). Its bytes add
-those subtrees and one byte per distinct mixed node above them (still no pointer).
+those subtrees and one byte per distinct mixed node above them (still no pointer). Printed beside
+it: each triangle's *route*, the mixed nodes above its subtrees, and how many subtrees hang from
+it -- what a real design must store (a node and a pointer a subtree) or read before that line.
 
 Real designs need pointers in the record and more than one line for the maps that do not fit in
 one, so they read more lines and store more bytes than this. The ``gap`` column is the both-fronts
@@ -118,6 +120,27 @@ def fit_bytes(nodes: np.ndarray, size: np.ndarray, roots: np.ndarray) -> int:
     return total
 
 
+def routes(nodes: np.ndarray, tree: np.ndarray, roots: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Per map (root reference) its *route* -- the mixed nodes of its tree whose own tree does
+    not fit in a line -- and the subtrees that fit hanging from it (what a lookup must find
+    before it reads the line of its subtree): (route nodes, subtrees) per entry of ``roots``."""
+    out = {}
+    for r in np.unique(roots):
+        r = int(r)
+        route = sub = 0
+        stack = [r] if r >= 3 else []
+        while stack:
+            x = stack.pop()
+            if tree[x] <= LINE:
+                sub += 1
+                continue
+            route += 1
+            stack.extend(int(c) for c in nodes[x - 3] if c >= 3)
+        out[r] = (route, sub)
+    got = np.array([out[int(r)] for r in roots], np.int64).reshape(-1, 2)
+    return got[:, 0], got[:, 1]
+
+
 def lines_per_ray(pixel: np.ndarray, ids: np.ndarray, pixels: int) -> float:
     key = pixel.astype(np.int64) * (1 << 42) + ids
     return len(np.unique(key)) / pixels
@@ -150,11 +173,14 @@ def measure(path: str, levels: list[int], size: int) -> list[dict]:
         row = {"scene": os.path.basename(path), "level": lv, "lookups_per_ray": len(tri) / pixels,
                "depth_share": np.bincount(depth, minlength=lv + 1) / max(len(tri), 1),
                "tri_lines": tri_mem["map_lines_per_ray"], "csm_bytes": csm_mem["map_bytes"],
-               "csm_lines": csm_mem["map_lines_per_ray"], "cases": []}
+               "csm_lines": csm_mem["map_lines_per_ray"], "cases": [],
+               "route_mean": float(route.mean()), "route_p90": float(np.percentile(route, 90)),
+               "subtrees_mean": float(subtrees.mean()), "subtrees_p90": float(np.percentile(subtrees, 90))}
         cum = np.cumsum(per_depth[root], axis=1)  # mixed nodes above each depth, per triangle
         tree = per_depth.sum(axis=1)  # mixed nodes of each reference's tree
         region = region_of(nodes, tree, root[tri], lv, k)
         shared_fit = fit_bytes(nodes, tree, root)
+        route, subtrees = routes(nodes, tree, root)
         for unit in ("triangle", "pair"):
             owner = tri if unit == "triangle" else pair[tri]
             count = len(root) if unit == "triangle" else n_pairs
@@ -199,6 +225,9 @@ def main() -> int:
                   f"triL raw rows {row['tri_lines']:.3f} lines/ray; csmL {row['csm_bytes'] / 1024:.1f} KiB, "
                   f"{row['csm_lines']:.3f} lines/ray")
             print(f"  share of lookups decided at depth 0..{row['level']}: {share}")
+            print(f"  per triangle, the route to its subtrees that fit in a line (fit case): {row['route_mean']:.1f} "
+                  f"mixed nodes (90th percentile {row['route_p90']:.0f}) above {row['subtrees_mean']:.1f} subtrees "
+                  f"({row['subtrees_p90']:.0f})")
             print("                          best case (a map a line)            fit (a subtree a line)")
             print("  record per   bytes  decided  lines/ray  x triL  KiB    x csmL  gap   lines/ray  x triL  KiB    "
                   "x csmL  gap")

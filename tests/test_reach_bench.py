@@ -80,5 +80,17 @@ def test_tree_measures_match_the_states(case):
                 assert ref == b[0]
             else:
                 assert ref >= 3 and tree[ref] == mixed and tree[ref] <= reach.LINE
+        route, sub = reach.routes(nodes, tree, roots)
+
+        def walk(b, lv):  # (route nodes, subtrees) of a block of states, brute force
+            mixed = not (b == b[0]).all()
+            if not mixed:
+                return 0, 0
+            if sum(brute_mixed(b, lv)) <= reach.LINE:
+                return 0, 1
+            parts = [walk(q, lv - 1) for q in b.reshape(4, -1)]
+            return 1 + sum(p[0] for p in parts), sum(p[1] for p in parts)
+
+        assert [walk(m, level) for m in maps] == list(zip(route.tolist(), sub.tolist()))
     finally:
         reach.LINE = 64
