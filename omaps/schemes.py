@@ -14,6 +14,7 @@
     omm                  (trace) the EXT_mesh_opacity_micromap micromaps stored in the traced file
     file:CODEC           (trace) the OMAPS_pair_opacity_maps pair blocks stored in the traced file,
                          CODEC the codec they were stored with (sqN or a codec of the registry)
+    file:csm             (trace) the OMAPS_merged_micromaps stored in the traced file (omm --from csmL)
     budget:BYTES         (trace) per pair the default option (none, sqN up to 64 and the codecs
                          that opt in: ``budget.PAIR_OPTIONS``) that saves the most alpha tests per
                          byte, all pairs within BYTES (1263936, 1.2MiB, 800KiB)
@@ -197,10 +198,13 @@ def get_scheme(name: str, encoder: str | None = None, effort: str | None = None)
                       for n in [get_codec(o).fallback(encoder, effort)[2]] if n)
         return Scheme(f"budget:{nbytes}{suffix}", "budget", encoder=enc, effort=eff, budget=nbytes, options=options,
                       notes=notes)
+    if key == "file:csm":
+        return Scheme(key, "stored", representation="csm")
     if key.startswith("file:"):
         codec_name = key[len("file:"):]
         if not (_SQ.fullmatch(codec_name) or codec_name in codec_names()):
-            raise InputError(f"unknown scheme {name!r}: file:CODEC names a codec (sqN, {', '.join(codec_names())})")
+            raise InputError(f"unknown scheme {name!r}: file:CODEC names a codec (sqN, {', '.join(codec_names())}), "
+                             "or file:csm the merged micromaps")
         return Scheme(key, "stored", codec=get_codec(codec_name))
     m = _TRI.fullmatch(key)
     if m:
@@ -224,7 +228,7 @@ def get_scheme(name: str, encoder: str | None = None, effort: str | None = None)
             return Scheme(key, "square", codec=codec, encoder=enc, effort=eff)
         enc, eff, note = codec.fallback(encoder, effort)
         return Scheme(key, "square", codec=codec, encoder=enc, effort=eff, notes=(note,) if note else ())
-    raise InputError(f"unknown scheme {name!r} (known: none, texel, triL, succinctL, csmL, omm, file:CODEC, budget:BYTES, "
+    raise InputError(f"unknown scheme {name!r} (known: none, texel, triL, succinctL, csmL, omm, file:CODEC, file:csm, budget:BYTES, "
                      f"{square_scheme_choices()})")
 
 

@@ -149,3 +149,38 @@ def test_gltf_from_csm_verify_expand_and_a_broken_dag(tmp_path, rng, capsys):
     assert not os.path.exists(tmp_path / "std2.glb")
     assert main(["omm", str(broken), "--expand", "-o", str(tmp_path / "std2.glb")]) == 2
     assert not os.path.exists(tmp_path / "std2.glb")
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.integers(0, 3), st.lists(st.integers(0, 2 ** 32 - 1), min_size=1, max_size=6))
+def test_unpack_gives_the_dag_pack_writes_again(level, seeds):
+    from omaps.codecs import csm_decode, csm_encode, csm_pack, csm_unpack
+
+    maps = np.array([np.random.default_rng(s).integers(0, 3, 4 ** level) for s in seeds], np.uint8)
+    maps[::2] = maps[0]  # repeated maps share their root
+    blob, n_nodes = csm_encode(maps, level)
+    nodes, roots = csm_unpack(blob, level, len(maps))
+    assert nodes.shape == (n_nodes, 4) and csm_pack(nodes, roots) == blob
+    assert np.array_equal(csm_decode(csm_pack(nodes, roots[::-1]), level, len(maps)), maps[::-1])
+    with pytest.raises(InputError):
+        csm_unpack(blob[:3], level, len(maps))
+
+
+def test_trace_file_csm_reads_the_stored_dag(tmp_path, rng):
+    """``trace --schemes file:csm`` reads the DAG the file stores: the tests, known fraction, bytes
+    and lines read of the tracer's own csmL of that level, and no pixel changed."""
+    alpha = (rng.random((32, 32)) > 0.5).astype(np.uint8) * 255
+    src = grid_scene(tmp_path / "grid.gltf", alpha, k=10)
+    baked = tmp_path / "baked.glb"
+    assert main(["omm", str(src), "--from", "csm4", "-o", str(baked), "--quiet"]) == 0
+    js = tmp_path / "t.json"
+    assert main(["trace", str(baked), "--schemes", "none,file:csm,csm4", "--size", "48", "--memory", "--quiet",
+                 "--json", str(js)]) == 0
+    rep = json.loads(js.read_text())["schemes"]
+    got, own = rep["file:csm"], rep["csm4"]
+    assert got["differing_pixels"] == 0 and rep["none"]["alpha_tests_per_primary_ray"] > 0
+    for key in ("alpha_tests_per_primary_ray", "known_fraction", "map_bytes", "map_lines_per_ray", "distinct_maps"):
+        assert got[key] == own[key], key
+    plain = tmp_path / "plain.glb"
+    assert main(["omm", str(src), "-o", str(plain), "--quiet"]) == 0
+    assert main(["trace", str(plain), "--schemes", "none,file:csm", "--size", "8", "--quiet"]) == 2

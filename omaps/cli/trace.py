@@ -60,7 +60,7 @@ def add_parser(sub) -> None:
     t.add_argument("--schemes", default=DEFAULT_SCHEMES,
                    help="comma-separated: none, triL (or succinctL, csmL: the same micromaps as lossless trees), sqN, "
                         f"or a codec ({CODECS}; also with -fast, -medium or -thorough where it has efforts, "
-                        "and -paper where it has the deck's encoder), omm or file:CODEC (the maps the traced file stores), or "
+                        "and -paper where it has the deck's encoder), omm, file:CODEC or file:csm (the maps the traced file stores), or "
                         f"budget:BYTES (per pair the map -- none, {BUDGET_DEFAULTS} -- that saves the "
                         "most alpha tests per byte, every pair together within BYTES: 1263936, 1.2MiB, 800KiB) "
                         "(default: %(default)s)")

@@ -16,7 +16,8 @@ _RAW = ["pack_states", "unpack_states", "row_bytes", "read_state"]  # the one 2-
 # and a set's merged subtrees
 _SUCCINCT = ["succinct_encode", "succinct_encode_many", "succinct_encode_dag", "succinct_decode", "succinct_lookup", "succinct_bits",
              "succinct_check"]
-_CSM = ["csm_build", "csm_treelets", "csm_pack", "csm_encode", "csm_decode", "csm_lookup", "csm_bits", "csm_check", "CsmBuilder"]
+_CSM = ["csm_build", "csm_treelets", "csm_pack", "csm_encode", "csm_decode", "csm_unpack", "csm_lookup", "csm_bits", "csm_check",
+        "CsmBuilder"]
 _BITS = ["get_bits", "bit_length"]  # the bit-field rule of every block (docs/FORMAT.md)
 __all__ = _REGISTRY + _RAW + _SUCCINCT + _CSM + _BITS + ["block_state", "pair_block_state", "MAX_BLOCK_BYTES"]
 

@@ -43,8 +43,9 @@ from ..errors import InputError
 from .bits import bit_length, get_bits, kernel_bytes
 from ..checks import typed
 
-__all__ = ["ref_bits", "build", "Builder", "treelets", "pack", "encode", "decode", "lookup", "blob_bits", "check", "HEADER_BITS", "csm_build", "csm_treelets", "csm_encode",
-           "csm_decode", "csm_lookup", "csm_bits", "csm_pack", "csm_check", "CsmBuilder"]
+__all__ = ["ref_bits", "build", "Builder", "treelets", "pack", "encode", "decode", "unpack", "lookup", "blob_bits", "check",
+           "HEADER_BITS", "csm_build", "csm_treelets", "csm_encode", "csm_decode", "csm_unpack", "csm_lookup", "csm_bits",
+           "csm_pack", "csm_check", "CsmBuilder"]
 
 HEADER_BITS = 32
 
@@ -696,8 +697,40 @@ def decode(data, level: int, n_maps: int) -> np.ndarray:
     return _decode(buf, int(level), int(n_maps))
 
 
+@njit(cache=True)
+def _unpack(data, n_maps):
+    n = get_bits(data, 0, 32)
+    w = _ref_bits(n)
+    nodes = np.empty((n, 4), np.int64)
+    for i in range(n):
+        for c in range(4):
+            nodes[i, c] = get_bits(data, HEADER_BITS + w * (4 * i + c), w)
+    roots = np.empty(n_maps, np.int64)
+    for t in range(n_maps):
+        roots[t] = get_bits(data, HEADER_BITS + w * (4 * n + t), w)
+    return nodes, roots
+
+
+@typed
+def unpack(data, level: int, n_maps: int) -> tuple[np.ndarray, np.ndarray]:
+    """A set's blob (bytes or uint8 array) back into its DAG: (nodes (N, 4), roots (n_maps,))
+    int64 references, which ``pack`` writes again byte for byte; an InputError for a blob
+    ``check`` refuses.
+
+    Examples
+    --------
+    >>> blob, _ = encode([[0, 1, 2, 1], [1, 1, 1, 1]], 1)
+    >>> nodes, roots = unpack(blob, 1, 2)
+    >>> nodes.tolist(), roots.tolist(), pack(nodes, roots) == blob
+    ([[0, 1, 2, 1]], [3, 1], True)
+    """
+    buf = check(data, level, n_maps)
+    return _unpack(buf, int(n_maps))
+
+
 # the package API's names (``omaps.codecs``)
 csm_build, csm_pack, csm_encode, csm_decode, csm_lookup, csm_bits = build, pack, encode, decode, lookup, blob_bits
 csm_treelets = treelets
 csm_check = check
+csm_unpack = unpack
 CsmBuilder = Builder

@@ -209,9 +209,10 @@ def layouts(sm, at) -> dict[str, Layout]:
                         (sm.param, base))
         return {"own": own, "shared": shared}
     if sm.kind == "csm":
+        rows = np.ascontiguousarray(sm.rows, dtype=np.int64)  # each triangle's root
         lay = Layout("own", "the merged DAG: the triangle's root reference, then one reference per mixed node",
-                     int(sm.map_bytes), K_CSM, (), sm.data, (sm.param,))
-        return {"own": lay, "shared": Layout("shared", lay.description, lay.map_bytes, K_CSM, (), sm.data,
+                     int(sm.map_bytes), K_CSM, (rows,), sm.data, (sm.param,))
+        return {"own": lay, "shared": Layout("shared", lay.description, lay.map_bytes, K_CSM, lay.ints, sm.data,
                                              (sm.param,))}
     return {}
 
@@ -320,11 +321,12 @@ def _rank(data, t0, d0, w, i):
 
 
 @njit(cache=True)
-def _walk_csm(out, p, tri, k, data, level):
-    """The descent of ``codecs.csm.lookup`` (the header N is a constant of the scene, not a read)."""
+def _walk_csm(out, p, root, k, data, level):
+    """The descent of ``codecs.csm.lookup`` from root ``root`` (the header N is a constant of the
+    scene, not a read)."""
     n = get_bits(data, 0, 32)
     w = bit_length(n + 2)
-    pos = 32 + w * (4 * n + tri)
+    pos = 32 + w * (4 * n + root)
     p = _bits(out, p, 0, pos, pos + w)
     ref = get_bits(data, pos, w)
     reads = 1
@@ -349,7 +351,7 @@ def _walk(kind, out, p, tri, b1, b2, i0, i1, i2, data, q0, q1, q2, q3, q4):
     if kind == K_SUCCINCT:
         return _walk_succinct(out, p, tri, birdcurve.bary_to_index(b1, b2, q0), data, i1[i0[tri]], i2[tri], q0, q1)
     if kind == K_CSM:
-        return _walk_csm(out, p, tri, birdcurve.bary_to_index(b1, b2, q0), data, q0)
+        return _walk_csm(out, p, i0[tri], birdcurve.bary_to_index(b1, b2, q0), data, q0)
     return 0, p, -1
 
 

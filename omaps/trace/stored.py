@@ -1,6 +1,6 @@
 """Maps the traced file stores, as the any-hit filter reads them: scheme ``omm`` (the file's
-``EXT_mesh_opacity_micromap`` micromaps) and ``file:CODEC`` (its ``OMAPS_pair_opacity_maps``
-pair blocks). Nothing is baked: every alpha triangle the tracer sees is mapped to what the
+``EXT_mesh_opacity_micromap`` micromaps), ``file:CODEC`` (its ``OMAPS_pair_opacity_maps``
+pair blocks) and ``file:csm`` (its ``OMAPS_merged_micromaps``). Nothing is baked: every alpha triangle the tracer sees is mapped to what the
 file stores for its primitive and triangle (``scene.micromaps``, read and checked with the
 scene).
 
@@ -10,7 +10,9 @@ runs; 2-state records hold T and O only), looked up through the bird curve like 
 special indices are one-state level-0 rows (-1 T, -2 O, -3 and -4 C). A triangle whose
 primitive has no micromap is C (alpha-tested). ``file:CODEC``: each triangle reads its pair's
 stored block with the codec's random-access lookup and the corner codes the file stores; a
-triangle without a stored pair reads an all-C block.
+triangle without a stored pair reads an all-C block. ``file:csm``: each triangle descends from
+its root in the stored DAG (the primitive's ``first`` + its triangle), as ``csmL`` reads its own;
+a triangle whose primitive has none reads an all-C root added to the DAG's roots.
 """
 
 from __future__ import annotations
@@ -43,6 +45,10 @@ def _primitive_keys(at, scene) -> np.ndarray:
 def stored_maps(at, scene, scheme) -> SchemeMaps:
     stored = getattr(scene, "micromaps", None)
     path = getattr(scene, "path", None)
+    if scheme.representation == "csm":
+        if stored is None or stored.merged is None:
+            raise InputError(f"holds no OMAPS_merged_micromaps: scheme {scheme.name} has nothing to read", path)
+        return _merged_maps(at, scene, stored, scheme)
     if scheme.codec is None:
         if stored is None or not stored.micromaps:
             raise InputError("holds no EXT_mesh_opacity_micromap micromaps: scheme omm has nothing to read", path)
@@ -97,6 +103,27 @@ def _omm_maps(at, scene, stored, scheme) -> SchemeMaps:
     return SchemeMaps(scheme.name, "stored_micromap", 0, rows, data, 1, map_bytes,
                       sum(len(a.triangles) for a in stored.micromaps),
                       float(known.mean()) if len(known) else 0.0, None, scheme, extra)
+
+
+def _merged_maps(at, scene, stored, scheme) -> SchemeMaps:
+    from ..codecs import csm_pack, csm_unpack
+
+    mm = stored.merged
+    nodes, roots = csm_unpack(mm.dag, mm.level, mm.micromaps)
+    rows = np.full(at.count, len(roots), np.int64)  # no stored micromap: the all-C root added below
+    keys = _primitive_keys(at, scene)
+    for (mi, pi), first in stored.merged_primitives.items():
+        sel = np.flatnonzero((keys[:, 0] == mi) & (keys[:, 1] == pi))
+        rows[sel] = first + at.local[sel]
+    every = np.append(roots, states.C)
+    data = np.frombuffer(csm_pack(nodes, every), np.uint8).copy()
+    known = np.ones(3 + len(nodes))  # per reference the known share of its micro-triangles
+    known[states.C] = 0.0
+    for i in range(len(nodes)):  # children first (the blob's order)
+        known[3 + i] = known[nodes[i]].mean()
+    used = every[rows]
+    return SchemeMaps(scheme.name, "csm", mm.level, rows.astype(np.int32), data, len(data), len(mm.dag),
+                      len(np.unique(used)), float(known[used].mean()) if len(used) else 0.0, None, scheme)
 
 
 def _pair_maps(at, scene, stored, scheme) -> SchemeMaps:
