@@ -60,8 +60,8 @@ def add_parser(sub) -> None:
     r.add_argument("--no-dedup", action="store_true", help="no sharing of identical micromaps")
     r.add_argument("--from", dest="source", default="texture", metavar="SCHEME",
                    help="texture (default); csmL: the texture's micromaps at level L, also stored as one merged "
-                        "DAG of identical subtrees (OMAPS_merged_micromaps in a glTF output, which --expand turns "
-                        "back into standard micromaps); or a square scheme: sqN (the pair's N x N map, expanded to level "
+                        "DAG of identical subtrees (merged_micromaps.bin, or OMAPS_merged_micromaps in a glTF "
+                        "output); or a square scheme: sqN (the pair's N x N map, expanded to level "
                         f"log2 N) or a codec ({CODECS}; also with -fast, -medium or -thorough where it has "
                         "efforts, and -paper where it has the deck's encoder): square maps "
                         "stored, decoded, expanded. Pairs: the tracer's (shared edges) in a glTF scene, triangles "
