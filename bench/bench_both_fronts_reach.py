@@ -173,14 +173,14 @@ def measure(path: str, levels: list[int], size: int) -> list[dict]:
         row = {"scene": os.path.basename(path), "level": lv, "lookups_per_ray": len(tri) / pixels,
                "depth_share": np.bincount(depth, minlength=lv + 1) / max(len(tri), 1),
                "tri_lines": tri_mem["map_lines_per_ray"], "csm_bytes": csm_mem["map_bytes"],
-               "csm_lines": csm_mem["map_lines_per_ray"], "cases": [],
-               "route_mean": float(route.mean()), "route_p90": float(np.percentile(route, 90)),
-               "subtrees_mean": float(subtrees.mean()), "subtrees_p90": float(np.percentile(subtrees, 90))}
+               "csm_lines": csm_mem["map_lines_per_ray"], "cases": []}
         cum = np.cumsum(per_depth[root], axis=1)  # mixed nodes above each depth, per triangle
         tree = per_depth.sum(axis=1)  # mixed nodes of each reference's tree
         region = region_of(nodes, tree, root[tri], lv, k)
         shared_fit = fit_bytes(nodes, tree, root)
         route, subtrees = routes(nodes, tree, root)
+        row.update(route_mean=float(route.mean()), route_p90=float(np.percentile(route, 90)),
+                   subtrees_mean=float(subtrees.mean()), subtrees_p90=float(np.percentile(subtrees, 90)))
         for unit in ("triangle", "pair"):
             owner = tri if unit == "triangle" else pair[tri]
             count = len(root) if unit == "triangle" else n_pairs
