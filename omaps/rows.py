@@ -198,6 +198,7 @@ class RowIndex:
         self.external = bool(external)
         self._store = np.empty((0, -(-self.width // 8)), np.uint64)
         self._offsets = np.empty(0, np.int64)  # external: each id's row's byte offset in the caller's data
+        self._end = 0  # external: the end of the furthest row stored, the bytes ``data`` must hold
         self._table = np.full((16, 2), -1, np.int64)
 
     def add(self, rows: np.ndarray, data: np.ndarray | None = None, at: int = 0) -> np.ndarray:
@@ -218,7 +219,7 @@ class RowIndex:
                 offsets[:self.n] = self._offsets[:self.n]
                 self._offsets = offsets
             data = np.asarray(data, dtype=np.uint8).reshape(-1)
-            if self.n and int(self._offsets[:self.n].max()) + self.width > len(data):
+            if self._end > len(data):
                 raise ValueError("data does not hold every row this index has seen")
         elif need > len(self._store):
             store = np.empty((max(need, 2 * len(self._store)), self._store.shape[1]), np.uint64)
@@ -235,6 +236,8 @@ class RowIndex:
                               _NO_DATA if data is None else data, self._offsets, before)
         if self.external:
             self._offsets[before:self.n] = int(at) + self.width * np.arange(self.n - before, dtype=np.int64)
+            if self.n > before:
+                self._end = max(self._end, int(self._offsets[self.n - 1]) + self.width)
         return ids
 
 

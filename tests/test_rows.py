@@ -139,3 +139,17 @@ def test_row_index_rejects_another_width():
     external.add(np.zeros((2, 4), np.uint8), np.zeros(0, np.uint8), 0)
     with pytest.raises(ValueError, match="does not hold"):  # the caller did not store the new row
         external.add(np.ones((1, 4), np.uint8), np.zeros(2, np.uint8), 2)
+
+
+def test_external_index_refuses_data_that_lacks_a_row_it_has_seen():
+    from omaps.rows import RowIndex, first_uses
+
+    index, data = RowIndex(3, external=True), bytearray()
+    for rows in (np.array([[1, 2, 3], [4, 5, 6]], np.uint8), np.array([[4, 5, 6], [7, 8, 9]], np.uint8)):
+        before = index.n
+        ids = index.add(rows, np.frombuffer(bytes(data), np.uint8), len(data))
+        data += rows[first_uses(ids, before)].tobytes()  # the caller stores the new rows, in id order
+    assert len(data) == 9 and index.n == 3
+    assert index.add(np.array([[7, 8, 9]], np.uint8), np.frombuffer(bytes(data), np.uint8), len(data)).tolist() == [2]
+    with pytest.raises(ValueError, match="every row"):  # the last row stored lies past the data given
+        index.add(np.array([[1, 2, 3]], np.uint8), np.frombuffer(bytes(data[:8]), np.uint8), 8)
