@@ -1,7 +1,8 @@
 """Opacity micromaps stored in a glTF file: the draft extension ``EXT_mesh_opacity_micromap``
 (KhronosGroup/glTF pull request 2623) and omaps' own ``OMAPS_pair_opacity_maps`` (the deck's
 compressed square maps per pair) and ``OMAPS_merged_micromaps`` (every triangle's micromap in one
-merged DAG of identical subtrees, ``codecs.csm``). docs/FORMAT.md "Opacity micromaps in glTF" states every field.
+merged DAG of identical subtrees, ``codecs.csm``). docs/FORMAT.md "Opacity micromaps in glTF"
+states every field.
 
 Reading (``read_extensions``) runs inside the one scene reader (``scene.gltf``: it passes its
 checked accessor and bufferView readers), so the tracer and ``omaps omm --verify`` see exactly
@@ -106,8 +107,8 @@ def _is_int(v) -> bool:
 
 
 def read_extensions(r) -> StoredMicromaps | None:
-    """Both extensions of the document the scene reader ``r`` holds (``r.g``: the document,
-    ``r.view_bytes``, ``r.accessor``, ``r.path``); None when the file has neither."""
+    """The extensions of the document the scene reader ``r`` holds (``r.g``: the document,
+    ``r.view_bytes``, ``r.accessor``, ``r.path``); None when the file has none of them."""
     g = r.g
     root = g.extensions if isinstance(g.extensions, dict) else {}
     has_prim = any(isinstance(getattr(p, "extensions", None), dict) and any(e in p.extensions for e in _EXTS)
@@ -357,7 +358,7 @@ def write_gltf(src, out_tmp, out_final, micromaps: list[dict], prim_omm: dict, p
                prim_pairs: dict, warn=None, *, root=None, allow_outside: bool = False,
                max_bytes: int | None = None, merged: dict | None = None, prim_merged: dict | None = None) -> None:
     """Write ``src`` with the extensions to ``out_tmp`` (.glb or .gltf by ``out_final``'s suffix;
-    ``out_final`` is where it will be renamed to). Earlier micromaps of either extension in
+    ``out_final`` is where it will be renamed to). Earlier micromaps of these extensions in
     ``src`` are replaced. The output is self-contained (``container.self_contained``): a .glb
     holds every buffer and image, a .gltf names only data URIs and its copies in
     ``OUT_files/`` (copied last, beside ``out_final``).
