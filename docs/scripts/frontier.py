@@ -422,15 +422,21 @@ def reach_lines(scene: str, rows: list | None) -> list[str]:
            "the nodes above a subtree, so they read and store more. The gaps are against triL's raw rows' lines "
            "and csmL's bytes from the same trace, each the least over records of 4 to 128 bytes: the best case's "
            "is the least any such design could reach; the fit case's is nearer to one that could be built.", "",
+           "The last column is what the fit case reads for free: per triangle the *route* to its subtrees, the "
+           "mixed nodes above them and how many subtrees hang from it (mean, 90th percentile in brackets). A real "
+           "design stores a node and a pointer per subtree of it in the record, or reads it from a line of its "
+           "own before the subtree's.", "",
            "| level | decided at depth 0, 1, ... L | best case: least gap (record) | fit: least gap (record) | "
-           "fit: lines/ray, KiB |", "|---|---|---|---|---|"]
+           "fit: lines/ray, KiB | route: mixed nodes, subtrees |", "|---|---|---|---|---|---|"]
     for r in rows:
         best = min(r["cases"], key=lambda c: c["gap"])
         fit = min(r["cases"], key=lambda c: c["fit_gap"])
         share = ", ".join(f"{v:.2f}" for v in r["depth_share"])
+        route = (f"{r['route_mean']:.1f} ({r['route_p90']:.0f}), {r['subtrees_mean']:.1f} ({r['subtrees_p90']:.0f})"
+                 if "route_mean" in r else "—")
         out.append(f"| {r['level']} | {share} | {best['gap']:.2f} ({best['record']} B a {best['unit']}) | "
                    f"{fit['fit_gap']:.2f} ({fit['record']} B a {fit['unit']}) | {fit['fit_lines']:.3f}, "
-                   f"{_kib(fit['fit_bytes'])} |")
+                   f"{_kib(fit['fit_bytes'])} | {route} |")
     return out
 
 
