@@ -53,10 +53,9 @@ def verify(folder, **assets) -> tuple[OmmResult, list[str], list[str]]:
                                        os.path.join(folder, omm_format.PAIR_BLOCKS_FILE))
         done.append("micromaps against the decoded pair blocks")
     if res.merged_micromaps is not None:
-        from ..codecs import csm_decode
+        from .expand import stored_states
 
-        level = int(res.summary["merged_micromaps"]["level"])  # (checked when read)
-        problems += _against(res, csm_decode(res.merged_micromaps, level, len(res.index)), "merged micromap")
+        problems += _against(res, stored_states(res)[0], "merged micromap")
         done.append("micromaps against the merged micromaps")
     spec = res.summary.get("input")
     if spec is not None:
