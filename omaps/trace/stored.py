@@ -18,6 +18,7 @@ a triangle whose primitive has none reads an all-C root added to the DAG's roots
 from __future__ import annotations
 
 import numpy as np
+from numba import njit
 
 from .. import states
 from ..codecs import pack_states, row_bytes, unpack_states
@@ -117,13 +118,21 @@ def _merged_maps(at, scene, stored, scheme) -> SchemeMaps:
         rows[sel] = first + at.local[sel]
     every = np.append(roots, states.C)
     data = np.frombuffer(csm_pack(nodes, every), np.uint8).copy()
-    known = np.ones(3 + len(nodes))  # per reference the known share of its micro-triangles
-    known[states.C] = 0.0
-    for i in range(len(nodes)):  # children first (the blob's order)
-        known[3 + i] = known[nodes[i]].mean()
+    known = _known_shares(nodes)
     used = every[rows]
     return SchemeMaps(scheme.name, "csm", mm.level, rows.astype(np.int32), data, len(data), len(mm.dag),
                       len(np.unique(used)), float(known[used].mean()) if len(used) else 0.0, None, scheme)
+
+
+@njit(cache=True)
+def _known_shares(nodes):
+    """Per reference of a merged DAG the share of its micro-triangles that are T or O: a state's
+    1 or 0, a node's the mean of its children's (nodes come children first, the blob's order)."""
+    known = np.ones(3 + nodes.shape[0])
+    known[states.C] = 0.0
+    for i in range(nodes.shape[0]):
+        known[3 + i] = 0.25 * (known[nodes[i, 0]] + known[nodes[i, 1]] + known[nodes[i, 2]] + known[nodes[i, 3]])
+    return known
 
 
 def _pair_maps(at, scene, stored, scheme) -> SchemeMaps:
