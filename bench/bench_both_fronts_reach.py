@@ -171,7 +171,7 @@ def measure(path: str, levels: list[int], size: int) -> list[dict]:
         pair = np.asarray(prep.alpha.pair, np.int64)
         n_pairs = len(prep.alpha.pair_first)
         row = {"scene": os.path.basename(path), "level": lv, "lookups_per_ray": len(tri) / pixels,
-               "depth_share": np.bincount(depth, minlength=lv + 1) / max(len(tri), 1),
+               "depth_share": (np.bincount(depth, minlength=lv + 1) / max(len(tri), 1)).tolist(),
                "tri_lines": tri_mem["map_lines_per_ray"], "csm_bytes": csm_mem["map_bytes"],
                "csm_lines": csm_mem["map_lines_per_ray"], "cases": []}
         cum = np.cumsum(per_depth[root], axis=1)  # mixed nodes above each depth, per triangle

@@ -55,7 +55,7 @@ def measure(path: str, schemes: str, size: int = 256, rounds: int = 5) -> dict:
     at = prep.alpha
     parsed = parse_schemes(names)
     build = {n: float("inf") for n in names}
-    for _ in range(rounds if rounds > 1 else 1):
+    for _ in range(rounds):
         for s in parsed:
             t0 = time.perf_counter()
             build_scheme_maps(at, prep.tests, [s])

@@ -91,22 +91,8 @@ def run(scenes: dict | None = None) -> dict:
         costs = cost.measure(str(path), COST_SCHEMES, SIZE, COST_ROUNDS)
         print(cost.format_result(costs), flush=True)
         out["scenes"][name] = {"names": res.names, "report": res.report, "seconds": seconds, "costs": costs,
-                               "reach": _jsonable(reach.measure(str(path), reach_levels(level), SIZE))}
+                               "reach": reach.measure(str(path), reach_levels(level), SIZE)}
     return out
-
-
-def _jsonable(x):
-    import numpy as np
-
-    if isinstance(x, dict):
-        return {k: _jsonable(v) for k, v in x.items()}
-    if isinstance(x, (list, tuple)):
-        return [_jsonable(v) for v in x]
-    if isinstance(x, np.ndarray):
-        return x.tolist()
-    if isinstance(x, np.generic):
-        return x.item()
-    return x
 
 
 def _kind(report: dict, n: str) -> str:
