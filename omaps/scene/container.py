@@ -5,7 +5,8 @@ resource of the document (buffers, images) is then found and read through the re
 ``Container`` under one policy (``AssetPolicy``), for the scene reader (``scene.gltf``) and the
 writer of baked scenes (``scene.micromaps``) alike. Writing (``write_glb``, ``write_json``) packs
 a document back into a file; ``self_contained`` first makes the document name nothing outside
-the output (the one rule of every glTF file omaps writes; docs/guide/io.md "glTF outputs"):
+the output (the one rule of every glTF file omaps writes; docs/guide/io.md "glTF outputs"; and
+``drop_unnamed`` removes the data of micromaps the writer replaces). The rule:
 
 * a **.glb** output holds every buffer and image in its binary chunk: the buffers one after the
   other (each at a multiple of 8 bytes, their buffer views re-based), image files and data URIs
@@ -61,11 +62,28 @@ from ..errors import InputError
 
 __all__ = ["DEFAULT_MAX_BYTES", "MAX_BYTES_ENV", "AssetPolicy", "Container", "Location", "read_container",
            "max_asset_bytes", "write_glb", "write_json", "SelfContained", "self_contained", "files_folder",
-           "FILES_MANIFEST"]
+           "FILES_MANIFEST", "SUPPORTED_EXTENSIONS", "drop_unnamed"]
 
 DEFAULT_MAX_BYTES = 2 << 30  # 2 GiB: any one asset file, buffer, image file or data URI
 MAX_BYTES_ENV = "OMAPS_MAX_ASSET_BYTES"
 MESHOPT = "EXT_meshopt_compression"  # bufferViews whose bytes are compressed in another buffer's range
+DRACO = "KHR_draco_mesh_compression"  # a primitive's Draco data: a bufferView
+INSTANCING = "EXT_mesh_gpu_instancing"  # a node's mesh drawn at many transforms: accessors
+# the extensions the scene reader knows (``scene.gltf``): those whose data it reads, or that cannot change
+# geometry, texture coordinates or alpha; none names an accessor or a buffer view but where ``drop_unnamed``
+# looks
+SUPPORTED_EXTENSIONS = frozenset({
+    "KHR_texture_transform", "KHR_mesh_quantization", "EXT_texture_webp", "KHR_materials_emissive_strength",
+    "KHR_materials_ior", "KHR_materials_specular", "KHR_materials_sheen", "KHR_materials_clearcoat",
+    "KHR_materials_transmission", "KHR_materials_volume", "KHR_materials_iridescence", "KHR_materials_anisotropy",
+    "KHR_materials_dispersion", "KHR_materials_unlit", "KHR_materials_variants", "KHR_materials_pbrSpecularGlossiness",
+    "KHR_lights_punctual", "KHR_xmp_json_ld", "KHR_animation_pointer",
+    "EXT_mesh_opacity_micromap", "OMAPS_pair_opacity_maps", "OMAPS_merged_micromaps",  # read by scene.micromaps
+    "EXT_mesh_gpu_instancing",  # its nodes' instances (``GltfReader.gpu_instances``)
+    "MSFT_texture_dds",  # a texture's DDS image (``_source_of``)
+    "KHR_draco_mesh_compression",  # a primitive's Draco data (``GltfReader.draco``)
+    "EXT_meshopt_compression",  # a bufferView's compressed bytes (``GltfReader.view_bytes``)
+})
 GLB_MAGIC, JSON_CHUNK, BIN_CHUNK = 0x46546C67, 0x4E4F534A, 0x004E4942
 URI_SCHEME = re.compile(r"^([A-Za-z][A-Za-z0-9+.\-]*):")
 _DRIVE = re.compile(r"^[A-Za-z]:([\\/]|$)")
@@ -626,3 +644,177 @@ def _self_contained(c: Container, out_path) -> SelfContained:
     if gone:
         _leave_out_images(doc, gone, out, c.path)
     return out
+
+
+# ---- data no longer named -----------------------------------------------------------------------
+
+
+def _extension_names(node, found: set) -> None:
+    """Every extension name ``node`` (a JSON value) uses: ``extensionsUsed`` and the keys of every
+    ``extensions`` object, at any depth."""
+    if isinstance(node, dict):
+        for k, v in node.items():
+            if k == "extensions" and isinstance(v, dict):
+                found.update(v)
+            elif k == "extensionsUsed" and isinstance(v, list):
+                found.update(e for e in v if isinstance(e, str))
+            _extension_names(v, found)
+    elif isinstance(node, list):
+        for v in node:
+            _extension_names(v, found)
+
+
+def _index(v) -> bool:
+    return isinstance(v, int) and not isinstance(v, bool)
+
+
+def _accessor_holders(doc: dict):
+    """(object, key) of every place the core glTF schema and ``EXT_mesh_gpu_instancing`` name an
+    accessor: attributes, indices and morph targets of primitives, instance attributes, skins'
+    inverse bind matrices, animation samplers' input and output."""
+    for m in _items(doc, "meshes"):
+        for p in (m.get("primitives") or []) if isinstance(m, dict) else []:
+            if not isinstance(p, dict):
+                continue
+            maps = [p.get("attributes")] + list(p.get("targets") or [])
+            for a in maps:
+                if isinstance(a, dict):
+                    yield from ((a, k) for k in a)
+            yield p, "indices"
+    for n in _items(doc, "nodes"):
+        ext = (n.get("extensions") or {}).get(INSTANCING) if isinstance(n, dict) else None
+        if isinstance(ext, dict) and isinstance(ext.get("attributes"), dict):
+            yield from ((ext["attributes"], k) for k in ext["attributes"])
+    for s in _items(doc, "skins"):
+        if isinstance(s, dict):
+            yield s, "inverseBindMatrices"
+    for a in _items(doc, "animations"):
+        for s in (a.get("samplers") or []) if isinstance(a, dict) else []:
+            if isinstance(s, dict):
+                yield s, "input"
+                yield s, "output"
+
+
+def _view_holders(doc: dict):
+    """(object, key) of every place the core schema and ``KHR_draco_mesh_compression`` name a
+    buffer view: accessors (and their sparse indices and values), images, Draco primitives."""
+    for a in _items(doc, "accessors"):
+        if not isinstance(a, dict):
+            continue
+        yield a, "bufferView"
+        sparse = a.get("sparse")
+        if isinstance(sparse, dict):
+            for part in ("indices", "values"):
+                if isinstance(sparse.get(part), dict):
+                    yield sparse[part], "bufferView"
+    for im in _items(doc, "images"):
+        if isinstance(im, dict):
+            yield im, "bufferView"
+    for m in _items(doc, "meshes"):
+        for p in (m.get("primitives") or []) if isinstance(m, dict) else []:
+            ext = (p.get("extensions") or {}).get(DRACO) if isinstance(p, dict) else None
+            if isinstance(ext, dict):
+                yield ext, "bufferView"
+
+
+def _renumber(holders, gone: set, n: int) -> None:
+    """Renumber the indices ``holders`` name after removing the items ``gone`` of ``n``."""
+    new, k = {}, 0
+    for i in range(n):
+        if i not in gone:
+            new[i] = k
+            k += 1
+    for h, key in holders:
+        v = h.get(key)
+        if _index(v) and v in new:
+            h[key] = new[v]
+
+
+def _buffer_holders(views: list):
+    """Every object of ``views`` that names a buffer: a view, and its ``EXT_meshopt_compression``
+    (the compressed range)."""
+    for v in views:
+        if not isinstance(v, dict):
+            continue
+        ext = (v.get("extensions") or {}).get(MESHOPT) if isinstance(v.get("extensions"), dict) else None
+        yield from (h for h in (v, ext) if isinstance(h, dict))
+
+
+def _ranges(holders, buffer: int) -> list:
+    """[start, end) of each of ``holders`` (``_buffer_holders``) in buffer ``buffer``, merged."""
+    spans = sorted((h.get("byteOffset", 0), h.get("byteOffset", 0) + h["byteLength"]) for h in holders
+                   if h.get("buffer") == buffer and _index(h.get("byteOffset", 0)) and _index(h.get("byteLength")))
+    merged: list = []
+    for lo, hi in spans:
+        if merged and lo <= merged[-1][1]:
+            merged[-1][1] = max(merged[-1][1], hi)
+        else:
+            merged.append([lo, hi])
+    return merged
+
+
+def drop_unnamed(doc: dict, accessors=(), views=(), body: bytes | None = None,
+                 known: frozenset = SUPPORTED_EXTENSIONS) -> bytes | None:
+    """Remove from ``doc`` the ``accessors`` and buffer ``views`` (indices) that nothing in it
+    names any more (the data of micromaps being replaced), renumbering every reference to those
+    after them. Returns ``body`` (a .glb's binary chunk, buffer 0) with only the bytes the views
+    left cover, when a view was removed (``_compact``: each range at its old offset modulo 16, so
+    every alignment holds); for a .gltf (``body`` None) a ``data:`` buffer only removed views named is
+    removed. Nothing is removed when ``doc`` uses an extension outside ``known`` (one that may
+    name an accessor or a view where this function does not look): ``body`` comes back as it was."""
+    found: set = set()
+    _extension_names(doc, found)
+    if not found <= known:
+        return body
+    acc = _items(doc, "accessors")
+    named = {h.get(k) for h, k in _accessor_holders(doc)}
+    gone_acc = {a for a in accessors if _index(a) and 0 <= a < len(acc) and a not in named}
+    views_list = _items(doc, "bufferViews")
+    candidates = {v for v in views if _index(v)}
+    candidates |= {acc[a].get("bufferView") for a in gone_acc if isinstance(acc[a], dict)}
+    kept_acc = [a for i, a in enumerate(acc) if i not in gone_acc]
+    named_views = {h.get(k) for h, k in _view_holders({**doc, "accessors": kept_acc})}
+    gone_views = {v for v in candidates if _index(v) and 0 <= v < len(views_list) and v not in named_views}
+    if gone_acc:
+        _renumber(list(_accessor_holders(doc)), gone_acc, len(acc))
+        acc[:] = kept_acc
+        if not acc:
+            del doc["accessors"]
+    if not gone_views:
+        return body
+    removed = [v for i, v in enumerate(views_list) if i in gone_views]
+    _renumber(list(_view_holders(doc)), gone_views, len(views_list))
+    views_list[:] = [v for i, v in enumerate(views_list) if i not in gone_views]
+    if not views_list:
+        del doc["bufferViews"]
+    if body is not None:
+        return _compact(views_list, body)
+    buffers = _items(doc, "buffers")
+    still = {h.get("buffer") for h in _buffer_holders(views_list)}
+    gone_buffers = {h.get("buffer") for h in _buffer_holders(removed)}
+    gone_buffers = {b for b in gone_buffers if _index(b) and 0 <= b < len(buffers) and b not in still
+                    and isinstance(buffers[b], dict) and str(buffers[b].get("uri", "")).startswith("data:")}
+    if gone_buffers:
+        _renumber([(h, "buffer") for h in _buffer_holders(views_list)], gone_buffers, len(buffers))
+        buffers[:] = [b for i, b in enumerate(buffers) if i not in gone_buffers]
+    return None
+
+
+def _compact(views: list, body: bytes) -> bytes:
+    """``body`` (buffer 0) holding only the byte ranges ``views`` cover (no glTF object reaches
+    a buffer's other bytes), moved down, each range to its old offset modulo 16; ``views``
+    re-based."""
+    out, shifts = bytearray(), []
+    for lo, hi in _ranges(_buffer_holders(views), 0):
+        out += b"\0" * ((lo - len(out)) % 16)
+        shifts.append((lo, hi, len(out) - lo))
+        out += body[lo:hi]
+    for h in _buffer_holders(views):
+        off = h.get("byteOffset", 0)
+        if h.get("buffer") != 0 or not _index(off):
+            continue
+        for lo, hi, shift in shifts:
+            if lo <= off < hi:
+                h["byteOffset"] = off + shift
+                break
+    return bytes(out)

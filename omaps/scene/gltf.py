@@ -56,28 +56,14 @@ import warnings
 import numpy as np
 
 from ..errors import InputError
-from .container import MESHOPT, AssetPolicy, Container, Location, read_container
+from .container import (DRACO, INSTANCING, MESHOPT, SUPPORTED_EXTENSIONS, AssetPolicy, Container, Location,
+                        read_container)
 from .files import check_scene_file
 from .model import ALPHA_MODES, Material, Mesh, Primitive, Scene, SceneCamera, SceneWarning, Texture, own_vertices
 
 __all__ = ["load_scene", "SUPPORTED_EXTENSIONS", "node_matrix", "texture_transform_matrix"]
 
-INSTANCING = "EXT_mesh_gpu_instancing"  # a node's mesh drawn at many transforms
-DRACO = "KHR_draco_mesh_compression"
 IMAGE_SOURCES = ("MSFT_texture_dds", "EXT_texture_webp")  # texture extensions that name an image (``_source_of``)
-# extensions whose data we read, or that cannot change geometry, texture coordinates or alpha
-SUPPORTED_EXTENSIONS = frozenset({
-    "KHR_texture_transform", "KHR_mesh_quantization", "EXT_texture_webp", "KHR_materials_emissive_strength",
-    "KHR_materials_ior", "KHR_materials_specular", "KHR_materials_sheen", "KHR_materials_clearcoat",
-    "KHR_materials_transmission", "KHR_materials_volume", "KHR_materials_iridescence", "KHR_materials_anisotropy",
-    "KHR_materials_dispersion", "KHR_materials_unlit", "KHR_materials_variants", "KHR_materials_pbrSpecularGlossiness",
-    "KHR_lights_punctual", "KHR_xmp_json_ld", "KHR_animation_pointer",
-    "EXT_mesh_opacity_micromap", "OMAPS_pair_opacity_maps",  # read by scene.micromaps
-    "EXT_mesh_gpu_instancing",  # its nodes' instances (``GltfReader.gpu_instances``)
-    "MSFT_texture_dds",  # a texture's DDS image (``_source_of``)
-    "KHR_draco_mesh_compression",  # a primitive's Draco data (``GltfReader.draco``)
-    "EXT_meshopt_compression",  # a bufferView's compressed bytes (``GltfReader.view_bytes``)
-})
 _GL_NEAREST = (9728, 9984, 9986)  # magFilter NEAREST, or min NEAREST_MIPMAP_*
 _WRAP = {33071: "clamp", 33648: "mirror", 10497: "wrap"}
 _COMPONENTS = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4, "MAT2": 4, "MAT3": 9, "MAT4": 16}

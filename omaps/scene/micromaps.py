@@ -13,7 +13,7 @@ as the scene reader) directly (no glTF library round trip), so every mesh, mater
 node, animation, camera and unknown extension or extra of the input is kept as it was, its
 buffers and images made part of the output (``container.self_contained``: in a .glb's binary
 chunk, or copied beside a .gltf): the new data is appended as buffer views (and accessors for the
-per-primitive indices). The OMM format's
+per-primitive indices), the data of micromaps it replaces dropped. The OMM format's
 facts (record layout, level limit, sizes, record checks) are ``omm_format``'s.
 """
 
@@ -26,7 +26,7 @@ import numpy as np
 
 from ..errors import InputError
 from ..omm_format import MAX_LEVEL, PAIR_RECORD, TRIANGLE_RECORD, record_problem
-from .container import AssetPolicy, read_container, self_contained, write_glb, write_json
+from .container import AssetPolicy, drop_unnamed, read_container, self_contained, write_glb, write_json
 
 __all__ = ["EXT_OMM", "EXT_PAIRS", "EXT_MERGED", "MicromapArray", "PrimitiveMicromap", "PairMaps", "PrimitivePairs",
            "MergedMicromaps", "StoredMicromaps", "read_extensions", "write_gltf", "index_component_type",
@@ -354,12 +354,33 @@ class _Appender:
         return len(self.views) - 1
 
 
+def _named_by_extensions(doc: dict) -> tuple[set, set]:
+    """The accessors and buffer views the micromaps of ``_EXTS`` in ``doc`` name."""
+    accessors, views = set(), set()
+    root = doc.get("extensions") if isinstance(doc.get("extensions"), dict) else {}
+    omm, pairs, merged = (root.get(e) if isinstance(root.get(e), dict) else {} for e in _EXTS)
+    for item in omm.get("micromaps") or []:
+        views.update(item.get(k) for k in ("data", "triangles")) if isinstance(item, dict) else None
+    for item in pairs.get("maps") or []:
+        views.add(item.get("blocks")) if isinstance(item, dict) else None
+    views.add(merged.get("dag"))
+    for m in doc.get("meshes") or []:
+        for p in (m.get("primitives") or []) if isinstance(m, dict) else []:
+            ext = p.get("extensions") if isinstance(p, dict) else None
+            if isinstance(ext, dict):
+                accessors.add((ext.get(EXT_OMM) or {}).get("micromapIndices") if isinstance(ext.get(EXT_OMM), dict)
+                              else None)
+                views.add(ext[EXT_PAIRS].get("pairs") if isinstance(ext.get(EXT_PAIRS), dict) else None)
+    return accessors, views
+
+
 def write_gltf(src, out_tmp, out_final, micromaps: list[dict], prim_omm: dict, pair_maps: list[dict],
                prim_pairs: dict, warn=None, *, root=None, allow_outside: bool = False,
                max_bytes: int | None = None, merged: dict | None = None, prim_merged: dict | None = None) -> None:
     """Write ``src`` with the extensions to ``out_tmp`` (.glb or .gltf by ``out_final``'s suffix;
     ``out_final`` is where it will be renamed to). Earlier micromaps of these extensions in
-    ``src`` are replaced. The output is self-contained (``container.self_contained``): a .glb
+    ``src`` are replaced, the accessors, views and bytes they alone named dropped
+    (``container.drop_unnamed``). The output is self-contained (``container.self_contained``): a .glb
     holds every buffer and image, a .gltf names only data URIs and its copies in
     ``OUT_files/`` (copied last, beside ``out_final``).
 
@@ -379,17 +400,8 @@ def write_gltf(src, out_tmp, out_final, micromaps: list[dict], prim_omm: dict, p
         if warn:
             warn(w)
     buffers = doc.setdefault("buffers", [])
-    views = doc.setdefault("bufferViews", [])
-    accessors = doc.setdefault("accessors", [])
-    if glb_out:  # the new bytes go after the others in the binary chunk (buffer 0, the only one)
-        bin_chunk = packed.body
-        app = _Appender(len(bin_chunk) + (-len(bin_chunk)) % 8)
-        new_buffer = 0
-    else:  # a new buffer (a data URI)
-        app = _Appender(0)
-        new_buffer = len(buffers)
-        buffers.append({"byteLength": 0})
-    # drop earlier micromaps of both extensions (their views stay, unreferenced)
+    # earlier micromaps of these extensions are replaced: their accessors and views dropped
+    old_accessors, old_views = _named_by_extensions(doc)
     root_ext = doc.setdefault("extensions", {})
     for name in _EXTS:
         root_ext.pop(name, None)
@@ -401,6 +413,19 @@ def write_gltf(src, out_tmp, out_final, micromaps: list[dict], prim_omm: dict, p
                 if not p["extensions"]:
                     del p["extensions"]
     used = [e for e in doc.get("extensionsUsed") or [] if e not in _EXTS]
+    if "extensionsUsed" in doc:
+        doc["extensionsUsed"] = used
+    body = drop_unnamed(doc, old_accessors, old_views, packed.body if glb_out else None)
+    views = doc.setdefault("bufferViews", [])
+    accessors = doc.setdefault("accessors", [])
+    if glb_out:  # the new bytes go after the others in the binary chunk (buffer 0, the only one)
+        bin_chunk = body
+        app = _Appender(len(bin_chunk) + (-len(bin_chunk)) % 8)
+        new_buffer = 0
+    else:  # a new buffer (a data URI)
+        app = _Appender(0)
+        new_buffer = len(buffers)
+        buffers.append({"byteLength": 0})
     first_view = len(views)
     if micromaps:
         items = []
