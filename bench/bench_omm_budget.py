@@ -62,10 +62,10 @@ def reference_plan(scene: Path, budget: int):
     sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
     import reference_budget as ref
     from omaps.omm import budget as cur
-    from omaps.omm.inputs import gltf_spec, load_geometries
+    from omaps.omm.inputs import scene_spec, load_geometries
     from omaps.omm.pipeline import OmmSettings
 
-    geoms, _, _ = load_geometries(gltf_spec(str(scene)))
+    geoms, _, _ = load_geometries(scene_spec(str(scene)))
     s = OmmSettings(budget=budget)
     t = time.perf_counter()
     plan_ref, rep_ref = ref.budget_levels(geoms, s, budget)

@@ -206,7 +206,7 @@ def omm_input_spec(inputs: str | os.PathLike[str] | Sequence[str | os.PathLike[s
     if len(inputs) == 1 and is_scene_file(inputs[0]):
         if channel is not None:
             raise InputError("channel applies to a texture input, not to a scene", param="channel")
-        return omm_inputs.gltf_spec(inputs[0], rules)
+        return omm_inputs.scene_spec(inputs[0], rules)
     if len(inputs) == 2:
         return omm_inputs.texture_spec(inputs[0], inputs[1], rules.cutoff, rules.filter, rules.wrap, channel)
     if len(inputs) == 1:
@@ -320,7 +320,7 @@ def bake_omms(inputs: str | os.PathLike[str] | Sequence[str | os.PathLike[str]],
     outputs = Outputs(inputs=inputs)
     to_gltf = output is not None and gltf_io.is_gltf(output)
     if to_gltf:
-        if spec["kind"] != "gltf":
+        if spec["kind"] != "scene":
             raise InputError("a .glb / .gltf output needs a glTF input (a texture and UVs have no scene)", output)
         from .scene.files import is_usd_file
 
@@ -333,7 +333,7 @@ def bake_omms(inputs: str | os.PathLike[str] | Sequence[str | os.PathLike[str]],
     t0 = time.perf_counter()
     view, view_info = None, None
     if weights == "view":  # where the view's hits fall: the same counting trace as trace's budget
-        if settings.budget is None or spec["kind"] != "gltf":
+        if settings.budget is None or spec["kind"] != "scene":
             raise InputError("weights 'view' needs a budget and a glTF scene", param=("weights", "budget"))
         from .alpha_test import MaterialRules
         from .scene import load_scene
@@ -428,7 +428,7 @@ def expand_omms(baked: str | os.PathLike[str], output: str | os.PathLike[str], *
     if res.pair_blocks is None and res.merged_micromaps is None:
         raise InputError("holds no OMAPS_pair_opacity_maps pair blocks or OMAPS_merged_micromaps to expand", baked)
     out = expand_result(res, root=root, allow_outside=allow_outside)
-    bake = OmmBake(out, None, {"kind": "gltf", "path": os.path.abspath(baked)}, os.fspath(output),
+    bake = OmmBake(out, None, {"kind": "scene", "path": os.path.abspath(baked)}, os.fspath(output),
                    seconds=time.perf_counter() - t0)
     with outputs.writing():
         bake.warnings = list(gltf_io.write_gltf_result(baked, outputs.path(output), output, out, None, root=root, allow_outside=allow_outside))

@@ -47,7 +47,7 @@ from omaps.cli.main import main
 from omaps.codecs import codec_names, get_codec
 from omaps.errors import InputError
 from omaps import omm_format
-from omaps.omm.inputs import gltf_spec, load_geometries, load_uvs, texture_spec
+from omaps.omm.inputs import scene_spec, load_geometries, load_uvs, texture_spec
 from omaps.omm.pipeline import OmmSettings, build
 from omaps.omm.verify import verify
 from omaps.sampling import FILTERS, WRAP_MODES
@@ -347,7 +347,7 @@ def check_scene_geometry(path: str) -> None:
     if scene is None:
         return
     check_scene(scene)
-    expect_input_error(lambda: load_geometries(gltf_spec(path)), path)
+    expect_input_error(lambda: load_geometries(scene_spec(path)), path)
 
 
 def check_scene(scene) -> None:
@@ -423,7 +423,7 @@ def test_fuzzed_image_in_a_gltf_scene(image):
         check_scene(scene)
         tex = scene.textures[scene.materials[0].texture]
         assert tex.name == name
-        expect_input_error(lambda: load_geometries(gltf_spec(path)), path)
+        expect_input_error(lambda: load_geometries(scene_spec(path)), path)
 
 
 # -- glTF JSON and GLB ---------------------------------------------------------------------------

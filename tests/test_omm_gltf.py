@@ -22,7 +22,7 @@ from omaps.cli.main import main
 from omaps.errors import InputError
 from omaps.omm import OmmSettings, build
 from omaps.omm.gltf_io import read_gltf
-from omaps.omm.inputs import gltf_spec, load_geometries
+from omaps.omm.inputs import scene_spec, load_geometries
 from omaps.scene.micromaps import encode_indices, index_component_type
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
@@ -141,7 +141,7 @@ def test_quad_round_trip(tmp_path, suffix):
     assert main(["omm", str(src), "-o", str(out), "--quiet", "--level", "3"]) == 0
     doc, parsed, lookups = check_extension_rules(out)
     # the bake of the same scene, independently of the file: identical buffers
-    geoms, _, _ = load_geometries(gltf_spec(src))
+    geoms, _, _ = load_geometries(scene_spec(src))
     res = build(geoms, OmmSettings(level=3))
     data, rec = parsed[0]
     assert bytes(data) == res.data.tobytes()
@@ -234,7 +234,7 @@ def test_palm_glb_extension_verify_trace_and_expand(tmp_path):
     out = tmp_path / "palm.glb"
     assert main(["omm", PALM, "-o", str(out), "--quiet"]) == 0
     doc, parsed, lookups = check_extension_rules(out)
-    geoms, _, _ = load_geometries(gltf_spec(PALM))
+    geoms, _, _ = load_geometries(scene_spec(PALM))
     res = build(geoms, OmmSettings())
     assert np.array_equal(np.concatenate([lookups[(g.info["mesh"], g.info["primitive"])] for g in geoms]), res.index)
     assert bytes(parsed[0][0]) == res.data.tobytes()

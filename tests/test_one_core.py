@@ -14,7 +14,7 @@ from omaps import states
 from omaps.alpha_test import MaterialRules
 from omaps.cli import main
 from omaps.omm import OmmSettings, build, pairs
-from omaps.omm.inputs import gltf_spec, load_geometries
+from omaps.omm.inputs import scene_spec, load_geometries
 from omaps.scene import alpha_triangles, load_scene
 from omaps.schemes import parse_schemes
 from omaps.trace.maps import build_scheme_maps
@@ -110,7 +110,7 @@ def _tracer_micromaps(path, level, rules=MaterialRules()):
 
 
 def _omm_micromaps(path, settings, rules=MaterialRules()):
-    geoms, _, _ = load_geometries(gltf_spec(path, rules))
+    geoms, _, _ = load_geometries(scene_spec(path, rules))
     res = build(geoms, settings)
     out = {}
     t = 0

@@ -18,6 +18,7 @@ from __future__ import annotations
 import importlib.util
 import json
 import math
+import os
 import subprocess
 import sys
 import warnings
@@ -245,8 +246,9 @@ def test_the_palm_as_usd_reads_traces_and_bakes_as_the_gltf_palm(tmp_path):
     assert x["schemes"]["none"]["alpha_tests_per_primary_ray"] > 0
     ou, og = _omm(tmp_path, "usd", usd), _omm(tmp_path, "gltf", SCENES / "palm.glb")
     _same_bins(ou, og)  # the same micromaps, triangle by triangle
-    geoms = json.loads((ou / "omm.json").read_text())["geometries"]
-    (leaf,) = geoms
+    summary = json.loads((ou / "omm.json").read_text())
+    assert summary["input"]["kind"] == "scene" and summary["input"]["path"] == os.path.abspath(usd)
+    (leaf,) = summary["geometries"]
     assert leaf["prim"] == "/Palm/Mesh" and len(leaf["faces"]) == leaf["triangles"]
     first = len(a.meshes[0].primitives[0].triangles)  # the trunk's faces come first
     assert leaf["faces"] == list(range(first, first + leaf["triangles"]))

@@ -47,7 +47,7 @@ def write_gltf_result(src, out_tmp, out_final, result: OmmResult, extra_summary:
 
     summary = dict(result.summary, **(extra_summary or {}))
     spec = summary.get("input") or {}
-    if spec.get("kind") != "gltf":
+    if spec.get("kind") != "scene":
         raise InputError("a glTF output needs a glTF input (a texture and UVs have no scene to write into)", out_final)
     summary["input"] = {k: v for k, v in spec.items() if k not in ("kind", "path")}  # the material rules
     summary["source"] = os.path.basename(spec["path"])
@@ -109,7 +109,7 @@ def read_gltf(path, scene=None, **assets) -> OmmResult:
     rules = summary.get("input")
     if not isinstance(rules, dict) or not isinstance(summary.get("geometries"), list):
         raise InputError("extras.omaps lacks input (material rules) or geometries", path)
-    summary["input"] = {"kind": "gltf", "path": os.path.abspath(path), **rules}
+    summary["input"] = {"kind": "scene", "path": os.path.abspath(path), **rules}
     parts, pair_parts = [], []
     try:
         ranges = list(_ranges(summary))

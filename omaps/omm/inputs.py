@@ -20,7 +20,7 @@ from ..errors import InputError
 from ..texture import load_alpha
 from .pipeline import Geometry
 
-__all__ = ["texture_spec", "gltf_spec", "check_spec", "load_uvs", "load_geometries"]
+__all__ = ["texture_spec", "scene_spec", "check_spec", "load_uvs", "load_geometries"]
 
 
 def texture_spec(texture, uvs, cutoff=None, filter=None, wrap=None, channel=None) -> dict:
@@ -29,12 +29,13 @@ def texture_spec(texture, uvs, cutoff=None, filter=None, wrap=None, channel=None
             "wrap": wrap or "clamp", "channel": channel}
 
 
-def gltf_spec(path, rules: MaterialRules = MaterialRules()) -> dict:
-    return {"kind": "gltf", "path": os.path.abspath(path), **rules.settings()}
+def scene_spec(path, rules: MaterialRules = MaterialRules()) -> dict:
+    """A scene file's spec (glTF or OpenUSD: ``scene.load_scene`` reads either)."""
+    return {"kind": "scene", "path": os.path.abspath(path), **rules.settings()}
 
 
 def check_spec(spec) -> dict:
-    """An input spec as omm.json records it (``texture_spec`` / ``gltf_spec``), checked: an
+    """An input spec as omm.json records it (``texture_spec`` / ``scene_spec``), checked: an
     InputError saying which field is wrong (the caller names the file)."""
     if not isinstance(spec, dict):
         raise InputError(f"input is {spec!r}, not an object")
@@ -58,14 +59,14 @@ def check_spec(spec) -> dict:
             raise InputError(f"input.channel is {channel!r}, a channel name or index expected")
         StateRule("cutoff", cutoff=field("cutoff", float))
         MaterialRules(filter=field("filter", str), wrap=field("wrap", str))  # checks the names
-    elif kind == "gltf":
+    elif kind == "scene":
         field("path", str)
         blend = field("blend", str) if "blend" in spec else "levels"
         blend_cutoff = field("blend_cutoff", float) if "blend_cutoff" in spec else 0.5
         MaterialRules(field("cutoff", float, True), field("filter", str, True), field("wrap", str, True), blend,
                       blend_cutoff)
     else:
-        raise InputError(f"input.kind is {kind!r}, texture or gltf expected")
+        raise InputError(f"input.kind is {kind!r}, texture or scene expected")
     return spec
 
 
