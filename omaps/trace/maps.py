@@ -73,16 +73,22 @@ def encode_cached(codec, maps_: np.ndarray, encoder, effort, jobs: int = 1, prog
     return cache[key]
 
 
+def by_material(materials: np.ndarray, where: np.ndarray | None = None):
+    """(material, the indices of ``materials`` that name it) for each material, in order; only
+    the indices where ``where`` (bool) holds, when given."""
+    idx = np.arange(len(materials)) if where is None else np.flatnonzero(where)
+    for m in np.unique(materials[idx]):
+        yield int(m), idx[materials[idx] == m]
+
+
 def _pair_flags(at: AlphaTriangles, tests: dict, n: int):
     """Flags (D, n, n) of the distinct pairs, and every pair's distinct index."""
     uv, has_b, mat = pair_corner_uvs(at)
     unknown = at.unknown[at.pair_first] | ((at.pair_second >= 0) & at.unknown[np.maximum(at.pair_second, 0)])
     reps, inverse = distinct_rows(uv, has_b, mat, unknown)
     flags = np.empty((len(reps), n, n), np.uint8)
-    rmat = mat[reps]
-    for m in np.unique(rmat):
-        sel = np.flatnonzero(rmat == m)
-        flags[sel] = bake_pair_flags(tests[int(m)].grid(), uv[reps[sel]], has_b[reps[sel]], n, GROW_TEXEL)
+    for m, sel in by_material(mat[reps]):
+        flags[sel] = bake_pair_flags(tests[m].grid(), uv[reps[sel]], has_b[reps[sel]], n, GROW_TEXEL)
     flags[unknown[reps]] = states.FLAG_C
     return flags, inverse
 
@@ -91,10 +97,8 @@ def micromap_states(at: AlphaTriangles, tests: dict, level: int):
     """States (D, 4**level) of the distinct alpha triangles, and every triangle's distinct index."""
     reps, inverse = distinct_rows(at.uv, at.material, at.unknown)
     out = np.empty((len(reps), 4 ** level), np.uint8)
-    rmat = at.material[reps]
-    for m in np.unique(rmat):
-        sel = np.flatnonzero(rmat == m)
-        s, _ = bake_micromaps(tests[int(m)].grid(), at.uv[reps[sel]], level, GROW_TEXEL)
+    for m, sel in by_material(at.material[reps]):
+        s, _ = bake_micromaps(tests[m].grid(), at.uv[reps[sel]], level, GROW_TEXEL)
         out[sel] = s.reshape(len(sel), -1)
     out[at.unknown[reps]] = states.C
     return out, inverse
@@ -118,12 +122,10 @@ def baked_tree(at: AlphaTriangles, tests: dict, level: int, progress: bool = Fal
     builder = CsmBuilder(level)
     roots = np.full(len(reps), states.C, np.int64)  # unknown triangles: all C
     known_micro = np.zeros(len(reps))  # micro-triangles of each whose state is not C
-    rmat = at.material[reps]
     todo = ~at.unknown[reps]
     bar = tqdm(total=int(todo.sum()), desc=f"bake {name}", unit="tri", disable=not progress, leave=False)
-    for m in np.unique(rmat[todo]):
-        sel = np.flatnonzero((rmat == m) & todo)
-        grid = tests[int(m)].grid()
+    for m, sel in by_material(at.material[reps], todo):
+        grid = tests[m].grid()
         sat = flag_table(grid)
         chunk, i, per = 16, 0, 64.0  # the rate is a guess at first: a short chunk (one that outgrows its buffer
         while i < len(sel):

@@ -18,7 +18,7 @@ from ..codecs import get_codec
 from ..coverage import cell_fractions
 from ..promotion import PROMOTIONS, resolve_regions
 from ..scene.alpha import distinct_rows, pair_corner_uvs
-from .maps import SchemeMaps, dedupe_maps
+from .maps import SchemeMaps, by_material, dedupe_maps
 
 from ..errors import InputError
 
@@ -72,10 +72,8 @@ def two_state_maps(prep, sm: SchemeMaps, mode: str, seed: int = 0, cache: dict |
     if key not in cache:
         frac = np.zeros((len(reps), n, n))
         centre = np.zeros((len(reps), n, n, 2))
-        rmat = mat[reps]
-        for m in np.unique(rmat):
-            sel = np.flatnonzero(rmat == m)
-            frac[sel], centre[sel] = cell_fractions(prep.tests[int(m)], uv[reps[sel]], has_b[reps[sel]], n)
+        for m, sel in by_material(mat[reps]):
+            frac[sel], centre[sel] = cell_fractions(prep.tests[m], uv[reps[sel]], has_b[reps[sel]], n)
         cache[key] = (frac, centre)
     frac, centre = cache[key]
     three = decoded_pair_maps(sm, at)[reps]
