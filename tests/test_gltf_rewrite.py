@@ -122,7 +122,7 @@ def test_compressed_scenes_baked_again(tmp_path, packing):
         pytest.importorskip("DracoPy", reason="DracoPy (the Draco encoder) is not installed")
         dracoify_glb(SCENES / "palm.glb", src)
     a, b, c = (tmp_path / f"{n}.glb" for n in "abc")
-    assert main(["omm", str(src), "-o", str(a), "--quiet", "--from", "vq4"]) == 0
+    assert main(["omm", str(src), "-o", str(a), "--quiet", "--from", "sq16"]) == 0
     assert main(["omm", str(a), "-o", str(b), "--quiet", "--level", "3"]) == 0
     assert main(["omm", str(src), "-o", str(c), "--quiet", "--level", "3"]) == 0
     (_, ba), (db, bb), (dc, bc) = glb_parts(a), glb_parts(b), glb_parts(c)
