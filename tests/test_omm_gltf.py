@@ -308,6 +308,22 @@ def test_khronos_validator(tmp_path, scene, args, suffixes):
         assert rep["numWarnings"] <= ref["numWarnings"], rep["messages"]
 
 
+@needs_validator
+@needs_palm
+@pytest.mark.parametrize("suffix", [".glb", ".gltf"])
+def test_khronos_validator_on_a_file_baked_again(tmp_path, suffix):
+    """The palm baked with pair blocks and a merged DAG, baked again: no error, and no object
+    the validator finds unused but those a single bake leaves (the micromaps' own views and
+    index accessors, which the validator does not know the extension of)."""
+    first, again, once = (tmp_path / f"{n}{suffix}" for n in ("first", "again", "once"))
+    assert main(["omm", PALM, "-o", str(first), "--quiet", "--from", "csm3"]) == 0
+    assert main(["omm", str(first), "-o", str(again), "--quiet", "--from", "sq16"]) == 0
+    assert main(["omm", PALM, "-o", str(once), "--quiet", "--from", "sq16"]) == 0
+    f, a, o = run_validator(first, again, once)
+    assert f["numErrors"] == a["numErrors"] == o["numErrors"] == 0
+    assert a["unused"] == o["unused"]  # (the first bake's micromaps would show here, unused)
+
+
 @pytest.mark.parametrize("args", [["--dynamic", "1", "--max-level", "5"], ["--level", "0", "--no-special"],
                                   ["--format", "2state"]])
 def test_trace_reads_stored_levels_and_formats(tmp_path, args):

@@ -32,6 +32,7 @@ for (const file of process.argv.slice(2)) {
     messages: issues.messages.filter((m) => m.severity <= 1)
       .map((m) => ({ code: m.code, severity: m.severity, message: m.message, pointer: m.pointer })),
     infoCodes: [...new Set(issues.messages.filter((m) => m.severity >= 2).map((m) => m.code))],
+    unused: issues.messages.filter((m) => m.code === "UNUSED_OBJECT").map((m) => m.pointer),
   };
   if (issues.numErrors > 0) failed = true;
   console.log(JSON.stringify(out));
