@@ -356,21 +356,22 @@ class _Appender:
 
 def _named_by_extensions(doc: dict) -> tuple[set, set]:
     """The accessors and buffer views the micromaps of ``_EXTS`` in ``doc`` name."""
-    accessors, views = set(), set()
-    root = doc.get("extensions") if isinstance(doc.get("extensions"), dict) else {}
-    omm, pairs, merged = (root.get(e) if isinstance(root.get(e), dict) else {} for e in _EXTS)
-    for item in omm.get("micromaps") or []:
-        views.update(item.get(k) for k in ("data", "triangles")) if isinstance(item, dict) else None
-    for item in pairs.get("maps") or []:
-        views.add(item.get("blocks")) if isinstance(item, dict) else None
+
+    def obj(holder, key) -> dict:
+        v = holder.get(key) if isinstance(holder, dict) else None
+        return v if isinstance(v, dict) else {}
+
+    root = obj(doc, "extensions")
+    omm, pairs, merged = (obj(root, e) for e in _EXTS)
+    views = {item.get(k) for item in omm.get("micromaps") or [] if isinstance(item, dict) for k in ("data", "triangles")}
+    views |= {item.get("blocks") for item in pairs.get("maps") or [] if isinstance(item, dict)}
     views.add(merged.get("dag"))
+    accessors = set()
     for m in doc.get("meshes") or []:
-        for p in (m.get("primitives") or []) if isinstance(m, dict) else []:
-            ext = p.get("extensions") if isinstance(p, dict) else None
-            if isinstance(ext, dict):
-                accessors.add((ext.get(EXT_OMM) or {}).get("micromapIndices") if isinstance(ext.get(EXT_OMM), dict)
-                              else None)
-                views.add(ext[EXT_PAIRS].get("pairs") if isinstance(ext.get(EXT_PAIRS), dict) else None)
+        for p in (m.get("primitives") if isinstance(m, dict) else None) or []:
+            ext = obj(p, "extensions")
+            accessors.add(obj(ext, EXT_OMM).get("micromapIndices"))
+            views.add(obj(ext, EXT_PAIRS).get("pairs"))
     return accessors, views
 
 
