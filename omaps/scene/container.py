@@ -48,6 +48,7 @@ from __future__ import annotations
 
 import base64
 import binascii
+import bisect
 import json
 import mimetypes
 import os
@@ -809,12 +810,12 @@ def _compact(views: list, body: bytes) -> bytes:
         out += b"\0" * ((lo - len(out)) % 16)
         shifts.append((lo, hi, len(out) - lo))
         out += body[lo:hi]
+    starts = [lo for lo, _, _ in shifts]
     for h in _buffer_holders(views):
         off = h.get("byteOffset", 0)
         if h.get("buffer") != 0 or not _index(off):
             continue
-        for lo, hi, shift in shifts:
-            if lo <= off < hi:
-                h["byteOffset"] = off + shift
-                break
+        k = bisect.bisect_right(starts, off) - 1  # the range that holds it
+        if k >= 0 and off < shifts[k][1]:
+            h["byteOffset"] = off + shifts[k][2]
     return bytes(out)
