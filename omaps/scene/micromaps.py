@@ -414,8 +414,6 @@ def write_gltf(src, out_tmp, out_final, micromaps: list[dict], prim_omm: dict, p
                 if not p["extensions"]:
                     del p["extensions"]
     used = [e for e in doc.get("extensionsUsed") or [] if e not in _EXTS]
-    if "extensionsUsed" in doc:
-        doc["extensionsUsed"] = used
     body = drop_unnamed(doc, old_accessors, old_views, packed.body if glb_out else None)
     views = doc.setdefault("bufferViews", [])
     accessors = doc.setdefault("accessors", [])

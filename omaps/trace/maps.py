@@ -77,8 +77,9 @@ def by_material(materials: np.ndarray, where: np.ndarray | None = None):
     """(material, the indices of ``materials`` that name it) for each material, in order; only
     the indices where ``where`` (bool) holds, when given."""
     idx = np.arange(len(materials)) if where is None else np.flatnonzero(where)
-    for m in np.unique(materials[idx]):
-        yield int(m), idx[materials[idx] == m]
+    mat = materials[idx]
+    for m in np.unique(mat):
+        yield int(m), idx[mat == m]
 
 
 def _pair_flags(at: AlphaTriangles, tests: dict, n: int):
