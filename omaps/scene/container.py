@@ -559,21 +559,16 @@ def _self_contained(c: Container, out_path) -> SelfContained:
             body += b"\0" * ((-len(body)) % ALIGN)
             shift[i] = len(body)
             body += raw
-        for v in views:
-            holders = [v] if isinstance(v, dict) else []
-            ext = (v.get("extensions") or {}).get(MESHOPT) if holders and isinstance(v.get("extensions"), dict) \
-                else None
-            holders += [ext] if isinstance(ext, dict) else []
-            for h in holders:  # the view's own range, and the compressed range its extension names
-                k = h.get("buffer")
-                if isinstance(k, bool) or not isinstance(k, int):
-                    continue
-                if k in shift:
-                    h["buffer"] = 0
-                    if shift[k] and isinstance(h.get("byteOffset", 0), int):
-                        h["byteOffset"] = h.get("byteOffset", 0) + shift[k]
-                elif k in placeholders:
-                    h["buffer"] = placeholders[k]
+        for h in _buffer_holders(views):  # each view's own range, and the compressed range its extension names
+            k = h.get("buffer")
+            if not _index(k):
+                continue
+            if k in shift:
+                h["buffer"] = 0
+                if shift[k] and isinstance(h.get("byteOffset", 0), int):
+                    h["byteOffset"] = h.get("byteOffset", 0) + shift[k]
+            elif k in placeholders:
+                h["buffer"] = placeholders[k]
         for i, im in enumerate(images):
             uri = im.get("uri")
             if uri is None:
